@@ -1,0 +1,216 @@
+"""One string names a bus everywhere (CLI, config, tests); `open_bus` turns it into a
+python-can bus.
+
+Accepted forms:
+    socketcan:<interface>              real SocketCAN (can0) or virtual (vcan0)
+    udp_multicast:<group>[:<port>]     processes on this host; IPv4 group, or IPv6 in [..]
+    virtual:<name>                     in-process only (unit tests)
+
+`udp_multicast` is always opened with hop limit 0 so no frame ever leaves the machine, and
+it is made to behave like a CAN controller: a bus does not receive its own frames (IP
+multicast loops them back), and a datagram that is not a python-can frame is counted and
+dropped instead of raising. It neither orders nor guarantees delivery; the E2E counters
+catch that, as on a real bus. Distinct runs on one host should use distinct ports.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import os
+import re
+import socket
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import can
+from can.interfaces.udp_multicast import UdpMulticastBus
+
+from .errors import UserInputError
+
+BUS_FORMS = ("socketcan:<interface> | udp_multicast:<group>[:<port>] "
+             "| udp_multicast:[<ipv6-group>]:<port> | virtual:<name>")
+DEFAULT_MULTICAST_GROUP = "239.255.72.80"   # IPv4 organisation-local scope
+DEFAULT_MULTICAST_PORT = 43180
+DEFAULT_SOCKETCAN_INTERFACE = "vcan0"
+_RCVBUF_BYTES = 4 << 20          # survive bursts while a process is busy; capped by rmem_max
+_IP_MULTICAST_ALL = 49           # Linux: 0 = receive only the groups this socket joined
+_IFNAME = re.compile(r"[A-Za-z0-9_.\-]{1,15}")
+
+
+class BusSpecError(UserInputError):
+    """The bus string is malformed."""
+
+
+class BusOpenError(UserInputError):
+    """The bus string is well-formed but the bus cannot be opened here."""
+
+
+@dataclass(frozen=True)
+class BusSpec:
+    kind: str                 # "socketcan" | "udp_multicast" | "virtual"
+    channel: str              # interface, multicast group or virtual channel name
+    port: int | None = None   # udp_multicast only
+
+    def __str__(self) -> str:
+        if self.kind == "udp_multicast":
+            group = f"[{self.channel}]" if ":" in self.channel else self.channel
+            return f"udp_multicast:{group}:{self.port}"
+        return f"{self.kind}:{self.channel}"
+
+
+def _bad(text: str, why: str) -> BusSpecError:
+    return BusSpecError(f"bad bus {text!r}: {why}; accepted forms: {BUS_FORMS}")
+
+
+def _multicast_group(text: str, group: str) -> str:
+    try:
+        address = ipaddress.ip_address(group)
+    except ValueError:
+        raise _bad(text, f"{group!r} is not an IP address") from None
+    if not address.is_multicast:
+        raise _bad(text, f"{group} is not a multicast group (IPv4 224.0.0.0/4, IPv6 ff00::/8)")
+    return str(address)
+
+
+def _port(text: str, port: str) -> int:
+    if not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise _bad(text, f"port {port!r} is not an integer in 1..65535")
+    return int(port)
+
+
+def parse_bus_spec(text: str) -> BusSpec:
+    """Parse a bus string; raise `BusSpecError` (one line, lists the forms) if malformed."""
+    if not isinstance(text, str) or ":" not in text:
+        raise _bad(str(text), "missing '<kind>:'")
+    kind, _, rest = text.partition(":")
+    if kind == "socketcan":
+        if not _IFNAME.fullmatch(rest):
+            raise _bad(text, "interface name must be 1-15 characters of letters, digits, '_', '.', '-'")
+        return BusSpec("socketcan", rest)
+    if kind == "virtual":
+        if not rest or any(c.isspace() for c in rest):
+            raise _bad(text, "virtual channel name must be non-empty without spaces")
+        return BusSpec("virtual", rest)
+    if kind == "udp_multicast":
+        if rest.startswith("["):                      # [ipv6]:port or [ipv6]
+            group, sep, tail = rest[1:].partition("]")
+            if not sep:
+                raise _bad(text, "unclosed '[' around the IPv6 group")
+            if tail and not tail.startswith(":"):
+                raise _bad(text, "expected ':<port>' after ']'")
+            port = _port(text, tail[1:]) if tail else DEFAULT_MULTICAST_PORT
+            return BusSpec("udp_multicast", _multicast_group(text, group), port)
+        if rest.count(":") > 1:                       # bare IPv6 group, no port
+            return BusSpec("udp_multicast", _multicast_group(text, rest), DEFAULT_MULTICAST_PORT)
+        group, sep, port = rest.partition(":")
+        port_number = _port(text, port) if sep else DEFAULT_MULTICAST_PORT
+        return BusSpec("udp_multicast", _multicast_group(text, group), port_number)
+    raise _bad(text, f"unknown bus kind {kind!r}")
+
+
+def socketcan_available(interface: str) -> bool:
+    return hasattr(socket, "AF_CAN") and Path("/sys/class/net", interface).exists() and _af_can_works()
+
+
+def _af_can_works() -> bool:
+    try:
+        socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW).close()
+    except OSError:
+        return False
+    return True
+
+
+def default_bus_spec() -> BusSpec:
+    """`socketcan:vcan0` where that interface exists, else the on-host multicast group."""
+    if socketcan_available(DEFAULT_SOCKETCAN_INTERFACE):
+        return BusSpec("socketcan", DEFAULT_SOCKETCAN_INTERFACE)
+    return BusSpec("udp_multicast", DEFAULT_MULTICAST_GROUP, DEFAULT_MULTICAST_PORT)
+
+
+class HostMulticastBus(UdpMulticastBus):
+    """python-can's udp_multicast, made to behave like one CAN controller on one host.
+
+    - hop limit 0: frames are delivered only to sockets on this machine;
+    - own frames are not received back (each bus tags what it sends with a random token
+      carried in the frame's `channel` field, and drops frames bearing its own token);
+    - a datagram that is not a python-can frame is counted in `rx_garbage`, not raised;
+    - classic CAN only (FD frames are rejected on send and dropped on receive).
+    """
+
+    def __init__(self, group: str, port: int):
+        super().__init__(channel=group, port=port, hop_limit=0, fd=False)
+        self._token = f"hydrapod-{os.urandom(8).hex()}"
+        self.group, self.port = group, port
+        self.channel_info = f"udp_multicast:{group}:{port} (hop limit 0)"
+        self.rx_garbage = 0
+        self._tune_socket(group)
+
+    def _tune_socket(self, group: str) -> None:
+        # fromfd duplicates the descriptor: options set on the copy apply to the socket.
+        family = socket.AF_INET6 if ":" in group else socket.AF_INET
+        with socket.fromfd(self.fileno(), family, socket.SOCK_DGRAM) as sock:
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, _RCVBUF_BYTES)
+                if family == socket.AF_INET:
+                    sock.setsockopt(socket.IPPROTO_IP, _IP_MULTICAST_ALL, 0)
+            except OSError:
+                pass   # best effort: defaults still work, only less isolated/buffered
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        channel = msg.channel
+        msg.channel = self._token
+        try:
+            super().send(msg, timeout)
+        finally:
+            msg.channel = channel
+
+    def _recv_internal(self, timeout: float | None):
+        deadline = None if timeout is None else time.monotonic() + timeout
+        remaining = timeout
+        while True:
+            try:
+                msg, filtered = super()._recv_internal(remaining)
+            except can.CanOperationError as error:
+                if not isinstance(error.__cause__, Exception) or isinstance(error.__cause__, OSError):
+                    raise                              # a socket failure, not a bad datagram
+                self.rx_garbage += 1
+                msg, filtered = None, False
+            else:
+                if msg is None:
+                    return None, False
+                if msg.channel != self._token:
+                    msg.channel = self.channel_info
+                    return msg, filtered
+            if deadline is not None:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return None, False
+
+
+def open_bus(spec: str | BusSpec | None = None) -> can.BusABC:
+    """Open the bus named by `spec` (None: `default_bus_spec()`).
+
+    Raises `BusSpecError` for a malformed string and `BusOpenError` (one line, naming
+    the bus) when it cannot be opened here.
+    """
+    if spec is None:
+        spec = default_bus_spec()
+    elif isinstance(spec, str):
+        spec = parse_bus_spec(spec)
+    try:
+        if spec.kind == "socketcan":
+            if not hasattr(socket, "AF_CAN") or not _af_can_works():
+                raise BusOpenError(f"{spec}: this kernel has no SocketCAN (AF_CAN unsupported); "
+                                   f"use udp_multicast:<group> on one host, or run inside a VM")
+            if not Path("/sys/class/net", spec.channel).exists():
+                raise BusOpenError(f"{spec}: no such network interface (create it: "
+                                   f"ip link add dev {spec.channel} type vcan; ip link set up {spec.channel})")
+            return can.Bus(interface="socketcan", channel=spec.channel, receive_own_messages=False)
+        if spec.kind == "udp_multicast":
+            return HostMulticastBus(spec.channel, spec.port)
+        if spec.kind == "virtual":
+            return can.Bus(interface="virtual", channel=spec.channel, receive_own_messages=False)
+    except (can.CanError, OSError) as error:
+        raise BusOpenError(f"{spec}: cannot open: {error}") from error
+    raise BusSpecError(f"bad bus {str(spec)!r}: unknown kind; accepted forms: {BUS_FORMS}")
