@@ -1,0 +1,21 @@
+"""Suite-wide settings: a deterministic Hypothesis profile, and a record of what pytest
+collected so `test_suite_integrity` can prove nothing was silently left out."""
+
+import pytest
+from hypothesis import HealthCheck, settings
+
+# Fixed seed (derandomize) so CI is reproducible; no deadline: timing is not behaviour.
+settings.register_profile(
+    "hydrapod",
+    derandomize=True,
+    deadline=None,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+settings.load_profile("hydrapod")
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(session, config, items):
+    # tryfirst: recorded before -k/-m deselection, so the record is what was collected.
+    config.hydrapod_collected = [(str(item.path), getattr(item, "originalname", item.name)) for item in items]

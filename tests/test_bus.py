@@ -1,0 +1,184 @@
+"""Bus strings, opening, and the on-host multicast bus between real OS processes."""
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import can
+import pytest
+
+from protocol.bus import (BUS_FORMS, BusOpenError, BusSpec, BusSpecError, HostMulticastBus, default_bus_spec,
+                          open_bus, parse_bus_spec, socketcan_available)
+from protocol.codec import CODECS, FrameDecoder
+from protocol.e2e import RxStatus
+
+sys.path.insert(0, str(Path(__file__).parent))
+import bus_peer  # noqa: E402
+
+GROUP = "239.255.72.80"
+
+
+def free_port() -> int:
+    """A UDP port unique to this test run (the kernel picks it), so parallel runs never mix."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.parametrize("text, spec", [
+    ("socketcan:vcan0", BusSpec("socketcan", "vcan0")),
+    ("socketcan:can0", BusSpec("socketcan", "can0")),
+    ("udp_multicast:239.255.72.80", BusSpec("udp_multicast", "239.255.72.80", 43180)),
+    ("udp_multicast:239.255.72.80:5000", BusSpec("udp_multicast", "239.255.72.80", 5000)),
+    ("udp_multicast:[ff15::7]:6000", BusSpec("udp_multicast", "ff15::7", 6000)),
+    ("udp_multicast:ff15::7", BusSpec("udp_multicast", "ff15::7", 43180)),
+    ("virtual:unit", BusSpec("virtual", "unit")),
+])
+def test_good_specs_parse_and_print_back(text, spec):
+    assert parse_bus_spec(text) == spec
+    assert parse_bus_spec(str(spec)) == spec
+
+
+@pytest.mark.parametrize("text, culprit", [
+    ("vcan0", "missing"), ("can:vcan0", "'can'"), ("socketcan:", "interface"),
+    ("socketcan:a/b", "interface"), ("socketcan:waytoolonginterface", "interface"),
+    ("udp_multicast:10.1.2.3", "not a multicast"), ("udp_multicast:239.1.2.3:0", "port"),
+    ("udp_multicast:239.1.2.3:70000", "port"), ("udp_multicast:239.1.2.3:x", "port"),
+    ("udp_multicast:nohost", "not an IP"), ("udp_multicast:[ff15::1", "unclosed"),
+    ("virtual:", "name"), ("", "missing"),
+])
+def test_bad_specs_give_one_line_listing_the_forms(text, culprit):
+    with pytest.raises(BusSpecError) as err:
+        parse_bus_spec(text)
+    message = str(err.value)
+    assert "\n" not in message and culprit in message and BUS_FORMS in message
+
+
+def test_default_is_vcan0_when_present_else_on_host_multicast():
+    spec = default_bus_spec()
+    if socketcan_available("vcan0"):
+        assert spec == BusSpec("socketcan", "vcan0")
+    else:
+        assert spec.kind == "udp_multicast" and parse_bus_spec(str(spec)) == spec
+
+
+def test_socketcan_opens_where_available_else_one_clear_line():
+    if socketcan_available("vcan0"):
+        bus = open_bus("socketcan:vcan0")
+        bus.shutdown()
+    else:
+        with pytest.raises(BusOpenError) as err:
+            open_bus("socketcan:vcan0")
+        assert "\n" not in str(err.value) and "socketcan:vcan0" in str(err.value)
+
+
+def test_virtual_bus_in_process():
+    a, b = open_bus("virtual:test-virtual"), open_bus("virtual:test-virtual")
+    try:
+        codec = CODECS["VALVE_CMD_3"]
+        msg = can.Message(arbitration_id=codec.frame_id, data=codec.new_buffer(), is_extended_id=False)
+        decoder = FrameDecoder(["VALVE_CMD_3"])
+        for _ in range(20):
+            codec.encode_into(codec.new_values(), msg.data)
+            a.send(msg)
+            assert decoder.receive_message(b.recv(1.0)) is RxStatus.OK
+        assert a.recv(0.05) is None                      # no own frames, like a CAN controller
+    finally:
+        a.shutdown()
+        b.shutdown()
+
+
+def test_multicast_is_hop_limit_zero_and_drops_own_and_garbage():
+    port = free_port()
+    a, b = open_bus(f"udp_multicast:{GROUP}:{port}"), open_bus(f"udp_multicast:{GROUP}:{port}")
+    try:
+        assert isinstance(a, HostMulticastBus)
+        with socket.fromfd(a.fileno(), socket.AF_INET, socket.SOCK_DGRAM) as s:
+            assert s.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 0   # never leaves the host
+        a.send(can.Message(arbitration_id=0x181, data=b"\x01\x02", is_extended_id=False))
+        got = b.recv(1.0)
+        assert got is not None and got.arbitration_id == 0x181 and bytes(got.data) == b"\x01\x02"
+        assert a.recv(0.1) is None
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as raw:
+            raw.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+            raw.sendto(b"not a frame", (GROUP, port))
+        a.send(can.Message(arbitration_id=0x182, data=b"", is_extended_id=False))
+        got = b.recv(1.0)
+        assert got is not None and got.arbitration_id == 0x182 and b.rx_garbage == 1
+    finally:
+        a.shutdown()
+        b.shutdown()
+
+
+def test_multicast_groups_on_one_port_are_isolated():
+    port = free_port()
+    a, other = open_bus(f"udp_multicast:{GROUP}:{port}"), open_bus(f"udp_multicast:239.255.72.81:{port}")
+    b = open_bus(f"udp_multicast:{GROUP}:{port}")
+    try:
+        a.send(can.Message(arbitration_id=0x100, data=b"", is_extended_id=False))
+        assert b.recv(1.0) is not None
+        assert other.recv(0.2) is None
+    finally:
+        for bus in (a, b, other):
+            bus.shutdown()
+
+
+def test_two_processes_exchange_10k_frames_none_lost_or_reordered():
+    """SYNC -> 6 LEG_STATE from the peer process -> 6 VALVE_CMD back, 770 cycles = 10,010 frames."""
+    cycles = 770
+    spec = f"udp_multicast:{GROUP}:{free_port()}"
+    bus = open_bus(spec)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(Path(__file__).parent), *sys.path]))
+    peer = subprocess.Popen([sys.executable, str(Path(bus_peer.__file__)), spec, str(cycles)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        deadline = time.monotonic() + 60
+        while True:                                      # handshake: the peer says READY
+            msg = bus.recv(1.0)
+            if msg is not None and msg.arbitration_id == bus_peer.READY_ID:
+                break
+            assert time.monotonic() < deadline and peer.poll() is None, peer.stderr.read() if peer.poll() else ""
+        legs = range(1, 7)
+        sync = can.Message(arbitration_id=CODECS["SYNC"].frame_id, data=bytearray(1), is_extended_id=False)
+        sync_values = CODECS["SYNC"].new_values()
+        cmds = {n: can.Message(arbitration_id=CODECS[f"VALVE_CMD_{n}"].frame_id, data=bytearray(4),
+                               is_extended_id=False) for n in legs}
+        cmd_values = CODECS["VALVE_CMD_1"].new_values()
+        spool = CODECS["VALVE_CMD_1"].index["SPOOL_SETPOINT"]
+        decoder = FrameDecoder([f"LEG_STATE_{n}" for n in legs])
+        position = CODECS["LEG_STATE_1"].index["POSITION"]
+        received = 0
+        for k in range(cycles):
+            sync_values[0] = bus_peer.sync_counter_of(k)
+            CODECS["SYNC"].encode_into(sync_values, sync.data)
+            bus.send(sync)
+            for n in legs:                               # exactly LEG_STATE_1..6 in order
+                msg = bus.recv(5.0)
+                while k == 0 and msg is not None and msg.arbitration_id == bus_peer.READY_ID:
+                    msg = bus.recv(5.0)                  # READYs sent before our first SYNC arrived
+                assert msg is not None, f"cycle {k}: LEG_STATE_{n} lost"
+                received += 1
+                assert msg.arbitration_id == CODECS[f"LEG_STATE_{n}"].frame_id, f"cycle {k}: reordered"
+                assert decoder.receive_message(msg) is RxStatus.OK
+                assert decoder.values[f"LEG_STATE_{n}"][position] == pytest.approx(bus_peer.position_of(k))
+            for n in legs:
+                cmd_values[spool] = bus_peer.spool_of(k, n)
+                CODECS[f"VALVE_CMD_{n}"].encode_into(cmd_values, cmds[n].data)
+                bus.send(cmds[n])
+        bus.send(can.Message(arbitration_id=bus_peer.FIN_ID, data=b"", is_extended_id=False))
+        out, err = peer.communicate(timeout=60)
+        assert peer.returncode == 0, err
+        summary = json.loads(out)
+        assert summary["errors"] == [] and summary["cycles"] == cycles and summary["lost"] == 0
+        assert summary["received"] == 7 * cycles                 # SYNC + 6 commands per cycle
+        assert received + summary["received"] == 13 * cycles >= 10_000
+        assert decoder.lost.sum() == 0 and decoder.counts[:, RxStatus.OK].sum() == 6 * cycles
+    finally:
+        if peer.poll() is None:
+            peer.kill()
+            peer.wait()
+        bus.shutdown()
