@@ -142,6 +142,8 @@ class MessageCodec:
         The alive counter lives in `buf` itself, so one buffer per message and sender must
         be reused for the whole session (as the AUTOSAR library expects).
         """
+        if len(buf) < self.dlc:
+            raise ValueError(f"{self.name}: buffer of {len(buf)} bytes, the frame needs {self.dlc}")
         if isinstance(values, np.ndarray):
             values = values.tolist()   # Python floats: NumPy scalar arithmetic is 3x slower here
         word = 0

@@ -6,6 +6,7 @@ import socket
 import subprocess
 import sys
 import time
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 import can
@@ -27,6 +28,18 @@ def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("", 0))
         return s.getsockname()[1]
+
+
+@contextmanager
+def opened(*specs: str):
+    """Open several buses; shut all of them down however the test ends."""
+    with ExitStack() as stack:
+        buses = []
+        for spec in specs:
+            bus = open_bus(spec)
+            stack.callback(bus.shutdown)
+            buses.append(bus)
+        yield buses
 
 
 @pytest.mark.parametrize("text, spec", [
@@ -77,8 +90,7 @@ def test_socketcan_opens_where_available_else_one_clear_line():
 
 
 def test_virtual_bus_in_process():
-    a, b = open_bus("virtual:test-virtual"), open_bus("virtual:test-virtual")
-    try:
+    with opened("virtual:test-virtual", "virtual:test-virtual") as (a, b):
         codec = CODECS["VALVE_CMD_3"]
         msg = can.Message(arbitration_id=codec.frame_id, data=codec.new_buffer(), is_extended_id=False)
         decoder = FrameDecoder(["VALVE_CMD_3"])
@@ -87,15 +99,11 @@ def test_virtual_bus_in_process():
             a.send(msg)
             assert decoder.receive_message(b.recv(1.0)) is RxStatus.OK
         assert a.recv(0.05) is None                      # no own frames, like a CAN controller
-    finally:
-        a.shutdown()
-        b.shutdown()
 
 
 def test_multicast_is_hop_limit_zero_and_drops_own_and_garbage():
     port = free_port()
-    a, b = open_bus(f"udp_multicast:{GROUP}:{port}"), open_bus(f"udp_multicast:{GROUP}:{port}")
-    try:
+    with opened(f"udp_multicast:{GROUP}:{port}", f"udp_multicast:{GROUP}:{port}") as (a, b):
         assert isinstance(a, HostMulticastBus)
         with socket.fromfd(a.fileno(), socket.AF_INET, socket.SOCK_DGRAM) as s:
             assert s.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 0   # never leaves the host
@@ -109,22 +117,15 @@ def test_multicast_is_hop_limit_zero_and_drops_own_and_garbage():
         a.send(can.Message(arbitration_id=0x182, data=b"", is_extended_id=False))
         got = b.recv(1.0)
         assert got is not None and got.arbitration_id == 0x182 and b.rx_garbage == 1
-    finally:
-        a.shutdown()
-        b.shutdown()
 
 
 def test_multicast_groups_on_one_port_are_isolated():
     port = free_port()
-    a, other = open_bus(f"udp_multicast:{GROUP}:{port}"), open_bus(f"udp_multicast:239.255.72.81:{port}")
-    b = open_bus(f"udp_multicast:{GROUP}:{port}")
-    try:
+    specs = (f"udp_multicast:{GROUP}:{port}", f"udp_multicast:{GROUP}:{port}", f"udp_multicast:239.255.72.81:{port}")
+    with opened(*specs) as (a, b, other):
         a.send(can.Message(arbitration_id=0x100, data=b"", is_extended_id=False))
         assert b.recv(1.0) is not None
         assert other.recv(0.2) is None
-    finally:
-        for bus in (a, b, other):
-            bus.shutdown()
 
 
 def test_two_processes_exchange_10k_frames_none_lost_or_reordered():

@@ -216,6 +216,12 @@ def test_out_of_range_saturates_and_non_finite_rejects(name):
         assert bytes(buf) == before           # nothing written, alive counter not advanced
 
 
+def test_encode_refuses_a_short_buffer():
+    codec = CODECS["LEG_STATE_1"]
+    with pytest.raises(ValueError, match="LEG_STATE_1"):
+        codec.encode_into(codec.new_values(), bytearray(codec.dlc - 1))
+
+
 def test_spool_setpoint_scaling_is_cia408():
     codec = CODECS["VALVE_CMD_1"]
     values, buf = codec.new_values(), codec.new_buffer()
