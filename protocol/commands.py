@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from .bench import format_bench, run_bench
 from .busload import MAX_LOAD, MIN_COMPUTE_WINDOW_US, bus_budget, format_budget
 from .cliutil import number_in_range
 from .codec import CODECS
@@ -29,10 +30,15 @@ def add_parsers(sub) -> None:
     p.set_defaults(handler=cmd_bus_load)
 
     proto = sub.add_parser("protocol", help="protocol tools")
-    psub = proto.add_subparsers(dest="protocol_command", required=True, metavar="{dump}")
+    psub = proto.add_subparsers(dest="protocol_command", required=True, metavar="{dump,bench}")
     d = psub.add_parser("dump", help="messages, schedule, E2E and signal scaling as compiled from the DBC")
     d.add_argument("--json", action="store_true", help="print JSON")
     d.set_defaults(handler=cmd_protocol_dump)
+    b = psub.add_parser("bench", help="time the codec hot path (receive, encode, one cycle of frames)")
+    b.add_argument("--iterations", type=number_in_range(int, 100, 10_000_000), default=20_000,
+                   help="timed iterations per case (default 20000)")
+    b.add_argument("--json", action="store_true", help="print JSON")
+    b.set_defaults(handler=cmd_protocol_bench)
 
 
 def cmd_bus_load(args: argparse.Namespace) -> int:
@@ -72,4 +78,10 @@ def cmd_protocol_dump(args: argparse.Namespace) -> int:
             kind = f"{'s' if s['signed'] else 'u'}{s['length']}@{s['start']}"
             print(f"  {s['name']:<18} {kind:<8} x{s['scale']:g}{s['offset']:+g} "
                   f"[{s['minimum']:g}, {s['maximum']:g}] {s['unit'] or '-':<6} {s['comment']}")
+    return 0
+
+
+def cmd_protocol_bench(args: argparse.Namespace) -> int:
+    result = run_bench(args.iterations)
+    print(json.dumps(result, indent=2) if args.json else format_bench(result))
     return 0

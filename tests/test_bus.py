@@ -129,9 +129,12 @@ def test_multicast_groups_on_one_port_are_isolated():
 
 
 def test_two_processes_exchange_10k_frames_none_lost_or_reordered():
-    """SYNC -> 6 LEG_STATE from the peer process -> 6 VALVE_CMD back, 770 cycles = 10,010 frames."""
+    """SYNC -> 6 LEG_STATE from the peer process -> 6 VALVE_CMD back, 770 cycles = 10,010 frames.
+
+    The bus is a fresh on-host multicast group unless HYDRAPOD_TEST_BUS names another
+    (e.g. socketcan:vcan0 inside a VM with SocketCAN)."""
     cycles = 770
-    spec = f"udp_multicast:{GROUP}:{free_port()}"
+    spec = os.environ.get("HYDRAPOD_TEST_BUS") or f"udp_multicast:{GROUP}:{free_port()}"
     bus = open_bus(spec)
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(Path(__file__).parent), *sys.path]))
     peer = subprocess.Popen([sys.executable, str(Path(bus_peer.__file__)), spec, str(cycles)],

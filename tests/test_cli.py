@@ -39,6 +39,15 @@ def test_protocol_dump_text_and_json():
     assert {"SYNC", "CTRL_STATUS", "HOST_WAYPOINT_ROT"} <= names
 
 
+def test_protocol_bench_prints_ordered_percentiles():
+    result = hydrapod("protocol", "bench", "--iterations", "300", "--json")
+    assert result.returncode == 0, result.stderr
+    cases = json.loads(result.stdout)["cases"]
+    assert set(cases) == {"receive_leg_state", "encode_valve_cmd", "cycle_6_receive_6_encode"}
+    for r in cases.values():
+        assert 0 < r["p50_us"] <= r["p99_us"] <= r["max_us"] and r["n"] == 300
+
+
 def test_module_entry_point():
     result = subprocess.run([sys.executable, "-m", "hil.cli", "bus-load", "--json"], capture_output=True, text=True,
                             timeout=120)
@@ -54,6 +63,7 @@ def test_module_entry_point():
     (["bus-load", "--bogus"], "--bogus"),
     (["frobnicate"], "frobnicate"),
     (["protocol"], "dump"),
+    (["protocol", "bench", "--iterations", "1e9"], "--iterations"),
     ([], "COMMAND"),
 ])
 def test_user_errors_are_one_line_and_exit_2(args, culprit):
