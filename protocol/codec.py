@@ -192,7 +192,6 @@ def _compile_all() -> dict[str, MessageCodec]:
 
 #: Every message of the DBC, compiled once at import, keyed by name, in CAN-id order.
 CODECS: dict[str, MessageCodec] = _compile_all()
-CODECS_BY_ID: dict[int, MessageCodec] = {c.frame_id: c for c in CODECS.values()}
 
 
 class FrameDecoder:

@@ -9,7 +9,7 @@ from .bench import format_bench, run_bench
 from .busload import MAX_LOAD, MIN_COMPUTE_WINDOW_US, bus_budget, format_budget
 from .cliutil import number_in_range
 from .codec import CODECS
-from .dbc import dbc_path, schedule_of, load_database
+from .dbc import dbc_path
 
 CLASSIC_CAN_MAX_BITRATE = 1_000_000
 
@@ -48,10 +48,9 @@ def cmd_bus_load(args: argparse.Namespace) -> int:
 
 
 def _describe() -> list[dict]:
-    db = load_database()
     out = []
     for codec in CODECS.values():
-        sched = schedule_of(db.get_message_by_frame_id(codec.frame_id))
+        sched = codec.schedule
         out.append({
             "name": codec.name, "id": codec.frame_id, "dlc": codec.dlc, "sender": sched.sender,
             "kind": sched.kind, "sync_period": sched.sync_period, "sync_phase": sched.sync_phase,
