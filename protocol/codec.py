@@ -30,7 +30,7 @@ from enum import IntEnum
 import numpy as np
 
 from . import e2e
-from .dbc import Schedule, load_database, schedule_of
+from .dbc import Schedule, load_database, schedule_of, schedules
 from .e2e import RxStatus
 
 # Engineering unit in the DBC -> factor to SI. A unit not listed here fails at import,
@@ -187,7 +187,7 @@ class MessageCodec:
 
 def _compile_all() -> dict[str, MessageCodec]:
     db = load_database()
-    return {m.name: MessageCodec(m) for m in sorted(db.messages, key=lambda m: m.frame_id)}
+    return {s.name: MessageCodec(db.get_message_by_name(s.name), s) for s in schedules()}
 
 
 #: Every message of the DBC, compiled once at import, keyed by name, in CAN-id order.

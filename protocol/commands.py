@@ -1,9 +1,10 @@
-"""`hydrapod bus-load` and `hydrapod protocol dump`."""
+"""`hydrapod bus-load`, `hydrapod protocol dump` and `hydrapod protocol bench`."""
 
 from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import asdict
 
 from .bench import format_bench, run_bench
 from .busload import MAX_LOAD, MIN_COMPUTE_WINDOW_US, bus_budget, format_budget
@@ -55,9 +56,7 @@ def _describe() -> list[dict]:
             "name": codec.name, "id": codec.frame_id, "dlc": codec.dlc, "sender": sched.sender,
             "kind": sched.kind, "sync_period": sched.sync_period, "sync_phase": sched.sync_phase,
             "cycle_time_ms": sched.cycle_time_ms, "e2e_data_id": codec.data_id,
-            "signals": [{"name": s.name, "start": s.start, "length": s.length, "signed": s.signed,
-                         "scale": s.scale, "offset": s.offset, "unit": s.unit, "minimum": s.minimum,
-                         "maximum": s.maximum, "to_si": s.to_si, "comment": s.comment} for s in codec.signals],
+            "signals": [asdict(s) for s in codec.signals],
         })
     return out
 
