@@ -110,10 +110,13 @@ def parse_bus_spec(text: str) -> BusSpec:
 
 
 def socketcan_available(interface: str) -> bool:
-    return hasattr(socket, "AF_CAN") and Path("/sys/class/net", interface).exists() and _af_can_works()
+    return _af_can_works() and Path("/sys/class/net", interface).exists()
 
 
 def _af_can_works() -> bool:
+    """Whether this kernel can open a raw CAN socket (Python may know AF_CAN when it cannot)."""
+    if not hasattr(socket, "AF_CAN"):
+        return False
     try:
         socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW).close()
     except OSError:
@@ -172,8 +175,10 @@ class HostMulticastBus(UdpMulticastBus):
             try:
                 msg, filtered = super()._recv_internal(remaining)
             except can.CanOperationError as error:
-                if not isinstance(error.__cause__, Exception) or isinstance(error.__cause__, OSError):
-                    raise                              # a socket failure, not a bad datagram
+                # python-can raises "could not unpack" from the decoder's error for a bad
+                # datagram; a socket failure comes from an OSError (or with no cause).
+                if error.__cause__ is None or isinstance(error.__cause__, OSError):
+                    raise
                 self.rx_garbage += 1
                 msg, filtered = None, False
             else:
@@ -200,7 +205,7 @@ def open_bus(spec: str | BusSpec | None = None) -> can.BusABC:
         spec = parse_bus_spec(spec)
     try:
         if spec.kind == "socketcan":
-            if not hasattr(socket, "AF_CAN") or not _af_can_works():
+            if not _af_can_works():
                 raise BusOpenError(f"{spec}: this kernel has no SocketCAN (AF_CAN unsupported); "
                                    f"use udp_multicast:<group> on one host, or run inside a VM")
             if not Path("/sys/class/net", spec.channel).exists():
