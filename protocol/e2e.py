@@ -39,10 +39,6 @@ def crc_ok(data: bytearray, data_id: int, length: int) -> bool:
     return e2e_p01_check(data, data_id, data_id_mode=E2E_P01_DATAID_BOTH, length=length)
 
 
-def counter_of(data) -> int:
-    return data[1] & 0x0F
-
-
 def classify_counter(counter: int, last_counter: int, max_delta: int) -> RxStatus:
     """Sequence check of a frame whose CRC is good (profile 1 semantics).
 

@@ -46,10 +46,6 @@ def any_in_range_values(codec):
                                  allow_nan=False) for s in payload_signals(codec))).map(build)
 
 
-def cantools_values(message, codec, data: bytes) -> dict:
-    return message.decode(data, decode_choices=False, scaling=True)
-
-
 @pytest.mark.parametrize("name", ALL)
 def test_roundtrip_within_half_an_lsb(name):
     codec = CODECS[name]
@@ -75,7 +71,7 @@ def test_decode_equals_cantools_for_any_bytes(name):
     @EXAMPLES
     @given(data=st.binary(min_size=codec.dlc, max_size=codec.dlc))
     def check(data):
-        expected = cantools_values(message, codec, data)
+        expected = message.decode(data, decode_choices=False, scaling=True)
         out_dbc, out_si = codec.new_values(), codec.new_values()
         codec.decode_dbc_units_into(data, out_dbc)
         codec.decode_into(data, out_si)
