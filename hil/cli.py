@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import sys
 
+from firmware_py import commands as firmware_commands
 from protocol import commands as protocol_commands
 from protocol.cliutil import OneLineArgumentParser, run
 
@@ -20,6 +21,7 @@ def build_parser() -> OneLineArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineArgumentParser,
                                 metavar="COMMAND")
     protocol_commands.add_parsers(sub)
+    firmware_commands.add_parsers(sub)
     return parser
 
 
