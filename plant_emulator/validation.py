@@ -15,6 +15,7 @@ import tomllib
 from dataclasses import asdict, dataclass
 from importlib import resources
 
+import mujoco
 import numpy as np
 
 from firmware_py.dynamics import InverseDynamics
@@ -88,7 +89,6 @@ def _mujoco_state(mech: Mechanism, traj: Trajectory, t: float):
     leg_vel = (legs[0] - 8 * legs[1] + 8 * legs[3] - legs[4]) / (12 * h)
     leg_acc = (-legs[0] + 16 * legs[1] - 30 * legs[2] + 16 * legs[3] - legs[4]) / (12 * h * h)
     rot = np.empty(9)
-    import mujoco
     mujoco.mju_quat2Mat(rot, p)
     rot = rot.reshape(3, 3)
     qpos = np.zeros(m.nq)
@@ -101,11 +101,9 @@ def _mujoco_state(mech: Mechanism, traj: Trajectory, t: float):
     qvel[fd + 3:fd + 6] = rot.T @ omega          # MuJoCo: free-joint angular velocity in the body frame
     qacc[fd:fd + 3] = a
     qacc[fd + 3:fd + 6] = rot.T @ alpha
-    for col, (qadr, dadr) in enumerate(((mech.u1_qpos, None), (mech.u2_qpos, None), (mech.slide_qpos, None))):
+    for col, (qadr, dof) in enumerate(((mech.u1_qpos, mech.u1_dof), (mech.u2_qpos, mech.u2_dof),
+                                       (mech.slide_qpos, mech.slide_dof))):
         qpos[qadr] = legs[2][:, col]
-    dofs = [m.jnt_dofadr[np.searchsorted(m.jnt_qposadr, mech.u1_qpos)],
-            m.jnt_dofadr[np.searchsorted(m.jnt_qposadr, mech.u2_qpos)], mech.slide_dof]
-    for col, dof in enumerate(dofs):
         qvel[dof] = leg_vel[:, col]
         qacc[dof] = leg_acc[:, col]
     return qpos, qvel, qacc
