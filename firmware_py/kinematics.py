@@ -126,21 +126,10 @@ def _cholesky_solve_into(a, b, out):
 @njit(cache=True)
 def constraint_into(base, platform, lengths, q, rot, platform_world, units, phi):
     """Phi_i(q) = ||r + R b_i - a_i|| - L_i (eq. 9.4-9.6); returns ||Phi||."""
-    r = q[0:3]
-    p = q[3:7]
-    quat_to_matrix_into(p, rot)
+    ik_into(base, platform, q[0:3], q[3:7], rot, platform_world, phi, units)
     norm2 = 0.0
     for i in range(base.shape[0]):
-        for k in range(3):
-            platform_world[i, k] = rot[k, 0] * platform[i, 0] + rot[k, 1] * platform[i, 1] + rot[k, 2] * platform[i, 2]
-        lx = r[0] + platform_world[i, 0] - base[i, 0]
-        ly = r[1] + platform_world[i, 1] - base[i, 1]
-        lz = r[2] + platform_world[i, 2] - base[i, 2]
-        length = math.sqrt(lx * lx + ly * ly + lz * lz)
-        units[i, 0] = lx / length
-        units[i, 1] = ly / length
-        units[i, 2] = lz / length
-        phi[i] = length - lengths[i]
+        phi[i] -= lengths[i]
         norm2 += phi[i] * phi[i]
     return math.sqrt(norm2)
 
