@@ -23,7 +23,9 @@ def _print(args, report, text) -> int:
 
 def _dk_eval(args) -> int:
     from .dk_eval import evaluate, format_evaluation
-    report = evaluate(_geometry(args), int(args.samples), int(args.seed), args.min_condition_index)
+    from .workspace import MIN_CONDITION_INDEX
+    margin = MIN_CONDITION_INDEX if args.min_condition_index is None else args.min_condition_index
+    report = evaluate(_geometry(args), int(args.samples), int(args.seed), margin)
     return _print(args, report, format_evaluation(report))
 
 
@@ -72,7 +74,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="singularity margin of the sampled workspace, 1/cond(Jx) (default: the rig's "
                         "limit; 0 samples everything on the home side of the singular surface)")
     common(p)
-    p.set_defaults(handler=_dk_eval_default)
+    p.set_defaults(handler=_dk_eval)
 
     p = kin_sub.add_parser("workspace", help="workspace extents (chapter 9.3) and slice plots (Figs. 9.3-9.12)")
     p.add_argument("--plot", metavar="DIR", help="write PNG slices into DIR")
@@ -89,9 +91,3 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     common(p)
     p.set_defaults(handler=_bench)
 
-
-def _dk_eval_default(args) -> int:
-    if args.min_condition_index is None:
-        from .workspace import MIN_CONDITION_INDEX
-        args.min_condition_index = MIN_CONDITION_INDEX
-    return _dk_eval(args)

@@ -36,7 +36,6 @@ from numba import njit
 
 from .geometry import N_LEGS, Geometry
 from .kinematics import ik_into, jacobian_into
-from .rotation import quat_to_matrix_into
 
 
 @njit(cache=True, inline="always")
@@ -63,6 +62,28 @@ def _inertia_terms(inertia, e1x, e1y, e1z, e2x, e2y, e2z, e3x, e3y, e3z, wx, wy,
     g1, g2, g3 = _cross(w1, w2, w3, iw1, iw2, iw3)
     n1, n2, n3 = ia1 + g1, ia2 + g2, ia3 + g3
     return (e1x * n1 + e2x * n2 + e3x * n3, e1y * n1 + e2y * n2 + e3y * n3, e1z * n1 + e2z * n2 + e3z * n3)
+
+
+@njit(cache=True, inline="always")
+def _link_wrench(mass, com, inertia, e1x, e1y, e1z, e2x, e2y, e2z, e3x, e3y, e3z,
+                 wx, wy, wz, ax, ay, az, ox, oy, oz, gx, gy, gz):
+    """Inertial-minus-gravity force F and the moment rho x F + N of a leg link about its origin.
+
+    Frame [e1 e2 e3] = [u4 u2 u3]; the link rotates with (w, alpha); its origin (A or B)
+    accelerates by (ox, oy, oz); rho = R_L com.
+    """
+    px = com[0] * e1x + com[1] * e2x + com[2] * e3x
+    py = com[0] * e1y + com[1] * e2y + com[2] * e3y
+    pz = com[0] * e1z + com[1] * e2z + com[2] * e3z
+    t1 = _cross(ax, ay, az, px, py, pz)
+    t2 = _cross(wx, wy, wz, px, py, pz)
+    t3 = _cross(wx, wy, wz, t2[0], t2[1], t2[2])
+    fx = mass * (ox + t1[0] + t3[0] - gx)
+    fy = mass * (oy + t1[1] + t3[1] - gy)
+    fz = mass * (oz + t1[2] + t3[2] - gz)
+    n = _inertia_terms(inertia, e1x, e1y, e1z, e2x, e2y, e2z, e3x, e3y, e3z, wx, wy, wz, ax, ay, az)
+    r = _cross(px, py, pz, fx, fy, fz)
+    return fx, fy, fz, n[0] + r[0], n[1] + r[1], n[2] + r[2]
 
 
 @njit(cache=True)
@@ -169,34 +190,15 @@ def platform_wrench_into(base, platform, axis1, lengths, units, platform_world, 
         alx = th1dd * u1x + th2dd * u2x + k * u12[0]
         aly = th1dd * u1y + th2dd * u2y + k * u12[1]
         alz = th1dd * u1z + th2dd * u2z + k * u12[2]
-        # cylinder: rho1 = R_L c1 from A (eq. 10.13)
-        p1x = coms[1, 0] * u4x + coms[1, 1] * u2x + coms[1, 2] * u3x
-        p1y = coms[1, 0] * u4y + coms[1, 1] * u2y + coms[1, 2] * u3y
-        p1z = coms[1, 0] * u4z + coms[1, 1] * u2z + coms[1, 2] * u3z
-        t1 = _cross(alx, aly, alz, p1x, p1y, p1z)
-        t2 = _cross(olx, oly, olz, p1x, p1y, p1z)
-        t3 = _cross(olx, oly, olz, t2[0], t2[1], t2[2])
-        f1x = m1 * (t1[0] + t3[0] - gx)
-        f1y = m1 * (t1[1] + t3[1] - gy)
-        f1z = m1 * (t1[2] + t3[2] - gz)
-        n1 = _inertia_terms(inertias[1], u4x, u4y, u4z, u2x, u2y, u2z, u3x, u3y, u3z, olx, oly, olz, alx, aly, alz)
-        # rod: rho2 = R_L c2 from B (eq. 10.14)
-        p2x = coms[2, 0] * u4x + coms[2, 1] * u2x + coms[2, 2] * u3x
-        p2y = coms[2, 0] * u4y + coms[2, 1] * u2y + coms[2, 2] * u3y
-        p2z = coms[2, 0] * u4z + coms[2, 1] * u2z + coms[2, 2] * u3z
-        t1 = _cross(alx, aly, alz, p2x, p2y, p2z)
-        t2 = _cross(olx, oly, olz, p2x, p2y, p2z)
-        t3 = _cross(olx, oly, olz, t2[0], t2[1], t2[2])
-        f2x = m2 * (abx + t1[0] + t3[0] - gx)
-        f2y = m2 * (aby + t1[1] + t3[1] - gy)
-        f2z = m2 * (abz + t1[2] + t3[2] - gz)
-        n2 = _inertia_terms(inertias[2], u4x, u4y, u4z, u2x, u2y, u2z, u3x, u3y, u3z, olx, oly, olz, alx, aly, alz)
-        # moment about A of the leg's wrenches, mapped by K^T to a force at B
-        r1 = _cross(p1x, p1y, p1z, f1x, f1y, f1z)
-        r2 = _cross(p2x, p2y, p2z, f2x, f2y, f2z)
-        hx = n1[0] + n2[0] + r1[0] + r2[0]
-        hy = n1[1] + n2[1] + r1[1] + r2[1]
-        hz = n1[2] + n2[2] + r1[2] + r2[2]
+        # cylinder from A (eq. 10.13, A at rest), rod from B (eq. 10.14)
+        _, _, _, h1x, h1y, h1z = _link_wrench(m1, coms[1], inertias[1], u4x, u4y, u4z, u2x, u2y, u2z,
+                                              u3x, u3y, u3z, olx, oly, olz, alx, aly, alz,
+                                              0.0, 0.0, 0.0, gx, gy, gz)
+        f2x, f2y, f2z, h2x, h2y, h2z = _link_wrench(m2, coms[2], inertias[2], u4x, u4y, u4z, u2x, u2y, u2z,
+                                                    u3x, u3y, u3z, olx, oly, olz, alx, aly, alz,
+                                                    abx, aby, abz, gx, gy, gz)
+        # f_B = F_rod + K^T (sum of the links' moments about their origins), module docstring
+        hx, hy, hz = h1x + h2x, h1y + h2y, h1z + h2z
         c_u1 = -(u1x * hx + u1y * hy + u1z * hz) / (s * d)
         c_u2 = (u2x * hx + u2y * hy + u2z * hz) / d
         fbx = f2x + c_u1 * u2x + c_u2 * u4x
@@ -258,10 +260,7 @@ class InverseDynamics:
         """tau for the state; False (and NaN forces) at a singular Jx."""
         self._kinematics(position_m, quat)
         self._wrench(twist, accel, self.gravity, self.wrench)
-        ok = _lu_solve_transposed_into(self.jacobian, self.wrench, self._lu, self.force_n)
-        if not ok:
-            self.force_n[:] = np.nan
-        return ok
+        return self.joint_forces_from_wrench(self.wrench)
 
     def task_space_terms(self, position_m, quat, twist) -> None:
         self._kinematics(position_m, quat)

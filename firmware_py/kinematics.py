@@ -244,8 +244,8 @@ class DirectKinematics:
         if guess is not None:
             self.pose[:] = guess
         dk_solve_into(self.base, self.platform, lengths_m, self.pose, self.tolerance_m, self.max_iterations,
-                      self.max_step_quat, self._rot, self._platform_world, self._units, self._phi, self._gmat, self._jac,
-                      self._normal, self._y, self._step, self.status)
+                      self.max_step_quat, self._rot, self._platform_world, self._units, self._phi, self._gmat,
+                      self._jac, self._normal, self._y, self._step, self.status)
         return int(self.status[0])
 
     @property

@@ -73,15 +73,17 @@ def run_bench(geometry: Geometry, count: int = 20000) -> dict:
     joint = motion.joint_trajectory(geometry)
     times = np.arange(0.0, joint.duration_s, CYCLE_S)
     lengths_stream, _, _ = joint.sample(times)
-    solver = DirectKinematics(geometry)
-    poses = np.empty((len(times), 7))
-    for k in range(len(times)):                     # poses of the stream, from DK itself
-        solver.solve(lengths_stream[k])
-        poses[k] = solver.pose
     n = len(times)
-    base, platform = np.ascontiguousarray(geometry.base_anchor_m), np.ascontiguousarray(geometry.platform_anchor_m)
-    rot, pw, lengths, units, jac = np.empty((3, 3)), np.empty((N_LEGS, 3)), np.empty(N_LEGS), np.empty((N_LEGS, 3)), \
-        np.empty((N_LEGS, 6))
+    solver = DirectKinematics(geometry)
+    poses = np.empty((n, 7))
+    iterations = np.empty(n)
+    for k in range(n):          # poses of the stream from the warm-started DK itself
+        iterations[k] = solver.solve(lengths_stream[k])
+        poses[k] = solver.pose
+    base = np.ascontiguousarray(geometry.base_anchor_m)
+    platform = np.ascontiguousarray(geometry.platform_anchor_m)
+    rot, pw, jac = np.empty((3, 3)), np.empty((N_LEGS, 3)), np.empty((N_LEGS, 6))
+    lengths, units = np.empty(N_LEGS), np.empty((N_LEGS, 3))
     index = [0]
 
     def ik_kernel():
@@ -93,10 +95,7 @@ def run_bench(geometry: Geometry, count: int = 20000) -> dict:
         k = index[0] = (index[0] + 1) % n
         ik_batch(geometry, poses[k, :3], poses[k, 3:])
 
-    solver.reset()
-    solver.solve(lengths_stream[0])
-
-    def dk_warm():
+    def dk_warm():          # the motion ends where it starts, so the stream wraps smoothly
         k = index[0] = (index[0] + 1) % n
         solver.solve(lengths_stream[k])
 
@@ -116,21 +115,10 @@ def run_bench(geometry: Geometry, count: int = 20000) -> dict:
     for name, call in (("ik_numba", ik_kernel), ("ik_numpy_vectorised", ik_numpy), ("dk_warm", dk_warm),
                        ("inverse_dynamics", inverse_dynamics), ("task_space_terms", task_space)):
         index[0] = 0
-        if name == "dk_warm":
-            solver.reset()
-            solver.solve(lengths_stream[0])
         call()
         timing = _percentiles(_time(call, count))
-        index[0] = 0
-        if name == "dk_warm":
-            solver.reset()
-            solver.solve(lengths_stream[0])
         timing.update(allocations_per_call(call))
         report[name] = timing
-    iterations = []
-    solver.reset()
-    for k in range(n):
-        iterations.append(solver.solve(lengths_stream[k]))
     report["dk_warm"]["mean_iterations"] = float(np.mean(iterations[1:]))
     report["goals_us"] = {"ik_numba": 20, "dk_warm": 60, "inverse_dynamics": 150}
     return report

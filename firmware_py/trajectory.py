@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .geometry import N_LEGS, Geometry
+from .geometry import Geometry
 from .kinematics import ik_batch
 from .workspace import MIN_CONDITION_INDEX, check_poses
 

@@ -20,7 +20,6 @@ import numpy as np
 
 from firmware_py.dynamics import InverseDynamics
 from firmware_py.geometry import Geometry
-from firmware_py.kinematics import ik_batch
 from firmware_py.workspace import MIN_CONDITION_INDEX, check_poses
 
 from .mechanism import Mechanism
