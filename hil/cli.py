@@ -9,6 +9,7 @@ from __future__ import annotations
 import sys
 
 from firmware_py import commands as firmware_commands
+from plant_emulator import commands as emulator_commands
 from protocol import commands as protocol_commands
 from protocol.cliutil import OneLineArgumentParser, run
 
@@ -22,6 +23,7 @@ def build_parser() -> OneLineArgumentParser:
                                 metavar="COMMAND")
     protocol_commands.add_parsers(sub)
     firmware_commands.add_parsers(sub)
+    emulator_commands.add_parsers(sub)
     return parser
 
 

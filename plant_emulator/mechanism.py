@@ -3,7 +3,8 @@ kinematics and dynamics, and the mechanical half of the hexapod rig.
 
 Model: the platform is a free body; each leg is a cylinder body hung from the base by a
 universal joint (two hinges: the first about u1, fixed to the base, the second about the
-leg's u2), a rod body on a slide joint along the leg axis, and a `connect` equality between
+leg's u2), a rod body on a slide joint along the leg axis (optionally limited to the
+stroke: the cylinder's end stops, as the hexapod rig uses it), and a `connect` equality between
 a site at the rod's end and a site at the platform's spherical joint (a ball joint closing
 the loop). Inertias of Table 10.1 in the link frames [u4, u2, u3]. Contacts are off (the
 workspace test handles collisions). The slide joints carry the actuator forces.
@@ -26,6 +27,7 @@ TIMESTEP_S = 0.0005
 # keep the loop-closure error in the micrometre range under the rig's forces.
 CONNECT_SOLREF = "0.002 1"
 CONNECT_SOLIMP = "0.9999 0.9999 0.0001 0.5 2"
+STOP_MARGIN_M = 0.001
 
 
 def _frame(u3: np.ndarray, u1: np.ndarray) -> np.ndarray:
@@ -57,7 +59,8 @@ class LegHome:
     length_m: float             # d at home
 
 
-def build_mjcf(geometry: Geometry, timestep_s: float = TIMESTEP_S) -> tuple[str, list[LegHome]]:
+def build_mjcf(geometry: Geometry, timestep_s: float = TIMESTEP_S,
+               stroke_limits: bool = False) -> tuple[str, list[LegHome]]:
     home = geometry.home_position_m
     legs_home = []
     bodies = []
@@ -68,6 +71,10 @@ def build_mjcf(geometry: Geometry, timestep_s: float = TIMESTEP_S) -> tuple[str,
         frame = _frame((top - anchor) / length, geometry.universal_axis[i])
         legs_home.append(LegHome(anchor.copy(), frame, length))
         axis1_local = frame.T @ geometry.universal_axis[i]
+        # end stops of the stroke, 1 mm beyond it so a leg exactly at an end is not on its stop
+        slide_low = geometry.leg_min_m - length - STOP_MARGIN_M
+        slide_high = geometry.leg_max_m - length + STOP_MARGIN_M
+        slide_range = f' range="{slide_low:.9g} {slide_high:.9g}"' if stroke_limits else ""
         cyl, rod = geometry.cylinder, geometry.rod
         bodies.append(f"""
     <body name="cylinder{i}" pos="{_fmt(anchor)}" quat="{_fmt(_quat_of(frame))}">
@@ -76,7 +83,7 @@ def build_mjcf(geometry: Geometry, timestep_s: float = TIMESTEP_S) -> tuple[str,
       <inertial pos="{_fmt(cyl.com_m)}" mass="{cyl.mass_kg:.12g}" fullinertia="{_full_inertia(cyl.inertia_kg_m2)}"/>
       <geom type="capsule" fromto="0 0 0 0 0 {geometry.cylinder_length_m:.6g}" size="{geometry.cylinder_radius_m:.6g}" mass="0"/>
       <body name="rod{i}" pos="0 0 {length:.12g}">
-        <joint name="slide{i}" type="slide" axis="0 0 1"/>
+        <joint name="slide{i}" type="slide" axis="0 0 1"{slide_range}/>
         <inertial pos="{_fmt(rod.com_m)}" mass="{rod.mass_kg:.12g}" fullinertia="{_full_inertia(rod.inertia_kg_m2)}"/>
         <geom type="capsule" fromto="0 0 0 0 0 {-geometry.rod_length_m:.6g}" size="{geometry.rod_radius_m:.6g}" mass="0"/>
         <site name="rod_end{i}" pos="0 0 0"/>
@@ -114,15 +121,15 @@ def build_mjcf(geometry: Geometry, timestep_s: float = TIMESTEP_S) -> tuple[str,
 class Mechanism:
     """The MuJoCo 6-UPS: set a platform state, step with actuator forces, inverse dynamics."""
 
-    def __init__(self, geometry: Geometry, timestep_s: float = TIMESTEP_S):
+    def __init__(self, geometry: Geometry, timestep_s: float = TIMESTEP_S, stroke_limits: bool = False):
         self.geometry = geometry
-        self.xml, self.legs_home = build_mjcf(geometry, timestep_s)
+        self.xml, self.legs_home = build_mjcf(geometry, timestep_s, stroke_limits)
         self.model = mujoco.MjModel.from_xml_string(self.xml)
         self.data = mujoco.MjData(self.model)
         m = self.model
         self.free_qpos = m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "platform")]
         self.free_dof = m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "platform")]
-        joint = lambda name: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)   # noqa: E731
+        joint = lambda name: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)
         self.u1_qpos = np.array([m.jnt_qposadr[joint(f"u1_{i}")] for i in range(6)])
         self.u2_qpos = np.array([m.jnt_qposadr[joint(f"u2_{i}")] for i in range(6)])
         self.slide_qpos = np.array([m.jnt_qposadr[joint(f"slide{i}")] for i in range(6)])

@@ -12,13 +12,22 @@ from pathlib import Path
 import can
 import pytest
 
-from protocol.bus import (BUS_FORMS, BusOpenError, BusSpec, BusSpecError, HostMulticastBus, default_bus_spec,
-                          open_bus, parse_bus_spec, socketcan_available)
+from protocol.bus import (
+    BUS_FORMS,
+    BusOpenError,
+    BusSpec,
+    BusSpecError,
+    HostMulticastBus,
+    default_bus_spec,
+    open_bus,
+    parse_bus_spec,
+    socketcan_available,
+)
 from protocol.codec import CODECS, FrameDecoder
 from protocol.e2e import RxStatus
 
 sys.path.insert(0, str(Path(__file__).parent))
-import bus_peer  # noqa: E402
+import bus_peer
 
 GROUP = "239.255.72.80"
 

@@ -2,7 +2,13 @@
 
 import pytest
 
-from protocol.busload import MAX_LOAD, MIN_COMPUTE_WINDOW_US, bus_budget, frame_bits_nominal, frame_bits_worst
+from protocol.busload import (
+    MAX_LOAD,
+    MIN_COMPUTE_WINDOW_US,
+    bus_budget,
+    frame_bits_nominal,
+    frame_bits_worst,
+)
 from protocol.dbc import schedules, sync_counter_overflow
 
 

@@ -5,10 +5,24 @@ import pytest
 
 from firmware_py.dk_eval import sample_workspace
 from firmware_py.geometry import default_geometry
-from firmware_py.kinematics import (DirectKinematics, constraint_into, constraint_jacobian_into, ik_batch, ik_into,
-                                    jacobian_batch, jacobian_into)
-from firmware_py.rotation import (axis_angle_to_quat, quat_multiply, quat_to_matrix, quat_to_matrix_into,
-                                  quat_to_rpy, rotation_angle_between, rpy_to_quat)
+from firmware_py.kinematics import (
+    DirectKinematics,
+    constraint_into,
+    constraint_jacobian_into,
+    ik_batch,
+    ik_into,
+    jacobian_batch,
+    jacobian_into,
+)
+from firmware_py.rotation import (
+    axis_angle_to_quat,
+    quat_multiply,
+    quat_to_matrix,
+    quat_to_matrix_into,
+    quat_to_rpy,
+    rotation_angle_between,
+    rpy_to_quat,
+)
 from firmware_py.workspace import MIN_CONDITION_INDEX, check_poses, segment_distance
 
 GEOMETRY = default_geometry()

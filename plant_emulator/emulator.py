@@ -1,0 +1,429 @@
+"""The emulator on the bus: leg nodes (CiA 408 valve driver + encoder, load cell, pressure
+sensors), the IMU node (hexapod), fault injection, and the process loop.
+
+Per SYNC k (DESIGN.md "Timing model"):
+1. every valve applies the command latched during cycle k-1 (state machine, setpoint) and
+   checks its command timeout and spool deviation; EMCY on a fault;
+2. every OPERATIONAL sensor node samples the rig as it is at t_k and sends its frames due on
+   this SYNC (LEG_STATE every SYNC, with the valve state just applied; LEG_PRESSURE,
+   VALVE_STATUS, IMU at their divisors);
+3. the rig integrates exactly one SYNC period with the applied spool setpoints.
+So the emulator follows whoever produces SYNC, in realtime and lockstep pacing alike.
+Heartbeats and the SYNC-loss watchdog run on the wall clock, like a real node's timers.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import time
+from dataclasses import dataclass, field
+
+import can
+import numpy as np
+
+from protocol.codec import CODECS, FrameDecoder
+from protocol.dbc import sync_counter_overflow
+from protocol.e2e import RxStatus
+
+from . import hydraulics as hy
+from .params import EmulatorConfig
+from .valve_node import Emergency, ValveDriver, ValveState
+
+NMT_BOOTUP, NMT_STOPPED, NMT_OPERATIONAL, NMT_PRE_OPERATIONAL = 0, 4, 5, 127
+NMT_START, NMT_STOP, NMT_ENTER_PREOP, NMT_RESET_NODE, NMT_RESET_COMM = 1, 2, 128, 129, 130
+IMU_NODE = 7
+BABBLE_ID = 0x601                    # not in the DBC (an SDO request id of node 1)
+EMU_SET_LOAD, EMU_INJECT, EMU_CLEAR, EMU_CLEAR_ALL = 1, 2, 3, 4
+FAULT_NAMES = {1: "DROP", 2: "DELAY", 3: "DUPLICATE", 4: "CORRUPT", 5: "STUCK", 6: "OUT_OF_RANGE",
+               7: "SILENT", 8: "VALVE_JAM", 9: "SUPPLY_LOSS", 10: "REORDER", 11: "BABBLE"}
+FAULT_CODES = {name: code for code, name in FAULT_NAMES.items()}
+CONTROLLER_TARGET = 16
+
+
+@dataclass
+class Counters:
+    syncs: int = 0
+    frames_in: int = 0
+    frames_out: int = 0
+    e2e_errors: int = 0
+    sync_sequence_errors: int = 0
+    valve_faults: int = 0
+    emergencies: int = 0
+    unknown_frames: int = 0
+    injected: dict = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        return {k: getattr(self, k) for k in ("syncs", "frames_in", "frames_out", "e2e_errors",
+                                              "sync_sequence_errors", "valve_faults", "emergencies",
+                                              "unknown_frames")} | {"injected": dict(self.injected)}
+
+
+class _Outbox:
+    """One reusable can.Message + value vector per transmitted DBC message."""
+
+    def __init__(self, name: str):
+        self.codec = CODECS[name]
+        self.values = self.codec.new_values()
+        self.message = can.Message(arbitration_id=self.codec.frame_id, data=self.codec.new_buffer(),
+                                   is_extended_id=False)
+        self.index = self.codec.index
+
+    def encode(self) -> bool:
+        return self.codec.encode_into(self.values, self.message.data) != 2   # not REJECTED
+
+
+class Emulator:
+    """Nodes of one rig on one bus. `handle(msg)` for every received frame, `poll(now)` often."""
+
+    def __init__(self, bus: can.BusABC | None, rig, cfg: EmulatorConfig, clock=time.monotonic):
+        self.bus, self.rig, self.cfg, self.clock = bus, rig, cfg, clock
+        self.legs = range(1, rig.n_legs + 1)
+        self.has_imu = rig.n_legs == 6
+        self.nodes = list(self.legs) + ([IMU_NODE] if self.has_imu else [])
+        self.valves = {n: ValveDriver(cfg.command_timeout_syncs, cfg.spool_jam_threshold, cfg.spool_jam_syncs)
+                       for n in self.legs}
+        self.nmt = {n: NMT_BOOTUP for n in self.nodes}
+        names = ["NMT", "SYNC", "EMU_CTRL"] + [f"VALVE_CMD_{n}" for n in self.legs]
+        self.decoder = FrameDecoder(names)
+        self._cmd_slot = {CODECS[f"VALVE_CMD_{n}"].frame_id: n for n in self.legs}
+        self._ids = {name: CODECS[name].frame_id for name in names}
+        self.out = {name: _Outbox(name) for name in self._tx_names()}
+        self.counters = Counters()
+        self.rng = np.random.default_rng(cfg.seed)
+        self.sync_counter = 0
+        self.last_sync_time: float | None = None
+        self.sync_lost_reported = False
+        self.next_heartbeat = 0.0
+        self.faults: dict[tuple[int, int], list] = {}     # (target, kind) -> [remaining cycles or -1, param]
+        self._held: dict[str, bytes] = {}                  # REORDER: frame held back per message
+        self._delayed: list[can.Message] = []              # DELAY: frames sent at the next SYNC
+        self._stuck: dict[int, tuple] = {}
+        self._ignore_commands = 0
+        divisor = {"LEG_PRESSURE": cfg.leg_pressure_divisor, "VALVE_STATUS": cfg.valve_status_divisor,
+                   "IMU_ATTITUDE": cfg.imu_divisor, "IMU_RATE": cfg.imu_divisor, "LEG_STATE": 0}
+        self._period = {name: divisor[name.rsplit("_", 1)[0] if name[-1].isdigit() else name]
+                        or CODECS[name].schedule.sync_period for name in self.out
+                        if CODECS[name].schedule.sync_period > 0}
+        self._overflow = sync_counter_overflow()
+        self.last_emergency: dict[int, Emergency] = {}
+
+    def _tx_names(self) -> list[str]:
+        names = []
+        for n in self.legs:
+            names += [f"LEG_STATE_{n}", f"LEG_PRESSURE_{n}", f"VALVE_STATUS_{n}", f"EMCY_{n}", f"HEARTBEAT_{n}"]
+        if self.has_imu:
+            names += ["IMU_ATTITUDE", "IMU_RATE", f"EMCY_{IMU_NODE}", f"HEARTBEAT_{IMU_NODE}"]
+        return names
+
+    # -- transmit -----------------------------------------------------------------------------
+    def _send(self, message: can.Message) -> None:
+        if self.bus is not None:
+            try:
+                self.bus.send(message)
+            except can.CanError:
+                return                      # a full queue drops the frame, as a controller would
+        self.counters.frames_out += 1
+
+    def _fault(self, target: int, kind: str):
+        entry = self.faults.get((target, FAULT_CODES[kind]))
+        return entry
+
+    def _emit(self, node: int, name: str) -> None:
+        """Encode and send a node's frame through the injected frame faults."""
+        box = self.out[name]
+        if not box.encode():
+            return
+        if self._fault(node, "SILENT") or self._fault(node, "DROP"):
+            return
+        message = box.message
+        if self._fault(node, "CORRUPT"):
+            message = can.Message(arbitration_id=message.arbitration_id, data=bytearray(message.data),
+                                  is_extended_id=False)
+            message.data[-1] ^= 0x01          # after the CRC: the receiver sees a CRC error
+        if self._fault(node, "DELAY"):
+            self._delayed.append(can.Message(arbitration_id=message.arbitration_id, data=bytes(message.data),
+                                             is_extended_id=False))
+            return
+        if self._fault(node, "REORDER"):
+            held = self._held.pop(name, None)
+            if held is None:                   # hold this one; the next goes out before it
+                self._held[name] = bytes(message.data)
+                return
+            self._send(message)
+            self._send(can.Message(arbitration_id=message.arbitration_id, data=held, is_extended_id=False))
+            return
+        self._send(message)
+        if self._fault(node, "DUPLICATE"):
+            self._send(message)
+
+    def _emergency(self, node: int, emergency: Emergency) -> None:
+        box = self.out[f"EMCY_{node}"]
+        box.values[:] = (emergency.error_code, emergency.error_register, int(emergency.state),
+                         int(emergency.reason), self.sync_counter % 256, emergency.info)
+        self.last_emergency[node] = emergency
+        self.counters.emergencies += 1
+        if emergency.error_code:
+            self.counters.valve_faults += 1
+        if not self._fault(node, "SILENT"):
+            self._send(box.message) if box.encode() else None
+
+    def _heartbeats(self) -> None:
+        for n in self.nodes:
+            if self._fault(n, "SILENT"):
+                continue
+            box = self.out[f"HEARTBEAT_{n}"]
+            box.values[0] = self.nmt[n]
+            if box.encode():
+                self._send(box.message)
+
+    # -- lifecycle ----------------------------------------------------------------------------
+    def boot(self) -> None:
+        """Power-on: valves INIT -> DISABLED, boot-up heartbeats, then PRE-OPERATIONAL."""
+        for valve in self.valves.values():
+            valve.boot()
+        for n in self.nodes:
+            self.nmt[n] = NMT_BOOTUP
+        self._heartbeats()
+        for n in self.nodes:
+            self.nmt[n] = NMT_OPERATIONAL if self.cfg.nmt_autostart else NMT_PRE_OPERATIONAL
+        self.next_heartbeat = self.clock() + self.cfg.heartbeat_s
+
+    def poll(self, now: float | None = None) -> float:
+        """Timers: heartbeats and the SYNC watchdog. Returns seconds until the next timer."""
+        now = self.clock() if now is None else now
+        if now >= self.next_heartbeat:
+            self._heartbeats()
+            self.next_heartbeat = now + self.cfg.heartbeat_s
+        limit = self.cfg.sync_timeout_periods * self.cfg.sync_period_s
+        if self.last_sync_time is not None and not self.sync_lost_reported and now - self.last_sync_time > limit:
+            self.sync_lost_reported = True
+            for n, valve in self.valves.items():
+                emergency = valve.sync_lost((now - self.last_sync_time) / self.cfg.sync_period_s)
+                if emergency is not None:
+                    self._emergency(n, emergency)
+        wait = self.next_heartbeat - now
+        if self.last_sync_time is not None and not self.sync_lost_reported:
+            wait = min(wait, self.last_sync_time + limit - now)
+        return max(wait, 0.0)
+
+    # -- receive ------------------------------------------------------------------------------
+    def handle(self, msg: can.Message) -> None:
+        self.counters.frames_in += 1
+        status = self.decoder.receive_message(msg)
+        frame_id = msg.arbitration_id
+        if status is RxStatus.UNKNOWN_ID:
+            self.counters.unknown_frames += 1
+            return
+        if frame_id == self._ids["SYNC"]:
+            if status is RxStatus.OK:
+                self.on_sync(int(self.decoder.values["SYNC"][0]))
+            return
+        if frame_id == self._ids["NMT"]:
+            if status is RxStatus.OK:
+                command, node = (int(v) for v in self.decoder.values["NMT"])
+                self._nmt(command, node)
+            return
+        if status is not RxStatus.OK:
+            if status in (RxStatus.CRC_ERROR, RxStatus.WRONG_SEQUENCE, RxStatus.BAD_LENGTH, RxStatus.REPEATED):
+                self.counters.e2e_errors += 1
+                node = self._cmd_slot.get(frame_id)
+                if node is not None and status is not RxStatus.REPEATED:
+                    self.valves[node].receive_invalid()
+            return
+        node = self._cmd_slot.get(frame_id)
+        if node is not None:
+            if self._ignore_commands or self.nmt[node] != NMT_OPERATIONAL:
+                return
+            _, _, d, h, m, r, setpoint = self.decoder.values[f"VALVE_CMD_{node}"]
+            self.valves[node].receive(bool(d), bool(h), bool(m), bool(r), float(setpoint))
+        elif frame_id == self._ids["EMU_CTRL"]:
+            self._emu_ctrl(*(self.decoder.values["EMU_CTRL"][2:]))
+
+    def _nmt(self, command: int, node: int) -> None:
+        targets = self.nodes if node == 0 else [node] if node in self.nmt else []
+        for n in targets:
+            if command == NMT_START:
+                self.nmt[n] = NMT_OPERATIONAL
+            elif command == NMT_STOP:
+                self.nmt[n] = NMT_STOPPED
+            elif command == NMT_ENTER_PREOP:
+                self.nmt[n] = NMT_PRE_OPERATIONAL
+            elif command in (NMT_RESET_NODE, NMT_RESET_COMM):
+                if command == NMT_RESET_NODE and n in self.valves:
+                    self.valves[n] = ValveDriver(self.cfg.command_timeout_syncs, self.cfg.spool_jam_threshold,
+                                                 self.cfg.spool_jam_syncs)
+                    self.valves[n].boot()
+                self.nmt[n] = NMT_BOOTUP
+                box = self.out[f"HEARTBEAT_{n}"]
+                box.values[0] = NMT_BOOTUP
+                if box.encode():
+                    self._send(box.message)
+                self.nmt[n] = NMT_PRE_OPERATIONAL
+
+    def _emu_ctrl(self, command: float, target: float, kind: float, load_kg: float, param: float) -> None:
+        command, target, kind, param = int(command), int(target), int(kind), int(param)
+        if command == EMU_SET_LOAD:
+            self.rig.set_load(load_kg)
+        elif command == EMU_INJECT and kind in FAULT_NAMES:
+            self.faults[(target, kind)] = [param if param > 0 else -1, param]
+            self.counters.injected[FAULT_NAMES[kind]] = self.counters.injected.get(FAULT_NAMES[kind], 0) + 1
+            self._apply_state_fault(target, kind, True)
+        elif command == EMU_CLEAR:
+            if self.faults.pop((target, kind), None) is not None:
+                self._apply_state_fault(target, kind, False)
+        elif command == EMU_CLEAR_ALL:
+            for key in list(self.faults):
+                self.faults.pop(key)
+                self._apply_state_fault(*key, False)
+
+    def _apply_state_fault(self, target: int, kind: int, on: bool) -> None:
+        name = FAULT_NAMES[kind]
+        if name == "VALVE_JAM" and 1 <= target <= self.rig.n_legs:
+            self.rig.jammed[target - 1] = on
+        elif name == "SUPPLY_LOSS":
+            self.rig.set_supply_lost(on)
+        elif name == "STUCK" and not on:
+            self._stuck.pop(target, None)
+        elif name == "DROP" and target == CONTROLLER_TARGET:
+            self._ignore_commands = on
+        elif name == "DELAY" and not on:
+            self._flush_delayed()
+
+    def _flush_delayed(self) -> None:
+        delayed, self._delayed = self._delayed, []
+        for message in delayed:
+            self._send(message)
+
+    # -- SYNC ---------------------------------------------------------------------------------
+    def on_sync(self, counter: int) -> None:
+        now = self.clock()
+        self.counters.syncs += 1
+        if self.sync_counter and counter != self.sync_counter % self._overflow + 1:
+            self.counters.sync_sequence_errors += 1
+        self.sync_counter = counter
+        self.last_sync_time = now
+        self.sync_lost_reported = False
+        self._flush_delayed()
+        for n, valve in self.valves.items():
+            if self.nmt[n] != NMT_OPERATIONAL:
+                continue
+            emergency = valve.on_sync()
+            if emergency is None:
+                emergency = valve.check_spool(float(self.rig.state[n - 1, hy.S_SPOOL]))
+            if emergency is not None:
+                self._emergency(n, emergency)
+        self._sample_and_send(counter)
+        for n, valve in self.valves.items():
+            self.rig.command[n - 1] = valve.spool_command
+        self.rig.advance(self.cfg.sync_period_s)
+        self._count_down_faults()
+
+    def _count_down_faults(self) -> None:
+        for key, entry in list(self.faults.items()):
+            if FAULT_NAMES[key[1]] == "BABBLE":
+                babble = can.Message(arbitration_id=BABBLE_ID, data=bytes(8), is_extended_id=False)
+                for _ in range(max(entry[1], 1)):
+                    self._send(babble)
+            if entry[0] > 0:
+                entry[0] -= 1
+                if entry[0] == 0:
+                    del self.faults[key]
+                    self._apply_state_fault(*key, False)
+
+    def _due(self, name: str, counter: int) -> bool:
+        period = self._period.get(name, 0)
+        if period <= 1:
+            return period == 1
+        return (counter - 1) % period == CODECS[name].schedule.sync_phase % period
+
+    def _sample_and_send(self, counter: int) -> None:
+        rig, cfg, rng = self.rig, self.cfg, self.rng
+        for n in self.legs:
+            if self.nmt[n] != NMT_OPERATIONAL:
+                continue
+            i = n - 1
+            valve = self.valves[n]
+            position = round(rig.state[i, hy.S_Y] / cfg.encoder_resolution_m) * cfg.encoder_resolution_m
+            force = rig.rod_force_n[i] + cfg.load_cell_noise_n * rng.standard_normal()
+            if self._fault(n, "STUCK"):
+                position, force = self._stuck.setdefault(n, (position, force))
+            if self._fault(n, "OUT_OF_RANGE"):
+                param = self.faults[(n, FAULT_CODES["OUT_OF_RANGE"])][1]
+                force = float(param) if param else 1e9         # saturates at the DBC's maximum
+            box = self.out[f"LEG_STATE_{n}"]
+            box.values[box.index["VALVE_STATE"]] = int(valve.state)
+            box.values[box.index["SENSOR_FAULT"]] = 0
+            box.values[box.index["POSITION"]] = position
+            box.values[box.index["FORCE"]] = force
+            self._emit(n, box.codec.name)
+            name = f"LEG_PRESSURE_{n}"
+            if self._due(name, counter):
+                box = self.out[name]
+                box.values[box.index["PA"]] = rig.state[i, hy.S_PA] + cfg.pressure_noise_pa * rng.standard_normal()
+                box.values[box.index["PB"]] = rig.state[i, hy.S_PB] + cfg.pressure_noise_pa * rng.standard_normal()
+                self._emit(n, name)
+            name = f"VALVE_STATUS_{n}"
+            if self._due(name, counter):
+                box = self.out[name]
+                box.values[box.index["VALVE_STATE"]] = int(valve.state)
+                box.values[box.index["SPOOL_ACTUAL"]] = rig.state[i, hy.S_SPOOL]
+                box.values[box.index["FAULT_REASON"]] = int(valve.fault_reason)
+                self._emit(n, name)
+        if self.has_imu and self.nmt[IMU_NODE] == NMT_OPERATIONAL:
+            if self._due("IMU_ATTITUDE", counter):
+                _, quat = rig.platform_pose()
+                box = self.out["IMU_ATTITUDE"]
+                roll, pitch, yaw = quaternion_to_rpy(quat)
+                noise = cfg.imu_angle_noise_rad * rng.standard_normal(3)
+                box.values[box.index["ROLL"]:box.index["YAW"] + 1] = (roll + noise[0], pitch + noise[1],
+                                                                      yaw + noise[2])
+                self._emit(IMU_NODE, "IMU_ATTITUDE")
+            if self._due("IMU_RATE", counter):
+                box = self.out["IMU_RATE"]
+                rate = rig.platform_body_rate() + cfg.imu_rate_noise_rad_s * rng.standard_normal(3)
+                box.values[box.index["RATE_X"]:box.index["RATE_Z"] + 1] = rate
+                self._emit(IMU_NODE, "IMU_RATE")
+
+    # -- process loop -------------------------------------------------------------------------
+    def run(self, should_stop) -> None:
+        """Receive and dispatch until `should_stop()`; timers between frames."""
+        self.boot()
+        wait = 0.0
+        while not should_stop():
+            msg = self.bus.recv(timeout=min(max(wait, 0.0005), 0.05))
+            if msg is not None:
+                self.handle(msg)
+            wait = self.poll()
+
+    def summary(self) -> dict:
+        valves = {str(n): ValveState(v.state).name for n, v in self.valves.items()}
+        return {"rig": self.rig.name, "sim_time_s": round(self.rig.time_s, 6), **self.counters.as_dict(),
+                "rx_status": {s.name: int(c) for s, c in zip(RxStatus, self.decoder.counts.sum(axis=0))},
+                "valves": valves}
+
+
+def quaternion_to_rpy(quat: np.ndarray) -> tuple[float, float, float]:
+    """Roll, pitch, yaw (R = Rz(yaw) Ry(pitch) Rx(roll)) of a (w, x, y, z) quaternion."""
+    w, x, y, z = quat
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+class StopFlag:
+    """SIGTERM / SIGINT set it; the loop checks it between frames."""
+
+    def __init__(self):
+        self.stopped = False
+        self.signal = None
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, self._set)
+
+    def _set(self, signum, _frame) -> None:
+        self.stopped = True
+        self.signal = signum
+
+    def __call__(self) -> bool:
+        return self.stopped

@@ -1,0 +1,155 @@
+"""Servo-hydraulic actuator physics (thesis chapter 4.3), pure and in place.
+
+One actuator = a four-way servo-valve feeding an asymmetric double-acting cylinder. The
+state of leg i lives in a row of a float64 array (`S_*` columns); physical parameters are
+packed once into a float64 vector (`HP_*` entries) by `plant_emulator.params`. Kernels are
+numba-compiled and allocate nothing, so the rigs can call them every sub-step.
+
+Modelling choices (all SI, gauge pressures):
+- Valve orifices: eq. 4.2 Q = c x sqrt|dP| sign(dP) per metering edge, the edges combined as
+  eq. 4.4-4.6. The spool position x is the fraction of full valve input. The edges carry
+  a small underlap (`lap_p` on the supply edges, `lap_t` on the return edges): at null all
+  four edges pass a little flow, which is what gives the identified actuator its damping
+  (chapter 5: zeta ~ 0.5, far more than a critically lapped valve and friction give).
+  With both laps 0 the edges are exactly eq. 4.4-4.6. sqrt|dP| is regularised to a laminar
+  law below `laminar_pa` so the flow is smooth (and its slope finite) at dP = 0.
+- Spool: first-order lag. The thesis neglects spool dynamics (4.3); the Moog E050's
+  bandwidth (> 100 Hz) is well above the actuator's ~17 Hz hydraulic mode, and a second
+  order valve resonance would sit beyond the 250 Hz Nyquist limit of the 500 Hz loop, so a
+  first-order lag is all the loop can see. It is integrated exactly.
+- Chambers: continuity eq. 4.7-4.8 with internal (cross-piston) leakage, volumes eq. 4.9-4.10
+  with dead volumes that include the hoses, and an effective bulk modulus that depends on
+  the absolute chamber pressure: oil, entrained air (polytropic) and the hose wall in
+  series. Integrated linearly-implicitly per chamber (stable for stiff orifices and small
+  volumes at any sub-step).
+- Force on the piston eq. 4.15 / 4.24: F = Ap (PA - alpha PB).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+ATMOSPHERE_PA = 101325.0
+
+# -- parameter vector (filled by params.ActuatorParams.packed) ------------------------------
+HP_AREA_A = 0          # piston area Ap [m^2]
+HP_ALPHA = 1           # annulus / piston area ratio
+HP_STROKE = 2          # [m]
+HP_VA0 = 3             # dead volume of chamber A incl. hose [m^3]
+HP_VB0 = 4
+HP_BETA_OIL = 5        # [Pa]
+HP_AIR0 = 6            # entrained air volume fraction at atmospheric pressure
+HP_POLY_N = 7          # polytropic index of the air
+HP_BETA_WALL = 8       # hose/wall compliance as a bulk modulus [Pa]
+HP_KV = 9              # orifice coefficient per edge at full opening [m^3/s/sqrt(Pa)]
+HP_LAP_P = 10          # supply-edge underlap [fraction of full spool stroke]
+HP_LAP_T = 11          # return-edge underlap
+HP_LEAK = 12           # cross-piston leakage [m^3/s/Pa]
+HP_TANK = 13           # return-line pressure [Pa]
+HP_LAMINAR = 14        # laminar transition pressure of the orifice law [Pa]
+HP_TAU_SPOOL = 15      # spool time constant [s]
+HP_P_MIN = 16          # lowest chamber pressure (cavitation) [Pa gauge]
+HP_SIZE = 17
+
+# -- per-leg state columns -------------------------------------------------------------------
+S_Y = 0        # piston position from fully retracted [m]
+S_V = 1        # piston velocity [m/s] (testbench; the hexapod reads it from MuJoCo)
+S_PA = 2       # chamber pressures [Pa gauge]
+S_PB = 3
+S_SPOOL = 4    # spool position [fraction of full input]
+S_Z = 5        # LuGre bristle deflection of the cylinder seals [m]
+S_ZG = 6       # LuGre bristle deflection of the linear guide [m] (testbench)
+S_SIZE = 7
+
+
+@numba.njit(cache=True, inline="always")
+def orifice_root(dp: float, laminar_pa: float) -> float:
+    """sqrt|dp| sign(dp) of eq. 4.2, laminar (linear) below `laminar_pa`."""
+    return dp / (dp * dp + laminar_pa * laminar_pa) ** 0.25
+
+
+@numba.njit(cache=True, inline="always")
+def orifice_root_slope(dp: float, laminar_pa: float) -> float:
+    """d orifice_root / d dp (positive, finite at dp = 0)."""
+    q = dp * dp + laminar_pa * laminar_pa
+    return (0.5 * dp * dp + laminar_pa * laminar_pa) / q ** 1.25
+
+
+@numba.njit(cache=True)
+def valve_flows(spool: float, pa: float, pb: float, ps: float, hp: np.ndarray):
+    """Flows into chambers A and B through the valve (eq. 4.4-4.6 with edge underlap),
+    and their slopes d QA / d PA, d QB / d PB (for the implicit pressure update)."""
+    kv, lam, pt = hp[HP_KV], hp[HP_LAMINAR], hp[HP_TANK]
+    a_pa = max(spool + hp[HP_LAP_P], 0.0)     # P -> A opens with positive spool
+    a_at = max(hp[HP_LAP_T] - spool, 0.0)     # A -> T opens with negative spool
+    a_pb = max(hp[HP_LAP_P] - spool, 0.0)     # P -> B
+    a_bt = max(spool + hp[HP_LAP_T], 0.0)     # B -> T
+    qa = kv * (a_pa * orifice_root(ps - pa, lam) - a_at * orifice_root(pa - pt, lam))
+    qb = kv * (a_pb * orifice_root(ps - pb, lam) - a_bt * orifice_root(pb - pt, lam))
+    dqa = -kv * (a_pa * orifice_root_slope(ps - pa, lam) + a_at * orifice_root_slope(pa - pt, lam))
+    dqb = -kv * (a_pb * orifice_root_slope(ps - pb, lam) + a_bt * orifice_root_slope(pb - pt, lam))
+    return qa, qb, dqa, dqb
+
+
+@numba.njit(cache=True)
+def bulk_modulus(p: float, hp: np.ndarray) -> float:
+    """Effective bulk modulus at gauge pressure p: oil with entrained air, hose wall in series.
+
+    Air of volume fraction eps0 at atmospheric pressure is compressed polytropically,
+    eps(p) = eps0 (p_atm / p_abs)^(1/n); its compliance eps / (n p_abs) adds to the oil's,
+    per unit of mixture volume; the hose wall adds 1 / beta_wall.
+    """
+    p_abs = max(p + ATMOSPHERE_PA, 1000.0)
+    n = hp[HP_POLY_N]
+    eps = hp[HP_AIR0] * (ATMOSPHERE_PA / p_abs) ** (1.0 / n)
+    compliance = (1.0 / hp[HP_BETA_OIL] + eps / (n * p_abs)) / (1.0 + eps) + 1.0 / hp[HP_BETA_WALL]
+    return 1.0 / compliance
+
+
+@numba.njit(cache=True, inline="always")
+def chamber_volumes(y: float, hp: np.ndarray):
+    """eq. 4.9-4.10 with y from the retracted end: VA = VA0 + Ap y, VB = VB0 + alpha Ap (S - y)."""
+    area = hp[HP_AREA_A]
+    yc = min(max(y, 0.0), hp[HP_STROKE])
+    return hp[HP_VA0] + area * yc, hp[HP_VB0] + hp[HP_ALPHA] * area * (hp[HP_STROKE] - yc)
+
+
+@numba.njit(cache=True, inline="always")
+def piston_force(pa: float, pb: float, hp: np.ndarray) -> float:
+    """eq. 4.15 / 4.24: hydraulic force on the piston, positive extending."""
+    return hp[HP_AREA_A] * (pa - hp[HP_ALPHA] * pb)
+
+
+@numba.njit(cache=True)
+def pressure_rates(y: float, v: float, pa: float, pb: float, spool: float, ps: float, hp: np.ndarray):
+    """dPA/dt, dPB/dt (eq. 4.7-4.8, 4.13-4.14 with internal leakage) and their slopes."""
+    qa, qb, dqa, dqb = valve_flows(spool, pa, pb, ps, hp)
+    leak = hp[HP_LEAK] * (pa - pb)
+    va, vb = chamber_volumes(y, hp)
+    ka = bulk_modulus(pa, hp) / va
+    kb = bulk_modulus(pb, hp) / vb
+    area = hp[HP_AREA_A]
+    rate_a = ka * (qa - leak - area * v)
+    rate_b = kb * (qb + leak + hp[HP_ALPHA] * area * v)
+    return rate_a, rate_b, ka * (dqa - hp[HP_LEAK]), kb * (dqb - hp[HP_LEAK])
+
+
+@numba.njit(cache=True)
+def spool_step(spool: float, command: float, h: float, hp: np.ndarray) -> float:
+    """Exact first-order lag toward the command (saturated at full input)."""
+    target = min(max(command, -1.0), 1.0)
+    return target + (spool - target) * math.exp(-h / hp[HP_TAU_SPOOL])
+
+
+@numba.njit(cache=True)
+def chamber_step(state: np.ndarray, y: float, v: float, ps: float, h: float, hp: np.ndarray) -> None:
+    """Advance PA, PB of one leg's state row by h, linearly implicit (Rosenbrock-Euler
+    on each chamber's own slope); v and y are the end-of-step mechanical state."""
+    pa, pb = state[S_PA], state[S_PB]
+    rate_a, rate_b, slope_a, slope_b = pressure_rates(y, v, pa, pb, state[S_SPOOL], ps, hp)
+    p_min = hp[HP_P_MIN]
+    state[S_PA] = max(pa + h * rate_a / (1.0 - h * slope_a), p_min)
+    state[S_PB] = max(pb + h * rate_b / (1.0 - h * slope_b), p_min)

@@ -1,0 +1,272 @@
+"""The two rigs the emulator can be: the single-actuator test bench and the hexapod.
+
+Both expose the same surface to the node layer: `n_legs`, `state` (n_legs x S_SIZE, the
+actuator states of hydraulics.py), `command` (valve input per leg, fraction of full
+input, written by the valve nodes), `jammed` (per-leg spool frozen), `supply_pressure_pa`,
+`advance(period_s)` (integrate exactly that much physics), `rod_force_n` (what the load
+cells measure) and `set_load(kg)`.
+
+- `TestbenchRig` (chapters 5-7): one vertical actuator lifting the 1.35 kg slide of a linear
+  guide plus an external mass; guide friction eq. D.3 with Table D.1; seal friction LuGre.
+  One degree of freedom, integrated by our own numba kernel (semi-implicit velocity, exact
+  LuGre bristles, implicit chambers), hard end stops.
+- `HexapodRig`: six actuators driving the MuJoCo 6-UPS (`mechanism.Mechanism`). Per MuJoCo
+  step the hydraulic force minus the bristle force goes to the slide motors and the
+  friction's velocity slope to the slide's joint damping (MuJoCo's implicitfast integrates
+  damping implicitly); after the step the bristles and chambers advance with the new leg
+  velocities, in `hydraulic_substeps` sub-steps.
+
+The load cell sits on the rod between piston and load (chapter 8.2.3): it measures the
+axial force the rod transmits to the load, positive when it pushes (compression).
+"""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numba
+import numpy as np
+
+from firmware_py.geometry import Geometry, default_geometry
+
+from . import hydraulics as hy
+from .friction import lugre_split, lugre_z_step
+from .mechanism import Mechanism
+from .params import GRAVITY_M_S2, EmulatorConfig
+
+SUPPLY_LOSS_TIME_CONSTANT_S = 0.05    # supply pressure decay when the power unit is lost
+
+
+@numba.njit(cache=True)
+def testbench_advance(st: np.ndarray, command: float, jammed: bool, n: int, h: float, ps: float,
+                      hp: np.ndarray, fp: np.ndarray, gp: np.ndarray, rod_mass: float, load_mass: float,
+                      out: np.ndarray) -> None:
+    """n sub-steps of h of the test bench; out = [acceleration, seal friction, guide friction]."""
+    mass = rod_mass + load_mass
+    stroke = hp[hy.HP_STROKE]
+    y, v = st[hy.S_Y], st[hy.S_V]
+    accel = 0.0
+    seal = 0.0
+    guide = 0.0
+    for _ in range(n):
+        if not jammed:
+            st[hy.S_SPOOL] = hy.spool_step(st[hy.S_SPOOL], command, h, hp)
+        drive = hy.piston_force(st[hy.S_PA], st[hy.S_PB], hp)            # eq. 4.15
+        seal_z, seal_c = lugre_split(st[hy.S_Z], v, fp)                  # eq. 6.1-6.3
+        guide_z, guide_c = lugre_split(st[hy.S_ZG], v, gp)               # eq. D.3
+        # m dv/dt = drive - F_seal - F_guide - m g, the friction's v-slope implicit
+        v_new = (mass * v + h * (drive - seal_z - guide_z - mass * 9.81)) / (mass + h * (seal_c + guide_c))
+        y_new = y + h * v_new
+        if y_new <= 0.0:                                                 # end stops: inelastic
+            y_new = 0.0
+            v_new = max(v_new, 0.0)
+        elif y_new >= stroke:
+            y_new = stroke
+            v_new = min(v_new, 0.0)
+        seal = seal_z + seal_c * v_new
+        guide = guide_z + guide_c * v_new
+        st[hy.S_Z] = lugre_z_step(st[hy.S_Z], v_new, h, fp)
+        st[hy.S_ZG] = lugre_z_step(st[hy.S_ZG], v_new, h, gp)
+        hy.chamber_step(st, y_new, v_new, ps, h, hp)
+        accel = (v_new - v) / h
+        y, v = y_new, v_new
+    st[hy.S_Y], st[hy.S_V] = y, v
+    out[0], out[1], out[2] = accel, seal, guide
+
+
+@numba.njit(cache=True)
+def legs_drive_into(st: np.ndarray, velocity: np.ndarray, hp: np.ndarray, fp: np.ndarray,
+                    force: np.ndarray, damping: np.ndarray) -> None:
+    """Per leg: hydraulic force minus the bristle force (explicit) and the friction's slope."""
+    for i in range(st.shape[0]):
+        z_force, slope = lugre_split(st[i, hy.S_Z], velocity[i], fp)
+        force[i] = hy.piston_force(st[i, hy.S_PA], st[i, hy.S_PB], hp) - z_force
+        damping[i] = slope
+
+
+@numba.njit(cache=True)
+def legs_hydraulics(st: np.ndarray, stroke: np.ndarray, velocity: np.ndarray, command: np.ndarray,
+                    jammed: np.ndarray, n: int, h: float, ps: float, hp: np.ndarray, fp: np.ndarray) -> None:
+    """Advance spool, bristles and chambers of every leg by n x h at the given leg motion."""
+    for i in range(st.shape[0]):
+        st[i, hy.S_Y] = stroke[i]
+        st[i, hy.S_V] = velocity[i]
+        for _ in range(n):
+            if not jammed[i]:
+                st[i, hy.S_SPOOL] = hy.spool_step(st[i, hy.S_SPOOL], command[i], h, hp)
+            st[i, hy.S_Z] = lugre_z_step(st[i, hy.S_Z], velocity[i], h, fp)
+            hy.chamber_step(st[i], stroke[i], velocity[i], ps, h, hp)
+
+
+def holding_pressures(cfg: EmulatorConfig, force_n: float) -> tuple[float, float]:
+    """Chamber pressures that hold `force_n` with PA + PB = supply + tank (a start value)."""
+    ps, pt, alpha = cfg.supply_pressure_pa, cfg.hp[hy.HP_TANK], cfg.alpha
+    load_pressure = force_n / cfg.area_a_m2
+    pb = (ps + pt - load_pressure) / (1.0 + alpha)
+    return load_pressure + alpha * pb, pb
+
+
+class _RigBase:
+    n_legs: int
+
+    def __init__(self, cfg: EmulatorConfig):
+        self.cfg = cfg
+        self.state = np.zeros((self.n_legs, hy.S_SIZE))
+        self.command = np.zeros(self.n_legs)
+        self.jammed = np.zeros(self.n_legs, dtype=bool)
+        self.rod_force_n = np.zeros(self.n_legs)
+        self.supply_pressure_pa = cfg.supply_pressure_pa
+        self.supply_lost = False
+        self.time_s = 0.0
+
+    def _supply_for(self, period_s: float) -> float:
+        if self.supply_lost:      # the power unit stops: supply decays to the tank pressure
+            tank = self.cfg.hp[hy.HP_TANK]
+            self.supply_pressure_pa = tank + (self.supply_pressure_pa - tank) * math.exp(
+                -period_s / SUPPLY_LOSS_TIME_CONSTANT_S)
+        return self.supply_pressure_pa
+
+    def set_supply_lost(self, lost: bool) -> None:
+        self.supply_lost = lost
+        if not lost:
+            self.supply_pressure_pa = self.cfg.supply_pressure_pa
+
+    @property
+    def stroke_m(self) -> np.ndarray:
+        return self.state[:, hy.S_Y]
+
+
+class TestbenchRig(_RigBase):
+    """One actuator lifting the slide of a vertical linear guide plus an external mass."""
+
+    n_legs = 1
+    name = "testbench"
+    __test__ = False            # not a pytest class despite the name
+
+    def __init__(self, cfg: EmulatorConfig, load_kg: float | None = None, start_mm: float = 150.0):
+        super().__init__(cfg)
+        self.out = np.zeros(3)
+        self.set_load(cfg.load_kg if load_kg is None else load_kg)
+        self.state[0, hy.S_Y] = min(max(start_mm * 1e-3, 0.0), cfg.stroke_m)
+        hold = (cfg.piston_rod_mass_kg + self.load_mass_kg) * GRAVITY_M_S2
+        self.state[0, hy.S_PA], self.state[0, hy.S_PB] = holding_pressures(cfg, hold)
+        self.rod_force_n[0] = self.load_mass_kg * GRAVITY_M_S2          # at rest
+
+    def set_load(self, load_kg: float) -> None:
+        self.load_kg = float(load_kg)
+        self.load_mass_kg = self.cfg.guide.slide_mass_kg + self.load_kg
+        self.guide_friction = self.cfg.guide.lugre_vector(self.load_kg)
+
+    def advance(self, period_s: float) -> None:
+        n = max(1, round(period_s / self.cfg.substep_s))
+        ps = self._supply_for(period_s)
+        testbench_advance(self.state[0], float(self.command[0]), bool(self.jammed[0]), n, period_s / n, ps,
+                          self.cfg.hp, self.cfg.friction, self.guide_friction, self.cfg.piston_rod_mass_kg,
+                          self.load_mass_kg, self.out)
+        # the rod carries the load's weight, inertia and guide friction
+        self.rod_force_n[0] = self.load_mass_kg * (self.out[0] + GRAVITY_M_S2) + self.out[2]
+        self.time_s += period_s
+
+    @property
+    def acceleration_m_s2(self) -> float:
+        return float(self.out[0])
+
+    @property
+    def seal_friction_n(self) -> float:
+        return float(self.out[1])
+
+
+class HexapodRig(_RigBase):
+    """Six actuators on the MuJoCo 6-UPS, starting at rest at the home pose."""
+
+    n_legs = 6
+    name = "hexapod"
+
+    def __init__(self, cfg: EmulatorConfig, geometry: Geometry | None = None):
+        super().__init__(cfg)
+        self.geometry = geometry or default_geometry()
+        self.mechanism = Mechanism(self.geometry, timestep_s=cfg.mujoco_timestep_s, stroke_limits=True)
+        mech, model = self.mechanism, self.mechanism.model
+        self._home_length = np.array([leg.length_m for leg in mech.legs_home])
+        self._cylinder_body = model.body_parentid[model.site_bodyid[mech.rod_site]]
+        self._platform_mass0 = float(model.body_mass[mech.platform_body])
+        self.set_load(cfg.payload_kg)
+        self._force = np.zeros(6)
+        self._damping = np.zeros(6)
+        self._velocity = np.zeros(6)
+        self._stroke = np.zeros(6)
+        self._read_legs()
+        self.state[:, hy.S_Y] = self._stroke
+        static, _ = mech.inverse_forces(mech.data.qpos.copy(), np.zeros(model.nv), np.zeros(model.nv))
+        for i in range(6):
+            self.state[i, hy.S_PA], self.state[i, hy.S_PB] = holding_pressures(cfg, float(static[i]))
+        mech.set_pose(self.geometry.home_position_m, self.geometry.home_quaternion)
+        self._measure_rod_forces()
+
+    def set_load(self, load_kg: float) -> None:
+        """A payload at the platform's centre of mass (a point mass there adds no inertia about it)."""
+        self.load_kg = float(load_kg)
+        self.mechanism.model.body_mass[self.mechanism.platform_body] = self._platform_mass0 + self.load_kg
+
+    def _read_legs(self) -> None:
+        mech = self.mechanism
+        np.add(mech.data.qpos[mech.slide_qpos], self._home_length - self.geometry.leg_min_m, out=self._stroke)
+        self._velocity[:] = mech.data.qvel[mech.slide_dof]
+
+    def advance(self, period_s: float) -> None:
+        mech, cfg = self.mechanism, self.cfg
+        model, data = mech.model, mech.data
+        steps = max(1, round(period_s / model.opt.timestep))
+        ps = self._supply_for(period_s)
+        sub = cfg.hydraulic_substeps
+        h = model.opt.timestep / sub
+        for _ in range(steps):
+            legs_drive_into(self.state, self._velocity, cfg.hp, cfg.friction, self._force, self._damping)
+            model.dof_damping[mech.slide_dof] = self._damping
+            data.ctrl[:] = self._force
+            mujoco.mj_step(model, data)
+            self._read_legs()
+            legs_hydraulics(self.state, self._stroke, self._velocity, self.command, self.jammed, sub, h, ps,
+                            cfg.hp, cfg.friction)
+        self._measure_rod_forces()
+        self.time_s += steps * model.opt.timestep
+
+    def _measure_rod_forces(self) -> None:
+        """Axial force of each connect constraint (rod end -> platform), compression positive.
+
+        A connect's three rows carry the force f on the rod end in world axes (the platform
+        gets -f); the rod pushes the platform along the leg axis u by -f . u.
+        """
+        mech, data = self.mechanism, self.mechanism.data
+        rows = np.flatnonzero(data.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
+        force_on_rod = data.efc_force[rows].reshape(6, 3)
+        axis = data.site_xpos[mech.platform_site] - data.xpos[self._cylinder_body]
+        axis /= np.linalg.norm(axis, axis=1)[:, None]
+        np.einsum("ij,ij->i", force_on_rod, axis, out=self.rod_force_n)
+        np.negative(self.rod_force_n, out=self.rod_force_n)
+
+    def platform_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """Ground truth: platform position [m] and quaternion (w, x, y, z)."""
+        pos, quat, *_ = self.mechanism.platform_state()
+        return pos, quat
+
+    def platform_body_rate(self) -> np.ndarray:
+        """Angular velocity in the platform frame (what a strapdown IMU measures) [rad/s]."""
+        mech = self.mechanism
+        return mech.data.qvel[mech.free_dof + 3:mech.free_dof + 6].copy()
+
+    def closure_error_m(self) -> float:
+        return self.mechanism.closure_error_m()
+
+
+RIGS = {"testbench": TestbenchRig, "hexapod": HexapodRig}
+
+
+def make_rig(name: str, cfg: EmulatorConfig, load_kg: float | None = None):
+    if name == "testbench":
+        return TestbenchRig(cfg, load_kg)
+    rig = HexapodRig(cfg)
+    if load_kg is not None:
+        rig.set_load(load_kg)
+    return rig
