@@ -145,8 +145,8 @@ def test_calibration_subset_within_bounds(cfg):
 
 def test_calibration_table_regression(cfg):
     """The whole table as documented: 29 of 33 points inside the bounds (the misses are b1 at
-    the stroke ends with 0 kg and b0 at 120-150 mm with 3 kg / 10 mm with 6 kg, each within
-    a few percent of its bound), every pole pair in the region."""
+    10 mm / 0 kg and b0 at 120 and 150 mm / 3 kg and 10 mm / 6 kg, each within a few percent
+    of its bound), every pole pair in the region."""
     summary = calibration.summary(calibration.calibration_table(cfg))
     assert summary["poles_in_region"] == 33
     assert summary["within_bounds"] >= 29
