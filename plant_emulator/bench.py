@@ -8,6 +8,7 @@ the bus replaced by nothing, after a warm-up that compiles the numba kernels.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -20,7 +21,7 @@ GOALS = {"testbench": 10.0, "hexapod": 3.0}
 
 def bench_rig(name: str, cfg: EmulatorConfig, seconds: float, rate_hz: float) -> dict:
     period = 1.0 / rate_hz
-    cfg = _with_period(cfg, period)
+    cfg = replace(cfg, sync_period_s=period)
     rig = make_rig(name, cfg)
     emulator = Emulator(None, rig, cfg)
     emulator.boot()
@@ -44,11 +45,6 @@ def bench_rig(name: str, cfg: EmulatorConfig, seconds: float, rate_hz: float) ->
             "realtime_factor": syncs * period / total, "goal": GOALS[name],
             "per_sync_us": {"p50": float(np.percentile(wall, 50) * 1e6), "p99": float(np.percentile(wall, 99) * 1e6),
                             "max": float(wall.max() * 1e6)}}
-
-
-def _with_period(cfg: EmulatorConfig, period: float) -> EmulatorConfig:
-    from dataclasses import replace
-    return replace(cfg, sync_period_s=period)
 
 
 def format_bench(rows: list[dict]) -> str:

@@ -48,21 +48,23 @@ def _run(args) -> int:
 
 
 def _calibrate(args) -> int:
+    from protocol.errors import UserInputError
+
     from . import calibration
+    from .params import build
 
     cfg = _config(args)
+    tuned = None
     if args.fit:
-        from .calibration import TUNABLE
-        unknown = [n for n in args.fit.split(",") if n not in TUNABLE]
+        names = args.fit.split(",")
+        unknown = [n for n in names if n not in calibration.TUNABLE]
         if unknown:
-            from protocol.errors import UserInputError
-            raise UserInputError(f"--fit: unknown parameter {unknown[0]!r} (tunable: {', '.join(TUNABLE)})")
-        raw, _ = calibration.fit(cfg.raw, args.fit.split(","), args.max_evaluations)
-        from .params import build
+            raise UserInputError(f"--fit: unknown parameter {unknown[0]!r} "
+                                 f"(tunable: {', '.join(calibration.TUNABLE)})")
+        raw, _ = calibration.fit(cfg.raw, names, args.max_evaluations)
         cfg = build(raw)
-        tuned = {TUNABLE[n][0] + "." + TUNABLE[n][1]: raw[TUNABLE[n][0]][TUNABLE[n][1]] for n in args.fit.split(",")}
-    else:
-        tuned = None
+        tuned = {f"{section}.{key}": raw[section][key]
+                 for section, key, *_ in (calibration.TUNABLE[n] for n in names)}
     table = calibration.calibration_table(cfg)
     report = {"method": "linearisation of the emulator's equations at rest holding the load "
                         "(sliding-regime friction slopes); b0, b1 from the dominant pole pair, k01 by a "

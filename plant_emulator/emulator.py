@@ -14,7 +14,6 @@ Heartbeats and the SYNC-loss watchdog run on the wall clock, like a real node's 
 
 from __future__ import annotations
 
-import math
 import signal
 import time
 from dataclasses import dataclass, field
@@ -22,6 +21,7 @@ from dataclasses import dataclass, field
 import can
 import numpy as np
 
+from firmware_py.rotation import quat_to_rpy
 from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import RxStatus
@@ -100,13 +100,15 @@ class Emulator:
         self._delayed: list[can.Message] = []              # DELAY: frames sent at the next SYNC
         self._stuck: dict[int, tuple] = {}
         self._ignore_commands = 0
-        divisor = {"LEG_PRESSURE": cfg.leg_pressure_divisor, "VALVE_STATUS": cfg.valve_status_divisor,
-                   "IMU_ATTITUDE": cfg.imu_divisor, "IMU_RATE": cfg.imu_divisor, "LEG_STATE": 0}
-        self._period = {name: divisor[name.rsplit("_", 1)[0] if name[-1].isdigit() else name]
-                        or CODECS[name].schedule.sync_period for name in self.out
-                        if CODECS[name].schedule.sync_period > 0}
+        divisors = {"LEG_PRESSURE": cfg.leg_pressure_divisor, "VALVE_STATUS": cfg.valve_status_divisor,
+                    "IMU": cfg.imu_divisor}
+        self._period = {}                                   # SYNC-driven frames: send every n-th SYNC
+        for name in self.out:
+            dbc_period = CODECS[name].schedule.sync_period
+            if dbc_period > 0:
+                override = next((d for prefix, d in divisors.items() if name.startswith(prefix)), 0)
+                self._period[name] = override or dbc_period
         self._overflow = sync_counter_overflow()
-        self.last_emergency: dict[int, Emergency] = {}
 
     def _tx_names(self) -> list[str]:
         names = []
@@ -126,8 +128,8 @@ class Emulator:
         self.counters.frames_out += 1
 
     def _fault(self, target: int, kind: str):
-        entry = self.faults.get((target, FAULT_CODES[kind]))
-        return entry
+        """The active injected fault `kind` on `target` ([remaining, param]) or None."""
+        return self.faults.get((target, FAULT_CODES[kind]))
 
     def _emit(self, node: int, name: str) -> None:
         """Encode and send a node's frame through the injected frame faults."""
@@ -161,21 +163,21 @@ class Emulator:
         box = self.out[f"EMCY_{node}"]
         box.values[:] = (emergency.error_code, emergency.error_register, int(emergency.state),
                          int(emergency.reason), self.sync_counter % 256, emergency.info)
-        self.last_emergency[node] = emergency
         self.counters.emergencies += 1
         if emergency.error_code:
             self.counters.valve_faults += 1
-        if not self._fault(node, "SILENT"):
-            self._send(box.message) if box.encode() else None
+        if not self._fault(node, "SILENT") and box.encode():
+            self._send(box.message)
+
+    def _heartbeat(self, node: int) -> None:
+        box = self.out[f"HEARTBEAT_{node}"]
+        box.values[0] = self.nmt[node]
+        if not self._fault(node, "SILENT") and box.encode():
+            self._send(box.message)
 
     def _heartbeats(self) -> None:
         for n in self.nodes:
-            if self._fault(n, "SILENT"):
-                continue
-            box = self.out[f"HEARTBEAT_{n}"]
-            box.values[0] = self.nmt[n]
-            if box.encode():
-                self._send(box.message)
+            self._heartbeat(n)
 
     # -- lifecycle ----------------------------------------------------------------------------
     def boot(self) -> None:
@@ -255,10 +257,7 @@ class Emulator:
                                                  self.cfg.spool_jam_syncs)
                     self.valves[n].boot()
                 self.nmt[n] = NMT_BOOTUP
-                box = self.out[f"HEARTBEAT_{n}"]
-                box.values[0] = NMT_BOOTUP
-                if box.encode():
-                    self._send(box.message)
+                self._heartbeat(n)
                 self.nmt[n] = NMT_PRE_OPERATIONAL
 
     def _emu_ctrl(self, command: float, target: float, kind: float, load_kg: float, param: float) -> None:
@@ -374,10 +373,8 @@ class Emulator:
             if self._due("IMU_ATTITUDE", counter):
                 _, quat = rig.platform_pose()
                 box = self.out["IMU_ATTITUDE"]
-                roll, pitch, yaw = quaternion_to_rpy(quat)
-                noise = cfg.imu_angle_noise_rad * rng.standard_normal(3)
-                box.values[box.index["ROLL"]:box.index["YAW"] + 1] = (roll + noise[0], pitch + noise[1],
-                                                                      yaw + noise[2])
+                box.values[box.index["ROLL"]:box.index["YAW"] + 1] = (
+                    quat_to_rpy(quat) + cfg.imu_angle_noise_rad * rng.standard_normal(3))
                 self._emit(IMU_NODE, "IMU_ATTITUDE")
             if self._due("IMU_RATE", counter):
                 box = self.out["IMU_RATE"]
@@ -401,15 +398,6 @@ class Emulator:
         return {"rig": self.rig.name, "sim_time_s": round(self.rig.time_s, 6), **self.counters.as_dict(),
                 "rx_status": {s.name: int(c) for s, c in zip(RxStatus, self.decoder.counts.sum(axis=0))},
                 "valves": valves}
-
-
-def quaternion_to_rpy(quat: np.ndarray) -> tuple[float, float, float]:
-    """Roll, pitch, yaw (R = Rz(yaw) Ry(pitch) Rx(roll)) of a (w, x, y, z) quaternion."""
-    w, x, y, z = quat
-    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
-    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    return roll, pitch, yaw
 
 
 class StopFlag:
