@@ -9,7 +9,6 @@ range; the CLI turns it into exit code 2).
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -17,6 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from protocol.errors import UserInputError
+from protocol.tomlconfig import load_layered
+from protocol.tomlconfig import merge as _merge
 
 from . import hydraulics as hy
 from .friction import pack_lugre
@@ -79,70 +80,14 @@ def default_config_path() -> Path:
     return Path(str(resources.files("plant_emulator").joinpath("data/emulator.toml")))
 
 
-def _read_toml(path: Path) -> dict:
-    try:
-        with open(path, "rb") as handle:
-            return tomllib.load(handle)
-    except FileNotFoundError:
-        raise ConfigError(f"config {path}: no such file") from None
-    except tomllib.TOMLDecodeError as error:
-        raise ConfigError(f"config {path}: not valid TOML: {error}") from None
-    except OSError as error:
-        raise ConfigError(f"config {path}: cannot read: {error.strerror}") from None
-
-
-def _check_value(source: str, section: str, key: str, value):
-    spec = RANGES[section][key]
-    where = f"config {source}: [{section}].{key}"
-    if spec is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{where} = {value!r} must be true or false")
-        return value
-    if spec is None:                                  # numeric list, checked by its user
-        if not isinstance(value, list) or not value or not all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value):
-            raise ConfigError(f"{where} must be a non-empty list of finite numbers")
-        return [float(v) for v in value]
-    low, high = spec
-    if isinstance(low, int) and isinstance(high, int):
-        if not isinstance(value, int) or isinstance(value, bool):
-            raise ConfigError(f"{where} = {value!r} must be an integer in [{low}, {high}]")
-    elif not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
-        raise ConfigError(f"{where} = {value!r} must be a finite number in [{low:g}, {high:g}]")
-    if not low <= value <= high:
-        raise ConfigError(f"{where} = {value!r} is out of range [{low:g}, {high:g}]")
-    return value
-
-
 def merge(base: dict, override: dict, source: str) -> dict:
     """`base` with `override` applied; every override key validated."""
-    merged = {section: dict(values) for section, values in base.items()}
-    for section, values in override.items():
-        if section not in RANGES:
-            raise ConfigError(f"config {source}: unknown section [{section}] (known: {', '.join(RANGES)})")
-        if not isinstance(values, dict):
-            raise ConfigError(f"config {source}: [{section}] must be a table")
-        for key, value in values.items():
-            if key not in RANGES[section]:
-                raise ConfigError(f"config {source}: unknown key [{section}].{key} "
-                                  f"(known: {', '.join(RANGES[section])})")
-            merged.setdefault(section, {})[key] = _check_value(source, section, key, value)
-    return merged
+    return _merge(RANGES, base, override, source, ConfigError)
 
 
 def load_raw(path: str | Path | None = None, overrides: dict | None = None) -> dict:
     """Defaults, then the user's file, then programmatic overrides; thesis units."""
-    defaults_path = default_config_path()
-    raw = merge({}, _read_toml(defaults_path), str(defaults_path))
-    for section, keys in RANGES.items():
-        missing = [k for k in keys if k not in raw.get(section, {})]
-        if missing:
-            raise ConfigError(f"config {defaults_path}: [{section}] lacks {', '.join(missing)}")
-    if path is not None:
-        raw = merge(raw, _read_toml(Path(path)), str(path))
-    if overrides:
-        raw = merge(raw, overrides, "overrides")
-    return raw
+    return load_layered(RANGES, default_config_path(), path, overrides, ConfigError)
 
 
 @dataclass(frozen=True)
