@@ -59,6 +59,9 @@ def _bench(args) -> int:
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
+    ctl = sub.add_parser("controller", help="the controller daemon (runs until SIGTERM/SIGINT); "
+                                            "'controller bench' times the update step")
+    configure_controller_parser(ctl)
     kin = sub.add_parser("kinematics", help="mechanism: direct kinematics, workspace, dynamics validation, bench")
     kin_sub = kin.add_subparsers(dest="kinematics_command", required=True, metavar="SUBCOMMAND",
                                  parser_class=type(kin))
@@ -91,3 +94,35 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     common(p)
     p.set_defaults(handler=_bench)
 
+
+
+def _controller_bench(args) -> int:
+    from .config import load_config
+    from .controller_bench import format_bench, run_bench
+    rows = run_bench(load_config(args.config), cycles=args.cycles)
+    return _print(args, {"update_step_us": rows}, format_bench(rows))
+
+
+def configure_controller_parser(ctl) -> None:
+    """Options of the daemon and its `bench` subcommand, on `hydrapod controller` and
+    `python -m firmware_py` alike."""
+    from .control import CONTROLLER_NAMES
+    from .daemon import run_daemon
+
+    ctl.add_argument("--bus", default=None, metavar="SPEC",
+                     help="socketcan:<if> | udp_multicast:<group>[:<port>] | virtual:<name> "
+                          "(default: socketcan:vcan0 if present, else an on-host multicast group)")
+    ctl.add_argument("--rig", choices=("testbench", "hexapod"), default="testbench")
+    ctl.add_argument("--rate-hz", type=number_in_range(float, 1.0, 1000.0), default=500.0)
+    ctl.add_argument("--pacing", choices=("realtime", "lockstep"), default="realtime")
+    ctl.add_argument("--controller", choices=tuple(CONTROLLER_NAMES), default="pi")
+    ctl.add_argument("--config", metavar="FILE", help="controller TOML overriding the packaged defaults")
+    ctl.add_argument("--summary", metavar="FILE", help="write the run's summary as JSON on exit")
+    ctl.set_defaults(handler=run_daemon)
+    ctl_sub = ctl.add_subparsers(dest="controller_command", required=False, metavar="SUBCOMMAND",
+                                 parser_class=type(ctl))
+    p = ctl_sub.add_parser("bench", help="compute time of the update step per controller and rig (p50/p99/max)")
+    p.add_argument("--cycles", type=number_in_range(int, 100, 10_000_000), default=20000)
+    p.add_argument("--config", metavar="FILE", help="controller TOML overriding the packaged defaults")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(handler=_controller_bench)

@@ -118,22 +118,24 @@ class JointTrajectory:
         return out[0], out[1], out[2]
 
 
-def through_points(points, ta_s: float, tm_s, start_velocity=None) -> JointTrajectory:
+def through_points(points, ta_s, tm_s, start_velocity=None) -> JointTrajectory:
     """Multi-point SLS through points (n_points, n_joints), at rest at the last point.
 
-    tm_s is one duration for every segment or one per segment.
+    ta_s and tm_s are each one value for every segment or one per segment.
     """
     points = np.asarray(points, dtype=float)
     if points.ndim != 2 or len(points) < 2:
         raise ValueError("a trajectory needs at least two points")
     n_seg = len(points) - 1
     durations = np.broadcast_to(np.asarray(tm_s, dtype=float), (n_seg,))
+    accel_times = np.broadcast_to(np.asarray(ta_s, dtype=float), (n_seg,))
     velocity = np.zeros(points.shape[1]) if start_velocity is None else np.asarray(start_velocity, float)
     segments = np.empty((n_seg, points.shape[1], 8))
     start = 0.0
     for k in range(n_seg):
         last = k == n_seg - 1
-        segments[k] = sls_coefficients(points[k], velocity, points[k + 1], ta_s, float(durations[k]), last)
+        segments[k] = sls_coefficients(points[k], velocity, points[k + 1], float(accel_times[k]),
+                                       float(durations[k]), last)
         segments[k, :, T_START] = start
         velocity = segments[k, :, B1]
         start += float(durations[k])

@@ -14,7 +14,6 @@ Heartbeats and the SYNC-loss watchdog run on the wall clock, like a real node's 
 
 from __future__ import annotations
 
-import signal
 import time
 from dataclasses import dataclass, field
 
@@ -22,9 +21,11 @@ import can
 import numpy as np
 
 from firmware_py.rotation import quat_to_rpy
+from protocol.cliutil import StopFlag  # noqa: F401  (re-exported: the emulator's process uses it)
 from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import RxStatus
+from protocol.outbox import Outbox
 
 from . import hydraulics as hy
 from .params import EmulatorConfig
@@ -59,20 +60,6 @@ class Counters:
                                               "unknown_frames")} | {"injected": dict(self.injected)}
 
 
-class _Outbox:
-    """One reusable can.Message + value vector per transmitted DBC message."""
-
-    def __init__(self, name: str):
-        self.codec = CODECS[name]
-        self.values = self.codec.new_values()
-        self.message = can.Message(arbitration_id=self.codec.frame_id, data=self.codec.new_buffer(),
-                                   is_extended_id=False)
-        self.index = self.codec.index
-
-    def encode(self) -> bool:
-        return self.codec.encode_into(self.values, self.message.data) != 2   # not REJECTED
-
-
 class Emulator:
     """Nodes of one rig on one bus. `handle(msg)` for every received frame, `poll(now)` often."""
 
@@ -88,7 +75,7 @@ class Emulator:
         self.decoder = FrameDecoder(names)
         self._cmd_slot = {CODECS[f"VALVE_CMD_{n}"].frame_id: n for n in self.legs}
         self._ids = {name: CODECS[name].frame_id for name in names}
-        self.out = {name: _Outbox(name) for name in self._tx_names()}
+        self.out = {name: Outbox(name) for name in self._tx_names()}
         self.counters = Counters()
         self.rng = np.random.default_rng(cfg.seed)
         self.sync_counter = 0
@@ -398,20 +385,3 @@ class Emulator:
         return {"rig": self.rig.name, "sim_time_s": round(self.rig.time_s, 6), **self.counters.as_dict(),
                 "rx_status": {s.name: int(c) for s, c in zip(RxStatus, self.decoder.counts.sum(axis=0))},
                 "valves": valves}
-
-
-class StopFlag:
-    """SIGTERM / SIGINT set it; the loop checks it between frames."""
-
-    def __init__(self):
-        self.stopped = False
-        self.signal = None
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            signal.signal(sig, self._set)
-
-    def _set(self, signum, _frame) -> None:
-        self.stopped = True
-        self.signal = signum
-
-    def __call__(self) -> bool:
-        return self.stopped

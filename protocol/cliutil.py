@@ -7,6 +7,7 @@ with exactly one line on stderr naming the culprit and exit code 2, never a trac
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from collections.abc import Callable
 
@@ -52,3 +53,20 @@ def run(handler: Callable[[argparse.Namespace], int], args: argparse.Namespace, 
     except BrokenPipeError:            # `hydrapod ... | head`: the reader left, not an error
         sys.stderr.close()
         return 0
+
+
+class StopFlag:
+    """SIGTERM / SIGINT set it; the loop checks it between frames."""
+
+    def __init__(self):
+        self.stopped = False
+        self.signal = None
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, self._set)
+
+    def _set(self, signum, _frame) -> None:
+        self.stopped = True
+        self.signal = signum
+
+    def __call__(self) -> bool:
+        return self.stopped

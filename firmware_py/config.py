@@ -1,0 +1,230 @@
+"""The controller's configuration: `data/controller.toml` (thesis units) plus an optional
+user file with the same sections and keys, validated against the ranges below and
+converted to SI once (`load_config`). Errors are one line naming the file, the key, the
+value and the allowed range (`ConfigError`; the CLI exits 2).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from protocol.errors import UserInputError
+from protocol.tomlconfig import load_layered
+
+MM, BAR = 1e-3, 1e5
+GRAVITY_M_S2 = 9.81
+
+RANGES: dict[str, dict[str, object]] = {
+    "timing": {
+        "sync_window_fraction": (0.1, 0.95), "spin_us": (0.0, 5000.0), "lockstep_timeout_ms": (1.0, 10000.0),
+        "activation_timeout_s": (0.1, 600.0), "hold_cycles": (1, 10000), "shutdown_hold_cycles": (1, 10000),
+        "shutdown_disable_cycles": (1, 10000), "heartbeat_ms": (10.0, 10000.0),
+        "heartbeat_timeout_ms": (10.0, 60000.0), "realtime_priority": (1, 99),
+        "cpu": (-1, 1023),
+    },
+    "actuator": {
+        "bore_radius_mm": (0.5, 100.0), "rod_radius_mm": (0.1, 99.0), "stroke_mm": (10.0, 2000.0),
+        "moving_mass_kg": (0.0, 50.0), "valve_full_scale_v": (0.01, 24.0), "encoder_resolution_mm": (1e-4, 10.0),
+    },
+    "testbench": {"slide_mass_kg": (0.0, 100.0), "home_mm": (0.0, 2000.0), "park_mm": (0.0, 2000.0)},
+    "hexapod": {"park_stroke_mm": (0.0, 2000.0)},
+    "friction": {
+        "alpha0_pos_n": (-1000.0, 1000.0), "alpha1_pos_n": (-1000.0, 1000.0), "vs_pos_mm_s": (0.01, 1e4),
+        "sigma2_pos_ns_mm": (0.0, 100.0), "alpha0_neg_n": (-1000.0, 1000.0), "alpha1_neg_n": (-1000.0, 1000.0),
+        "vs_neg_mm_s": (-1e4, -0.01), "sigma2_neg_ns_mm": (0.0, 100.0), "sigma0_pos_n_mm": (1e-3, 1e6),
+        "sigma1_pos_ns_mm": (0.0, 1e3), "sigma0_neg_n_mm": (1e-3, 1e6), "sigma1_neg_ns_mm": (0.0, 1e3),
+        "observer_gain_per_s": (0.0, 1e4),
+    },
+    "kalman": {"jerk_psd_mm2_s5": (1e-3, 1e15), "adaptive_gain": (0.01, 1e4),
+               "adaptive_velocity_ref_mm_s": (1e-3, 1e4)},
+    "mass_estimator": {
+        "forgetting": (0.9, 1.0), "filter_hz": (0.01, 200.0), "filter_zeta": (0.1, 5.0), "initial_kg": (0.0, 100.0),
+        "covariance_initial": (1e-9, 1e6), "covariance_max": (1e-9, 1e9), "mass_max_kg": (0.1, 1000.0),
+    },
+    "load_pressure": {"differentiator_hz": (0.1, 240.0), "differentiator_zeta": (0.1, 5.0)},
+    "pi": {"kp_v_mm": (0.0, 100.0), "ki_v_mm_s": (0.0, 1000.0), "saturation_v": (0.01, 24.0)},
+    "adaptive": {
+        "kpl_v_bar": (0.0, 100.0), "ki_scale": (0.0, 10.0), "table_position_mm": None, "table_load_kg": None,
+        "kp_0kg_v_mm": None, "ki_0kg_v_mm_s": None, "kp_3kg_v_mm": None, "ki_3kg_v_mm_s": None,
+        "kp_6kg_v_mm": None, "ki_6kg_v_mm_s": None,
+    },
+    "model_based": {"feedforward_scale": (0.0, 10.0)},
+    "limits": {
+        "stroke_margin_mm": (0.0, 100.0), "velocity_max_mm_s": (1.0, 1e4), "force_max_n": (1.0, 1e6),
+        "tracking_error_max_mm": (0.1, 1000.0), "spool_max_pct": (1.0, 100.0),
+    },
+    "supervisor": {
+        "missing_frames_fault": (1, 10000), "e2e_errors_fault": (1, 10000), "overruns_fault": (1, 10000),
+        "dk_failures_fault": (1, 10000), "dk_tolerance_um": (0.001, 1000.0), "dk_max_iterations": (1, 100),
+        "singularity_ratio_min": (0.0, 1.0), "auto_enable": bool, "homing_speed_mm_s": (0.1, 1000.0),
+        "homing_accel_time_s": (0.001, 10.0), "waypoint_queue": (1, 255),
+        "waypoint_velocity_max_mm_s": (0.1, 1e4), "waypoint_force_max_n": (1.0, 1e6),
+        "waypoint_path_samples": (2, 1000),
+    },
+}
+SCHEDULE_LOADS = ("0kg", "3kg", "6kg")
+
+
+class ConfigError(UserInputError):
+    """A configuration value the controller cannot use."""
+
+
+def default_config_path() -> Path:
+    return Path(str(resources.files("firmware_py").joinpath("data/controller.toml")))
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    raw: dict                         # thesis units, as loaded
+    # timing
+    sync_window_fraction: float
+    spin_s: float
+    lockstep_timeout_s: float
+    activation_timeout_s: float
+    hold_cycles: int
+    shutdown_hold_cycles: int
+    shutdown_disable_cycles: int
+    heartbeat_s: float
+    heartbeat_timeout_s: float
+    realtime_priority: int
+    cpu: int
+    # actuator
+    piston_area_m2: float             # A_A, the bore: PL = pA - alpha pB acts on it
+    area_ratio: float                 # alpha = A_B / A_A
+    stroke_m: float
+    moving_mass_kg: float
+    valve_full_scale_v: float
+    encoder_resolution_m: float
+    slide_mass_kg: float
+    testbench_home_m: float
+    testbench_park_m: float
+    hexapod_park_stroke_m: float
+    # estimation
+    friction: np.ndarray              # LuGre observer vector, see estimation.FP_*
+    jerk_psd: float                   # m^2/s^5
+    kalman_adaptive_gain: float
+    kalman_velocity_ref_m_s: float
+    rls_forgetting: float
+    rls_filter_hz: float
+    rls_filter_zeta: float
+    rls_initial_kg: float
+    rls_p0: float
+    rls_p_max: float
+    mass_max_kg: float
+    differentiator_hz: float
+    differentiator_zeta: float
+    # control, gains in SI (V/m, V/(m s), V/Pa)
+    pi_kp: float
+    pi_ki: float
+    saturation_v: float
+    kpl_v_pa: float
+    ki_scale: float
+    table_position_m: np.ndarray      # (n_pos,)
+    table_load_kg: np.ndarray         # (3,)
+    table_kp: np.ndarray              # (3, n_pos) V/m
+    table_ki: np.ndarray              # (3, n_pos) V/(m s), as printed (ki_scale applied by the schedule)
+    feedforward_scale: float
+    # limits and supervisor
+    stroke_margin_m: float
+    velocity_max_m_s: float
+    force_max_n: float
+    tracking_error_max_m: float
+    spool_max: float                  # fraction of full input
+    missing_frames_fault: int
+    e2e_errors_fault: int
+    overruns_fault: int
+    dk_failures_fault: int
+    dk_tolerance_m: float
+    dk_max_iterations: int
+    singularity_ratio_min: float
+    auto_enable: bool
+    homing_speed_m_s: float
+    homing_accel_time_s: float
+    waypoint_queue: int
+    waypoint_velocity_max_m_s: float
+    waypoint_force_max_n: float
+    waypoint_path_samples: int
+
+
+def _schedule_tables(a: dict, source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    positions = np.array(a["table_position_mm"]) * MM
+    loads = np.array(a["table_load_kg"])
+    where = f"config {source}: [adaptive]"
+    if len(positions) < 4 or np.any(np.diff(positions) <= 0):
+        raise ConfigError(f"{where}.table_position_mm must hold >= 4 strictly increasing values")
+    if len(loads) != len(SCHEDULE_LOADS) or np.any(np.diff(loads) <= 0) or loads[0] < 0:
+        raise ConfigError(f"{where}.table_load_kg must hold 3 increasing non-negative masses, got {list(loads)}")
+    kp = np.empty((3, len(positions)))
+    ki = np.empty((3, len(positions)))
+    for j, load in enumerate(SCHEDULE_LOADS):
+        for name, out, scale in ((f"kp_{load}_v_mm", kp, 1.0 / MM), (f"ki_{load}_v_mm_s", ki, 1.0 / MM)):
+            values = a[name]
+            if len(values) != len(positions):
+                raise ConfigError(f"{where}.{name} has {len(values)} values, table_position_mm has {len(positions)}")
+            if min(values) < 0:
+                raise ConfigError(f"{where}.{name} has a negative gain {min(values)}")
+            out[j] = np.array(values) * scale
+    return positions, loads, kp, ki
+
+
+def build(raw: dict, source: str = "config") -> ControllerConfig:
+    from .estimation import pack_friction
+
+    t, a, tb, f, k, m = (raw[s] for s in ("timing", "actuator", "testbench", "friction", "kalman", "mass_estimator"))
+    lp, pi, ad, lim, sv = (raw[s] for s in ("load_pressure", "pi", "adaptive", "limits", "supervisor"))
+    if a["rod_radius_mm"] >= a["bore_radius_mm"]:
+        raise ConfigError(f"config {source}: [actuator].rod_radius_mm = {a['rod_radius_mm']} must be smaller "
+                          f"than bore_radius_mm = {a['bore_radius_mm']}")
+    if m["covariance_initial"] > m["covariance_max"]:
+        raise ConfigError(f"config {source}: [mass_estimator].covariance_initial = {m['covariance_initial']} "
+                          f"exceeds covariance_max = {m['covariance_max']}")
+    positions, loads, kp, ki = _schedule_tables(ad, source)
+    area = math.pi * (a["bore_radius_mm"] * MM) ** 2
+    ratio = 1.0 - (a["rod_radius_mm"] / a["bore_radius_mm"]) ** 2
+    friction = pack_friction(
+        f["alpha0_pos_n"], f["alpha1_pos_n"], f["vs_pos_mm_s"] * MM, f["sigma2_pos_ns_mm"] / MM,
+        f["alpha0_neg_n"], f["alpha1_neg_n"], f["vs_neg_mm_s"] * MM, f["sigma2_neg_ns_mm"] / MM,
+        f["sigma0_pos_n_mm"] / MM, f["sigma1_pos_ns_mm"] / MM, f["sigma0_neg_n_mm"] / MM,
+        f["sigma1_neg_ns_mm"] / MM, f["observer_gain_per_s"])
+    return ControllerConfig(
+        raw=raw,
+        sync_window_fraction=t["sync_window_fraction"], spin_s=t["spin_us"] * 1e-6,
+        lockstep_timeout_s=t["lockstep_timeout_ms"] * 1e-3, activation_timeout_s=t["activation_timeout_s"],
+        hold_cycles=t["hold_cycles"], shutdown_hold_cycles=t["shutdown_hold_cycles"],
+        shutdown_disable_cycles=t["shutdown_disable_cycles"], heartbeat_s=t["heartbeat_ms"] * 1e-3,
+        heartbeat_timeout_s=t["heartbeat_timeout_ms"] * 1e-3,
+        realtime_priority=t["realtime_priority"], cpu=t["cpu"],
+        piston_area_m2=area, area_ratio=ratio, stroke_m=a["stroke_mm"] * MM, moving_mass_kg=a["moving_mass_kg"],
+        valve_full_scale_v=a["valve_full_scale_v"], encoder_resolution_m=a["encoder_resolution_mm"] * MM,
+        slide_mass_kg=tb["slide_mass_kg"], testbench_home_m=tb["home_mm"] * MM, testbench_park_m=tb["park_mm"] * MM,
+        hexapod_park_stroke_m=raw["hexapod"]["park_stroke_mm"] * MM,
+        friction=friction, jerk_psd=k["jerk_psd_mm2_s5"] * MM ** 2, kalman_adaptive_gain=k["adaptive_gain"],
+        kalman_velocity_ref_m_s=k["adaptive_velocity_ref_mm_s"] * MM,
+        rls_forgetting=m["forgetting"], rls_filter_hz=m["filter_hz"], rls_filter_zeta=m["filter_zeta"],
+        rls_initial_kg=m["initial_kg"], rls_p0=m["covariance_initial"], rls_p_max=m["covariance_max"],
+        mass_max_kg=m["mass_max_kg"], differentiator_hz=lp["differentiator_hz"],
+        differentiator_zeta=lp["differentiator_zeta"],
+        pi_kp=pi["kp_v_mm"] / MM, pi_ki=pi["ki_v_mm_s"] / MM, saturation_v=pi["saturation_v"],
+        kpl_v_pa=ad["kpl_v_bar"] / BAR, ki_scale=ad["ki_scale"], table_position_m=positions, table_load_kg=loads,
+        table_kp=kp, table_ki=ki, feedforward_scale=raw["model_based"]["feedforward_scale"],
+        stroke_margin_m=lim["stroke_margin_mm"] * MM, velocity_max_m_s=lim["velocity_max_mm_s"] * MM,
+        force_max_n=lim["force_max_n"], tracking_error_max_m=lim["tracking_error_max_mm"] * MM,
+        spool_max=lim["spool_max_pct"] / 100.0,
+        missing_frames_fault=sv["missing_frames_fault"], e2e_errors_fault=sv["e2e_errors_fault"],
+        overruns_fault=sv["overruns_fault"], dk_failures_fault=sv["dk_failures_fault"],
+        dk_tolerance_m=sv["dk_tolerance_um"] * 1e-6, dk_max_iterations=sv["dk_max_iterations"],
+        singularity_ratio_min=sv["singularity_ratio_min"], auto_enable=sv["auto_enable"],
+        homing_speed_m_s=sv["homing_speed_mm_s"] * MM, homing_accel_time_s=sv["homing_accel_time_s"],
+        waypoint_queue=sv["waypoint_queue"], waypoint_velocity_max_m_s=sv["waypoint_velocity_max_mm_s"] * MM,
+        waypoint_force_max_n=sv["waypoint_force_max_n"], waypoint_path_samples=sv["waypoint_path_samples"],
+    )
+
+
+def load_config(path: str | Path | None = None, overrides: dict | None = None) -> ControllerConfig:
+    raw = load_layered(RANGES, default_config_path(), path, overrides, ConfigError)
+    return build(raw, str(path) if path is not None else str(default_config_path()))

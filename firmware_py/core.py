@@ -1,0 +1,444 @@
+"""The controller of one rig without the bus: `update()` is one cycle's update step
+(supervision, reference, estimation, control, outputs) on arrays allocated here.
+
+The loop (loop.py) fills the measurement arrays from the decoded frames (`meas_*`),
+calls `update()`, and encodes `cw_*` and `spool` into VALVE_CMD frames. Host commands and
+waypoints arrive through `host_command` and `waypoint_*` (events, outside the steady
+cycle; they may allocate, the cycle does not).
+
+Rigs: `testbench` (one leg; a waypoint's Z is the piston stroke) and `hexapod` (six legs;
+waypoints are platform poses, joint references by inverse kinematics, pose estimate by
+direct kinematics every cycle).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .config import ControllerConfig
+from .control import (IN_ACTIVE, IN_AR, IN_FORCE, IN_FRESH, IN_G_AX, IN_TAU, IN_VR, IN_Y, IN_YR, ST_ERROR,
+                      ST_INTEGRAL, ST_MASS, ST_U)
+from .control import MODEL_BASED, JointController
+from .geometry import GRAVITY_M_S2, Geometry, default_geometry
+from .supervisor import ACTIVE, Ack, Action, Fault, State, Supervisor
+from .trajectory import JointTrajectory, sls_coefficients, through_points
+
+RIGS = ("testbench", "hexapod")
+VALVE_FAULT_STATES = (4, 5)            # CiA 408 FAULT_HOLD, FAULT_DISABLED
+RESET_GRACE_CYCLES = 4                 # valves need a SYNC or two to leave FAULT after R
+FLAG_LAST, FLAG_START = 1, 2
+
+
+class ControllerCore:
+    def __init__(self, cfg: ControllerConfig, rig: str, period_s: float, controller: int = 0,
+                 geometry: Geometry | None = None):
+        if rig not in RIGS:
+            raise ValueError(f"unknown rig {rig!r} (known: {', '.join(RIGS)})")
+        self.cfg, self.rig, self.period_s = cfg, rig, period_s
+        self.hexapod = rig == "hexapod"
+        self.n = 6 if self.hexapod else 1
+        n = self.n
+        if self.hexapod:
+            from .platform import PlatformModel
+            self.geometry = geometry or default_geometry()
+            self.platform = PlatformModel(self.geometry, cfg.dk_tolerance_m, cfg.dk_max_iterations, period_s)
+            self.stroke_m = self.geometry.stroke_m
+            self.home_strokes = self.platform.lengths - self.geometry.leg_min_m     # lengths at home
+            self.park_strokes = np.full(n, cfg.hexapod_park_stroke_m)
+            moving_mass = self.geometry.rod.mass_kg
+            mass_offset = 0.0
+        else:
+            self.geometry = None
+            self.platform = None
+            self.stroke_m = cfg.stroke_m
+            self.home_strokes = np.full(n, cfg.testbench_home_m)
+            self.park_strokes = np.full(n, cfg.testbench_park_m)
+            moving_mass = cfg.moving_mass_kg
+            mass_offset = cfg.slide_mass_kg
+        self.joint = JointController(cfg, n, period_s, moving_mass_kg=moving_mass, mass_offset_kg=mass_offset)
+        self.sup = Supervisor(controller)
+        self.joint.set_mode(controller)
+        # measurements (filled by the loop each cycle)
+        self.meas_y = np.zeros(n)
+        self.meas_force = np.zeros(n)
+        self.meas_fresh = np.zeros(n, dtype=bool)
+        self.meas_bad = np.zeros(n, dtype=bool)          # an E2E-rejected frame of the leg this cycle
+        self.meas_sensor_fault = np.zeros(n, dtype=bool)
+        self.valve_state = np.zeros(n, dtype=np.int64)
+        # outputs
+        self.cw_d = np.ones(n)
+        self.cw_h = np.ones(n)
+        self.cw_m = np.zeros(n)
+        self.cw_r = np.zeros(n)
+        self.spool = np.zeros(n)                          # fraction of full valve input
+        # reference
+        self.yr = np.zeros(n)
+        self.vr = np.zeros(n)
+        self.ar = np.zeros(n)
+        self.hold_position = np.zeros(n)
+        self.trajectory: JointTrajectory | None = None
+        self.trajectory_t0 = 0.0
+        self.trajectory_seqs: list[int] = []
+        self.trajectory_ends: np.ndarray = np.zeros(0)
+        self.active_waypoint = 0
+        # supervision
+        self.missing = np.zeros(n, dtype=np.int64)
+        self.bad = np.zeros(n, dtype=np.int64)
+        self._mask = np.zeros(n, dtype=bool)
+        self._abs = np.zeros(n)
+        self.overruns_in_row = 0
+        self.dk_failures = 0
+        self.reset_cycles = 0
+        self.time_s = 0.0
+        self.cycles = 0
+        self.initialised = False
+        # waypoints
+        self.queue: list[dict] = []
+        self.expected_seq: int | None = None
+        self._staged_pos: dict[int, tuple] = {}
+        self._staged_rot: dict[int, tuple] = {}
+        if self.hexapod:
+            from .dynamics import InverseDynamics
+            from .kinematics import DirectKinematics
+            self._check_dk = DirectKinematics(self.geometry, cfg.dk_tolerance_m, 50)
+            self._check_dynamics = InverseDynamics(self.geometry)
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """Load every compiled kernel now (configure), not in the first cycle."""
+        self.joint.update()
+        if self.hexapod:
+            self.platform.estimate(self.home_strokes)
+            self.platform.reset_reference(self.home_strokes)
+            self.platform.reference_forces(self.home_strokes, self.vr)
+            self.platform.dk.reset()
+        self.joint.reset(0.0)
+
+    # -- helpers ----------------------------------------------------------------------------
+    @property
+    def state(self) -> State:
+        return self.sup.state
+
+    def _start_hold(self, position) -> None:
+        self.hold_position[:] = position
+        self.trajectory = None
+
+    def _move(self, target, speed_m_s: float, accel_time_s: float) -> None:
+        """Point-to-point SLS from the current reference to `target` (joint space)."""
+        start = self.yr.copy() if self.initialised else self.meas_y.copy()
+        distance = float(np.max(np.abs(np.asarray(target) - start)))
+        duration = max(distance / speed_m_s + accel_time_s, 2.0 * accel_time_s)
+        self._play(through_points(np.array([start, target]), accel_time_s, duration), [self.active_waypoint])
+
+    def _play(self, trajectory: JointTrajectory, seqs: list[int]) -> None:
+        self.trajectory = trajectory
+        self.trajectory_t0 = self.time_s
+        self.trajectory_seqs = seqs
+        seg = trajectory.segments[:, 0]
+        self.trajectory_ends = seg[:, 4] + seg[:, 6]          # T_START + TM per segment
+
+    # -- host interface (events) ------------------------------------------------------------
+    def host_command(self, command: int, argument: int) -> Ack:
+        result = self.sup.command(command, argument)
+        if result is Ack.ACCEPTED:
+            self._do_action()
+        return result
+
+    def _do_action(self) -> None:
+        action, self.sup.action = self.sup.action, Action.NONE
+        cfg = self.cfg
+        if action is Action.ENABLE:
+            self._start_hold(self.meas_y)
+            self.joint.st[:, ST_INTEGRAL] = 0.0
+        elif action in (Action.HOME, Action.PARK):
+            target = self.park_strokes if action is Action.PARK else self.home_strokes
+            if not self.initialised:
+                self.yr[:] = self.meas_y
+            self._move(target, cfg.homing_speed_m_s, cfg.homing_accel_time_s)
+        elif action is Action.START:
+            self._start_queue()
+        elif action is Action.STOP:
+            ta = cfg.homing_accel_time_s
+            coeffs = sls_coefficients(self.yr, self.vr, self.yr + self.vr * ta, ta, 2.0 * ta, True)
+            self._play(JointTrajectory(coeffs[None]), [self.active_waypoint])
+        elif action is Action.RESET:
+            self.reset_cycles = RESET_GRACE_CYCLES
+            self.missing[:] = 0
+            self.bad[:] = 0
+            self.overruns_in_row = 0
+            self.dk_failures = 0
+            self.trajectory = None
+            self.joint.st[:, ST_INTEGRAL] = 0.0
+        elif action is Action.CLEAR:
+            self.queue.clear()
+            self.expected_seq = None
+
+    def _start_queue(self) -> None:
+        if not self.queue:
+            return
+        take = next((k + 1 for k, w in enumerate(self.queue) if w["flags"] & FLAG_LAST), len(self.queue))
+        chosen, self.queue = self.queue[:take], self.queue[take:]
+        points = np.array([self.yr] + [w["strokes"] for w in chosen])
+        self._play(through_points(points, [w["accel_time"] for w in chosen], [w["segment_time"] for w in chosen]),
+                   [w["seq"] for w in chosen])
+        self.sup.start_running()
+
+    def waypoint_position(self, tag: int, x: float, y: float, z: float) -> None:
+        self._staged_pos[tag & 0x0F] = (x, y, z)
+
+    def waypoint_rotation(self, tag: int, roll: float, pitch: float, yaw: float) -> None:
+        self._staged_rot[tag & 0x0F] = (roll, pitch, yaw)
+
+    def queue_free(self) -> int:
+        return max(self.cfg.waypoint_queue - len(self.queue), 0)
+
+    def waypoint_time(self, tag: int, seq: int, segment_time: float, accel_time: float, flags: int) -> Ack:
+        """Commit the staged pose with this TAG: check it and queue it, or reject it."""
+        tag &= 0x0F
+        pos = self._staged_pos.pop(tag, None)
+        rot = self._staged_rot.pop(tag, None)
+        if pos is None or rot is None or (seq & 0x0F) != tag:
+            return Ack.INCOMPLETE
+        if self.expected_seq is not None and seq != self.expected_seq:
+            return Ack.SEQUENCE_GAP
+        if self.state not in (State.IDLE, State.READY, State.RUNNING):
+            return Ack.BAD_STATE
+        if len(self.queue) >= self.cfg.waypoint_queue:
+            return Ack.QUEUE_FULL
+        values = pos + rot + (segment_time, accel_time)
+        if not all(math.isfinite(v) for v in values):
+            return Ack.NOT_FINITE
+        if not (accel_time > 0.0 and segment_time >= 2.0 * accel_time):
+            return Ack.BAD_ARGUMENT
+        previous = self.queue[-1]["strokes"] if self.queue else (
+            self.trajectory_target() if self.trajectory is not None else self.yr.copy())
+        result, strokes = (self._check_hexapod(previous, pos, rot, segment_time, accel_time) if self.hexapod
+                           else self._check_testbench(previous, pos, rot, segment_time, accel_time))
+        if result is not Ack.ACCEPTED:
+            return result
+        self.queue.append({"seq": seq, "strokes": strokes, "segment_time": segment_time,
+                           "accel_time": accel_time, "flags": flags, "pose": pos + rot})
+        self.expected_seq = (seq + 1) % 256
+        if flags & FLAG_START and self.state is State.READY:
+            self.host_command(8, 0)                                   # START
+        return Ack.ACCEPTED
+
+    def trajectory_target(self) -> np.ndarray:
+        out = np.empty(self.n)
+        self.trajectory.evaluate_into(1e9, out, np.empty(self.n), np.empty(self.n))
+        return out
+
+    def _peak_velocity_ok(self, previous, strokes, segment_time, accel_time) -> bool:
+        peak = float(np.max(np.abs(strokes - previous))) / (segment_time - accel_time)
+        return peak <= self.cfg.waypoint_velocity_max_m_s
+
+    def _check_testbench(self, previous, pos, rot, segment_time, accel_time):
+        margin = self.cfg.stroke_margin_m
+        if max(abs(pos[0]), abs(pos[1]), *(abs(r) for r in rot)) > 1e-9 or not (
+                margin <= pos[2] <= self.stroke_m - margin):
+            return Ack.OUTSIDE_WORKSPACE, None
+        strokes = np.array([pos[2]])
+        if not self._peak_velocity_ok(previous, strokes, segment_time, accel_time):
+            return Ack.TOO_FAST, None
+        static = (self.cfg.moving_mass_kg + self.cfg.mass_max_kg) * GRAVITY_M_S2
+        if min(static, (self.cfg.moving_mass_kg + float(self.joint.st[0, ST_MASS])) * GRAVITY_M_S2) > \
+                self.cfg.waypoint_force_max_n:
+            return Ack.TOO_FAST, None
+        return Ack.ACCEPTED, strokes
+
+    def _check_hexapod(self, previous, pos, rot, segment_time, accel_time):
+        from .kinematics import ik_batch
+        from .rotation import rpy_to_quat
+        from .workspace import MIN_CONDITION_INDEX, check_poses
+
+        g = self.geometry
+        position = np.array(pos)
+        quat = rpy_to_quat(*rot)
+        report = check_poses(g, position[None], quat[None])
+        if not report.reachable[0]:
+            return Ack.OUTSIDE_WORKSPACE, None
+        if report.condition_index[0] < MIN_CONDITION_INDEX:
+            return Ack.SINGULAR, None
+        lengths, _ = ik_batch(g, position[None], quat[None])
+        strokes = lengths[0] - g.leg_min_m
+        if not self._peak_velocity_ok(previous, strokes, segment_time, accel_time):
+            return Ack.TOO_FAST, None
+        # the joint-space path between the waypoints, pose by pose
+        samples = self.cfg.waypoint_path_samples
+        poses, quats = np.empty((samples, 3)), np.empty((samples, 4))
+        self._check_dk.pose[:] = np.concatenate([position, quat])
+        for k, s in enumerate(np.linspace(1.0, 0.0, samples)):
+            self._check_dk.solve(g.leg_min_m + previous + s * (strokes - previous))
+            if not self._check_dk.converged:
+                return Ack.OUTSIDE_WORKSPACE, None
+            poses[k], quats[k] = self._check_dk.pose[0:3], self._check_dk.pose[3:7]
+        path = check_poses(g, poses, quats)
+        if not path.reachable.all():
+            return Ack.OUTSIDE_WORKSPACE, None
+        if np.min(path.condition_index) < MIN_CONDITION_INDEX:
+            return Ack.SINGULAR, None
+        # static load plus the peak SLS acceleration of the segment's translation
+        start_pose = poses[-1]
+        peak_accel = (position - start_pose) / (segment_time - accel_time) * math.pi / (2.0 * accel_time)
+        twist = np.zeros(6)
+        accel = np.concatenate([peak_accel, np.zeros(3)])
+        if not self._check_dynamics.forces(position, quat, twist, accel):
+            return Ack.SINGULAR, None
+        if np.max(np.abs(self._check_dynamics.force_n)) > self.cfg.waypoint_force_max_n:
+            return Ack.TOO_FAST, None
+        return Ack.ACCEPTED, strokes
+
+    # -- the cycle ---------------------------------------------------------------------------
+    def initialise(self) -> None:
+        """First measurements are in: estimators and the reference start at the measured state."""
+        gravity = GRAVITY_M_S2
+        if self.hexapod:
+            self.platform.estimate(self.meas_y)
+            gravity = self.platform.gravity_axial
+            self.platform.reset_reference(self.meas_y)
+        self.joint.reset(self.meas_y, gravity)
+        self.yr[:] = self.meas_y
+        self.hold_position[:] = self.meas_y
+        self.initialised = True
+
+    def fault(self, code: Fault) -> None:
+        self.sup.fault(code)
+
+    def update(self, overrun: bool = False) -> None:
+        """One cycle: supervise the inputs, reference, estimation and control, outputs."""
+        cfg, sup, joint = self.cfg, self.sup, self.joint
+        inputs = joint.inputs
+        self.cycles += 1
+        self.time_s += self.period_s
+        if not self.initialised:
+            if self.meas_fresh.all():
+                self.initialise()
+            else:
+                self._write_outputs()
+                return
+        # sensor frames: missing and E2E-rejected, consecutive
+        np.logical_not(self.meas_fresh, out=self._mask)
+        np.multiply(self.missing, self._mask, out=self.missing)
+        np.add(self.missing, self._mask, out=self.missing)
+        np.logical_and(self.meas_bad, self._mask, out=self._mask)
+        np.multiply(self.bad, self._mask, out=self.bad)
+        np.add(self.bad, self._mask, out=self.bad)
+        if self.bad.max() >= cfg.e2e_errors_fault:
+            sup.fault(Fault.E2E_ERROR)
+        if self.missing.max() >= cfg.missing_frames_fault:
+            sup.fault(Fault.SENSOR_TIMEOUT)
+        if self.meas_sensor_fault.any():
+            sup.fault(Fault.SENSOR_FAULT)
+        self.overruns_in_row = self.overruns_in_row + 1 if overrun else 0
+        if self.overruns_in_row >= cfg.overruns_fault:
+            sup.fault(Fault.OVERRUN)
+        if self.reset_cycles > 0:
+            self.reset_cycles -= 1
+        elif sup.state not in (State.FAULT, State.ESTOP, State.BOOT):
+            for state in VALVE_FAULT_STATES:
+                np.equal(self.valve_state, state, out=self._mask)
+                if self._mask.any():
+                    sup.fault(Fault.VALVE_FAULT)
+        # platform: pose estimate and gravity along the legs
+        if self.hexapod:
+            if self.platform.estimate(self.meas_y):
+                self.dk_failures = 0
+                if self.platform.det_ratio < cfg.singularity_ratio_min:
+                    sup.fault(Fault.SINGULARITY)
+            else:
+                self.dk_failures += 1
+                if self.dk_failures >= cfg.dk_failures_fault:
+                    sup.fault(Fault.DK_FAILURE)
+            inputs[:, IN_G_AX] = self.platform.gravity_axial
+        else:
+            inputs[:, IN_G_AX] = GRAVITY_M_S2
+        # reference
+        active = sup.state in ACTIVE
+        if active and self.trajectory is not None:
+            t = self.time_s - self.trajectory_t0
+            self.trajectory.evaluate_into(t, self.yr, self.vr, self.ar)
+            k = int(np.searchsorted(self.trajectory_ends, t))
+            if k < len(self.trajectory_seqs):
+                self.active_waypoint = self.trajectory_seqs[k]
+            if t >= self.trajectory_ends[-1]:
+                self.hold_position[:] = self.yr
+                self.trajectory = None
+                sup.motion_done()
+        elif active:
+            self.yr[:] = self.hold_position
+            self.vr[:] = 0.0
+            self.ar[:] = 0.0
+        else:                                     # valves locked: follow the measurement
+            self.yr[:] = joint.kalman_x[:, 0]
+            self.vr[:] = 0.0
+            self.ar[:] = 0.0
+            self.hold_position[:] = self.yr
+        if self.hexapod and sup.controller == MODEL_BASED:
+            if not self.platform.reference_forces(self.yr, self.vr) and active:
+                sup.fault(Fault.SINGULARITY)
+            inputs[:, IN_TAU] = self.platform.force_n
+        # estimation and control
+        inputs[:, IN_Y] = self.meas_y
+        inputs[:, IN_FRESH] = self.meas_fresh
+        inputs[:, IN_FORCE] = self.meas_force
+        inputs[:, IN_YR] = self.yr
+        inputs[:, IN_VR] = self.vr
+        inputs[:, IN_AR] = self.ar
+        inputs[:, IN_ACTIVE] = 1.0 if sup.state in ACTIVE else 0.0
+        if joint.mode != sup.controller:
+            joint.set_mode(sup.controller)
+        joint.update()
+        self._limits(active)
+        self._write_outputs()
+
+    def _limits(self, active: bool) -> None:
+        cfg, sup, joint = self.cfg, self.sup, self.joint
+        u = joint.st[:, ST_U]
+        if not (np.isfinite(u).all() and np.isfinite(joint.kalman_x).all()):
+            sup.fault(Fault.NOT_FINITE)
+        np.abs(self.meas_force, out=self._abs)
+        if self._abs.max() > cfg.force_max_n:
+            sup.fault(Fault.FORCE_LIMIT)
+        if not active:
+            return
+        margin = cfg.stroke_margin_m
+        if self.meas_y.min() < margin or self.meas_y.max() > self.stroke_m - margin:
+            sup.fault(Fault.POSITION_LIMIT)
+        np.abs(joint.kalman_x[:, 1], out=self._abs)
+        if self._abs.max() > cfg.velocity_max_m_s:
+            sup.fault(Fault.VELOCITY_LIMIT)
+        np.abs(joint.st[:, ST_ERROR], out=self._abs)
+        if self._abs.max() > cfg.tracking_error_max_m:
+            sup.fault(Fault.TRACKING_ERROR)
+
+    def _write_outputs(self) -> None:
+        """Control words and spool setpoints for the state the supervisor is in now."""
+        state = self.sup.state
+        self.cw_r[:] = 1.0 if self.reset_cycles == RESET_GRACE_CYCLES else 0.0
+        if state is State.ESTOP:
+            self.cw_d[:] = 0.0
+            self.cw_h[:] = 0.0
+            self.cw_m[:] = 0.0
+            self.spool[:] = 0.0
+            return
+        self.cw_d[:] = 1.0
+        self.cw_h[:] = 1.0
+        if state in ACTIVE:
+            self.cw_m[:] = 1.0
+            np.multiply(self.joint.st[:, ST_U], 1.0 / self.cfg.valve_full_scale_v, out=self.spool)
+            if not np.isfinite(self.spool).all():
+                self.spool[:] = 0.0
+                self.cw_m[:] = 0.0
+        else:
+            self.cw_m[:] = 0.0
+            self.spool[:] = 0.0
+
+    def force_outputs(self, hold: bool) -> None:
+        """Shutdown: every valve to HOLD (hold=True) or DISABLED, whatever the state."""
+        self.cw_r[:] = 0.0
+        self.cw_d[:] = 1.0 if hold else 0.0
+        self.cw_h[:] = 1.0 if hold else 0.0
+        self.cw_m[:] = 0.0
+        self.spool[:] = 0.0

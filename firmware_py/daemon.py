@@ -1,0 +1,102 @@
+"""`hydrapod controller`: the controller daemon on a bus (and `python -m firmware_py`).
+
+Runs until SIGTERM/SIGINT, then brings the valves to HOLD and DISABLED and exits 0 with a
+one-line summary. Real-time measures (gc frozen and disabled, SCHED_FIFO, mlockall, CPU
+affinity) are applied when permitted; each one that is not is logged and skipped.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import gc
+import json
+import os
+import sys
+
+from protocol.cliutil import StopFlag
+
+from .config import ControllerConfig, load_config
+from .control import CONTROLLER_NAMES
+
+MCL_CURRENT, MCL_FUTURE = 1, 2
+
+
+def log(text: str) -> None:
+    print(f"controller: {text}", file=sys.stderr, flush=True)
+
+
+def realtime_setup(cfg: ControllerConfig, realtime: bool) -> list[str]:
+    """gc.freeze + gc.disable always; scheduling, memory locking, affinity for realtime."""
+    notes = []
+    gc.collect()
+    gc.freeze()
+    gc.disable()
+    if not realtime:
+        return notes
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(cfg.realtime_priority))
+        notes.append(f"SCHED_FIFO priority {cfg.realtime_priority}")
+    except (OSError, AttributeError) as exc:
+        log(f"SCHED_FIFO not permitted ({exc}); running with normal scheduling")
+    libc_name = ctypes.util.find_library("c")
+    try:
+        libc = ctypes.CDLL(libc_name, use_errno=True)
+        if libc.mlockall(MCL_CURRENT | MCL_FUTURE) != 0:
+            log(f"mlockall not permitted ({os.strerror(ctypes.get_errno())}); memory may page")
+        else:
+            notes.append("mlockall")
+    except (OSError, AttributeError) as exc:
+        log(f"mlockall unavailable ({exc})")
+    if cfg.cpu >= 0:
+        try:
+            os.sched_setaffinity(0, {cfg.cpu})
+            notes.append(f"CPU {cfg.cpu}")
+        except (OSError, AttributeError) as exc:
+            log(f"CPU affinity {cfg.cpu} not permitted ({exc})")
+    return notes
+
+
+def realtime_teardown() -> None:
+    gc.enable()
+    gc.unfreeze()
+
+
+def run_daemon(args) -> int:
+    from protocol.bus import open_bus
+
+    from .core import ControllerCore
+    from .loop import ActivationError, ControllerLoop
+
+    cfg = load_config(args.config)
+    core = ControllerCore(cfg, args.rig, 1.0 / args.rate_hz, CONTROLLER_NAMES[args.controller])
+    stop = StopFlag()
+    bus = open_bus(args.bus)
+    loop = ControllerLoop(bus, core, args.rate_hz, args.pacing, log=log)
+    code = 0
+    notes = realtime_setup(cfg, args.pacing == "realtime")
+    if notes:
+        log("real-time: " + ", ".join(notes))
+    try:
+        try:
+            loop.activate(stop)
+        except ActivationError as exc:
+            log(f"activation failed: {exc}")
+            code = 1
+        else:
+            loop.run(stop)
+            loop.shutdown()
+    finally:
+        realtime_teardown()
+        bus.shutdown()
+    summary = loop.summary()
+    if args.summary:
+        with open(args.summary, "w") as handle:
+            json.dump(summary, handle, indent=1)
+    timing = summary["timing"].get("compute_us", {})
+    print(f"controller: rig={core.rig} controller={args.controller} pacing={args.pacing} cycles={summary['cycles']} "
+          f"overruns={summary['overruns']} e2e_errors={summary['e2e_errors']} "
+          f"missing_frames={summary['missing_frames']} faults={summary['faults']} "
+          f"fault_code={summary['fault_code']} state={summary['state']} "
+          f"compute_p99_us={timing.get('p99', 'n/a')}", flush=True)
+    return code
