@@ -81,7 +81,9 @@ class ControllerCore:
         self.trajectory: JointTrajectory | None = None
         self.trajectory_t0 = 0.0
         self.trajectory_seqs: list[int] = []
-        self.trajectory_ends: np.ndarray = np.zeros(0)
+        self.trajectory_ends = np.full(cfg.waypoint_queue + 2, np.inf)     # end time of each segment
+        self.trajectory_segments = 0
+        self._segment = 0
         self.active_waypoint = 0
         # supervision
         self.missing = np.zeros(n, dtype=np.int64)
@@ -137,7 +139,13 @@ class ControllerCore:
         self.trajectory_t0 = self.time_s
         self.trajectory_seqs = seqs
         seg = trajectory.segments[:, 0]
-        self.trajectory_ends = seg[:, 4] + seg[:, 6]          # T_START + TM per segment
+        n = len(seg)
+        if n > len(self.trajectory_ends):
+            self.trajectory_ends = np.full(n, np.inf)
+        np.add(seg[:, 4], seg[:, 6], out=self.trajectory_ends[:n])     # T_START + TM
+        self.trajectory_ends[n:] = np.inf
+        self.trajectory_segments = n
+        self._segment = 0
 
     # -- host interface (events) ------------------------------------------------------------
     def host_command(self, command: int, argument: int) -> Ack:
@@ -359,10 +367,11 @@ class ControllerCore:
         if active and self.trajectory is not None:
             t = self.time_s - self.trajectory_t0
             self.trajectory.evaluate_into(t, self.yr, self.vr, self.ar)
-            k = int(np.searchsorted(self.trajectory_ends, t))
-            if k < len(self.trajectory_seqs):
-                self.active_waypoint = self.trajectory_seqs[k]
-            if t >= self.trajectory_ends[-1]:
+            while self._segment < self.trajectory_segments - 1 and t >= self.trajectory_ends[self._segment]:
+                self._segment += 1
+            if self._segment < len(self.trajectory_seqs):
+                self.active_waypoint = self.trajectory_seqs[self._segment]
+            if t >= self.trajectory_ends[self.trajectory_segments - 1]:
                 self.hold_position[:] = self.yr
                 self.trajectory = None
                 sup.motion_done()

@@ -155,15 +155,16 @@ class ControllerLoop:
             self.acks.append((KIND_WAYPOINT, int(seq), int(result)))
 
     def _collect(self, deadline: float) -> None:
-        while True:
-            if self._all_fresh():
-                return
+        """Receive until every LEG_STATE of the cycle is in or the window closes; frames
+        already waiting in the receive queue when it closes arrived in time and are taken."""
+        while not self._all_fresh():
             remaining = deadline - self.clock()
-            if remaining <= 0.0:
-                return
-            msg = self.bus.recv(timeout=remaining)
-            if msg is not None:
-                self.dispatch(msg)
+            msg = self.bus.recv(timeout=max(remaining, 0.0))
+            if msg is None:
+                if remaining <= 0.0:
+                    return
+                continue
+            self.dispatch(msg)
 
     def _all_fresh(self) -> bool:
         fresh = self.decoder.fresh

@@ -1,0 +1,122 @@
+"""An in-process stand-in for the bus and the rig, for allocation and supervisor tests.
+
+It answers like the emulator's nodes, in plain Python floats (no NumPy, so whatever NumPy
+allocates in a test is the controller's): NMT start -> heartbeats OPERATIONAL; on SYNC k
+every leg applies the command latched in cycle k-1 (CiA 408: DISABLED/HOLD/ACTIVE) and
+sends LEG_STATE_n with its encoder position and load-cell force; each leg is the
+identified actuator of Table A.3 (150 mm, 0 kg) integrated by forward-Euler sub-steps.
+"""
+
+from __future__ import annotations
+
+import collections
+
+import can
+
+from protocol.codec import CODECS
+
+HEARTBEAT_EVERY = 20           # cycles (the controller checks heartbeats on its wall clock)
+
+
+class FakeBus:
+    def __init__(self, n_legs: int, strokes_m, period_s: float = 0.002, b0=11425.0, b1=106.0, k01=0.236,
+                 load_kg: float = 1.35, resolution_m: float = 0.125e-3, nodes=None):
+        self.n = n_legs
+        self.period = period_s
+        self.b0, self.b1, self.k01 = b0, b1, k01                     # k01 in (m/s)/V
+        self.mass = load_kg
+        self.res = resolution_m
+        self.y = [float(s) for s in strokes_m]
+        self.v = [0.0] * n_legs
+        self.a = [0.0] * n_legs
+        self.spool = [0.0] * n_legs
+        self.latched = [None] * n_legs
+        self.valve = [1] * n_legs                                   # DISABLED
+        self.queue = collections.deque()
+        self.nodes = nodes or list(range(1, n_legs + 1))
+        self.operational = False
+        self.syncs = 0
+        self.silent = set()           # legs whose LEG_STATE is not sent
+        self.corrupt = set()          # legs whose LEG_STATE has a bad CRC
+        self.sent = collections.Counter()
+        self._state = [(CODECS[f"LEG_STATE_{i}"], can.Message(arbitration_id=CODECS[f"LEG_STATE_{i}"].frame_id,
+                                                               data=bytearray(6), is_extended_id=False),
+                        CODECS[f"LEG_STATE_{i}"].new_values()) for i in range(1, n_legs + 1)]
+        self._hb = {node: can.Message(arbitration_id=0x700 + node, data=bytearray([5]), is_extended_id=False)
+                    for node in self.nodes}
+        self._cmd_codec = CODECS["VALVE_CMD_1"]
+        self._cmd_values = self._cmd_codec.new_values()
+        self._cmd_ids = {CODECS[f"VALVE_CMD_{i}"].frame_id: i - 1 for i in range(1, n_legs + 1)}
+        self._cmd_codecs = {CODECS[f"VALVE_CMD_{i}"].frame_id: CODECS[f"VALVE_CMD_{i}"] for i in range(1, n_legs + 1)}
+
+    # python-can bus interface ------------------------------------------------------------
+    def send(self, msg, timeout=None) -> None:
+        frame_id = msg.arbitration_id
+        self.sent[frame_id] += 1
+        if frame_id == 0x000 and msg.data[0] == 1:
+            self.operational = True
+            self._heartbeats()
+        elif frame_id == 0x080:
+            self._sync()
+        elif frame_id in self._cmd_ids:
+            leg = self._cmd_ids[frame_id]
+            self._cmd_codecs[frame_id].decode_into(msg.data, self._cmd_values)
+            _, _, d, h, m, r, setpoint = self._cmd_values
+            self.latched[leg] = (d > 0.5, h > 0.5, m > 0.5, float(setpoint))
+
+    def recv(self, timeout=None):
+        if self.queue:
+            return self.queue.popleft()
+        return None
+
+    def shutdown(self) -> None:
+        pass
+
+    # nodes -------------------------------------------------------------------------------
+    def _heartbeats(self) -> None:
+        for msg in self._hb.values():
+            self.queue.append(msg)
+
+    def _sync(self) -> None:
+        self.syncs += 1
+        if not self.operational:
+            return
+        if self.syncs % HEARTBEAT_EVERY == 0:
+            self._heartbeats()
+        for leg in range(self.n):
+            latched, self.latched[leg] = self.latched[leg], None
+            if latched is not None:
+                d, h, m, setpoint = latched
+                if not (d and h):
+                    self.valve[leg] = 1
+                elif m and self.valve[leg] in (2, 3):
+                    self.valve[leg] = 3
+                else:
+                    self.valve[leg] = 2
+                self.spool[leg] = setpoint if self.valve[leg] == 3 else 0.0
+            if leg in self.silent:
+                continue
+            codec, msg, values = self._state[leg]
+            values[2] = self.valve[leg]
+            values[3] = 0.0
+            values[4] = round(self.y[leg] / self.res) * self.res
+            values[5] = self.mass * (self.a[leg] + 9.81)
+            codec.encode_into(values, msg.data)
+            if leg in self.corrupt:
+                msg.data[0] ^= 0xFF
+            self.queue.append(msg)
+        self._advance()
+
+    def _advance(self) -> None:
+        steps = 20
+        h = self.period / steps
+        for leg in range(self.n):
+            y, v, a = self.y[leg], self.v[leg], self.a[leg]
+            u_volts = self.spool[leg] * 10.0
+            for _ in range(steps):        # y''' = b0 (k01 u - y') - b1 y''
+                jerk = self.b0 * (self.k01 * u_volts - v) - self.b1 * a
+                a += h * jerk
+                v += h * a
+                y += h * v
+            self.y[leg], self.v[leg], self.a[leg] = y, v, a
+
