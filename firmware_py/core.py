@@ -93,6 +93,7 @@ class ControllerCore:
         self.overruns_in_row = 0
         self.dk_failures = 0
         self.reset_cycles = 0
+        self._reset_pulse = False
         self.time_s = 0.0
         self.cycles = 0
         self.initialised = False
@@ -320,6 +321,7 @@ class ControllerCore:
         inputs = joint.inputs
         self.cycles += 1
         self.time_s += self.period_s
+        self._reset_pulse = self.reset_cycles == RESET_GRACE_CYCLES      # R high for one cycle
         if not self.initialised:
             if self.meas_fresh.all():
                 self.initialise()
@@ -425,7 +427,7 @@ class ControllerCore:
     def _write_outputs(self) -> None:
         """Control words and spool setpoints for the state the supervisor is in now."""
         state = self.sup.state
-        self.cw_r[:] = 1.0 if self.reset_cycles == RESET_GRACE_CYCLES else 0.0
+        self.cw_r[:] = 1.0 if self._reset_pulse else 0.0
         if state is State.ESTOP:
             self.cw_d[:] = 0.0
             self.cw_h[:] = 0.0

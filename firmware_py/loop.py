@@ -29,7 +29,7 @@ from protocol.dbc import sync_counter_overflow
 from protocol.e2e import RxStatus
 from protocol.outbox import Outbox
 
-from .core import ControllerCore
+from .core import RESET_GRACE_CYCLES, ControllerCore
 from .supervisor import Fault, State
 
 NMT_START, NMT_OPERATIONAL = 1, 5
@@ -300,8 +300,7 @@ class ControllerLoop:
             msg = self.bus.recv(timeout=0.02)
             if msg is not None:
                 self.dispatch(msg)
-        self.core.reset_cycles = 4                   # one Reset pulse: clears faults left from before
-        self.core.cw_r[:] = 1.0
+        self.core.reset_cycles = RESET_GRACE_CYCLES  # one Reset pulse: clears faults left from before
         self._run_cycles(cfg.hold_cycles, should_stop)
         self.core.sup.booted(cfg.auto_enable)
         if self.core.sup.action:

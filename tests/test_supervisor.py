@@ -1,0 +1,181 @@
+"""Supervisor and host interface: state transitions with their reset paths, faults from
+the bus, e-stop in the same cycle, waypoint checks with reason codes (a rejected waypoint
+never moves anything). Through the real loop and core, with the in-process fake bus."""
+
+import math
+
+import numpy as np
+import pytest
+
+from firmware_py.supervisor import Ack, Command, Fault, State, Supervisor
+from tests.test_controller_alloc import make_loop
+
+
+def cycles(loop, n):
+    for _ in range(n):
+        loop.cycle()
+
+
+def valve_words(bus, loop):
+    """What the controller last wrote to leg 1: (D, H, M, spool)."""
+    box = loop.out_cmd[0]
+    v = box.values
+    return v[box.index["CW_D"]], v[box.index["CW_H"]], v[box.index["CW_M"]], v[box.index["SPOOL_SETPOINT"]]
+
+
+def test_state_machine_table():
+    s = Supervisor()
+    assert s.state is State.BOOT
+    s.booted(auto_enable=False)
+    assert s.state is State.IDLE
+    assert s.command(Command.START, 0) is Ack.BAD_STATE
+    assert s.command(Command.ENABLE, 0) is Ack.ACCEPTED and s.state is State.READY
+    assert s.command(Command.SELECT_CONTROLLER, 3) is Ack.BAD_ARGUMENT
+    assert s.command(Command.SELECT_CONTROLLER, 2) is Ack.ACCEPTED and s.controller == 2
+    assert s.command(Command.HOME, 0) is Ack.ACCEPTED and s.state is State.HOMING
+    assert s.command(Command.SELECT_CONTROLLER, 0) is Ack.BAD_STATE
+    s.motion_done()
+    assert s.state is State.READY
+    assert s.command(Command.PARK, 0) is Ack.ACCEPTED
+    s.motion_done()
+    assert s.state is State.IDLE                       # parked: valves hold
+    assert s.command(Command.RESET, 0) is Ack.BAD_STATE
+    assert s.command(99, 0) is Ack.UNKNOWN_COMMAND
+    s.fault(Fault.SENSOR_TIMEOUT)
+    s.fault(Fault.E2E_ERROR)                            # the first fault stays latched
+    assert s.state is State.FAULT and s.fault_code is Fault.SENSOR_TIMEOUT
+    assert s.command(Command.ENABLE, 0) is Ack.BAD_STATE
+    assert s.command(Command.RESET, 0) is Ack.ACCEPTED and s.state is State.IDLE
+    assert s.fault_code is Fault.NONE
+    assert s.command(Command.ESTOP, 0) is Ack.ACCEPTED and s.state is State.ESTOP
+    s.fault(Fault.OVERRUN)
+    assert s.fault_code is Fault.ESTOP
+    assert s.command(Command.RESET, 0) is Ack.ACCEPTED and s.state is State.IDLE
+
+
+@pytest.mark.parametrize("rig", ["testbench", "hexapod"])
+def test_activation_enables_and_holds_position(rig):
+    loop, core, bus = make_loop(rig, "pi")
+    assert core.state is State.READY
+    start = list(bus.y)
+    cycles(loop, 500)
+    assert all(v == 3 for v in bus.valve)                      # ACTIVE
+    assert np.max(np.abs(np.array(bus.y) - start)) < 0.5e-3
+    assert core.sup.fault_code is Fault.NONE
+
+
+def test_estop_disables_valves_in_the_same_cycle_and_reset_recovers():
+    loop, core, bus = make_loop("testbench", "pi")
+    cycles(loop, 50)
+    assert core.host_command(Command.ESTOP, 0) is Ack.ACCEPTED
+    loop.cycle()
+    d, h, m, spool = valve_words(bus, loop)
+    assert (d, h, m, spool) == (0, 0, 0, 0)                  # written in the cycle that saw the command
+    cycles(loop, 3)
+    assert bus.valve == [1]                                  # DISABLED at the next SYNC
+    assert core.host_command(Command.ENABLE, 0) is Ack.BAD_STATE
+    assert core.host_command(Command.RESET, 0) is Ack.ACCEPTED
+    loop.cycle()
+    assert loop.out_cmd[0].values[loop.out_cmd[0].index["CW_R"]] == 1.0    # the reset pulse
+    cycles(loop, 3)
+    assert core.state is State.IDLE and bus.valve == [2]     # HOLD
+    assert core.host_command(Command.ENABLE, 0) is Ack.ACCEPTED
+    cycles(loop, 5)
+    assert core.state is State.READY and bus.valve == [3]
+
+
+def test_missing_sensor_frames_fault_after_the_configured_count_then_reset():
+    loop, core, bus = make_loop("testbench", "pi")
+    cycles(loop, 20)
+    bus.silent.add(0)
+    cycles(loop, core.cfg.missing_frames_fault - 1)
+    assert core.state is State.READY                          # transient: still running
+    loop.cycle()
+    assert core.state is State.FAULT and core.sup.fault_code is Fault.SENSOR_TIMEOUT
+    d, h, m, _ = valve_words(bus, loop)
+    assert (d, h, m) == (1, 1, 0)                             # FAULT holds the valves
+    assert all(math.isfinite(v) for v in core.joint.st[0])
+    bus.silent.clear()
+    cycles(loop, 5)
+    assert core.state is State.FAULT                          # needs an explicit reset
+    core.host_command(Command.RESET, 0)
+    core.host_command(Command.ENABLE, 0)
+    cycles(loop, 10)
+    assert core.state is State.READY
+
+
+def test_e2e_corrupted_frames_are_counted_and_fault():
+    loop, core, bus = make_loop("testbench", "pi")
+    cycles(loop, 20)
+    bus.corrupt.add(0)
+    cycles(loop, core.cfg.e2e_errors_fault)
+    assert loop.stats.e2e_errors == core.cfg.e2e_errors_fault
+    assert core.state is State.FAULT and core.sup.fault_code is Fault.E2E_ERROR
+
+
+def test_valve_fault_state_faults_the_controller():
+    loop, core, bus = make_loop("testbench", "pi")
+    cycles(loop, 10)
+    bus.valve[0] = 4                                          # FAULT_HOLD reported in LEG_STATE
+    bus.latched[0] = None
+    loop.cycle()
+    assert core.state is State.FAULT and core.sup.fault_code is Fault.VALVE_FAULT
+
+
+def send_waypoint(core, seq, x, y, z, rpy=(0.0, 0.0, 0.0), segment=1.0, accel=0.2, flags=0):
+    core.waypoint_position(seq & 0x0F, x, y, z)
+    core.waypoint_rotation(seq & 0x0F, *rpy)
+    return core.waypoint_time(seq & 0x0F, seq, segment, accel, flags)
+
+
+def test_testbench_waypoints_run_and_bad_ones_are_rejected():
+    loop, core, bus = make_loop("testbench", "pi")
+    cycles(loop, 10)
+    start = bus.y[0]
+    assert send_waypoint(core, 1, 0.0, 0.0, 0.5) is Ack.OUTSIDE_WORKSPACE       # beyond the stroke
+    assert send_waypoint(core, 1, 0.01, 0.0, 0.16) is Ack.OUTSIDE_WORKSPACE     # X must be 0
+    assert send_waypoint(core, 1, 0.0, 0.0, 0.30, segment=0.2, accel=0.05) is Ack.TOO_FAST
+    assert send_waypoint(core, 1, 0.0, 0.0, 0.16, segment=0.2, accel=0.15) is Ack.BAD_ARGUMENT
+    assert send_waypoint(core, 1, 0.0, 0.0, math.nan) is Ack.NOT_FINITE
+    core.waypoint_position(2, 0.0, 0.0, 0.16)
+    assert core.waypoint_time(2, 2, 1.0, 0.2, 0) is Ack.INCOMPLETE                 # no ROT frame
+    cycles(loop, 200)
+    assert abs(bus.y[0] - start) < 0.3e-3                                          # nothing moved
+    assert send_waypoint(core, 5, 0.0, 0.0, 0.16) is Ack.ACCEPTED
+    assert send_waypoint(core, 7, 0.0, 0.0, 0.15) is Ack.SEQUENCE_GAP
+    assert send_waypoint(core, 6, 0.0, 0.0, 0.15, flags=1) is Ack.ACCEPTED
+    assert core.host_command(Command.START, 0) is Ack.ACCEPTED
+    assert core.state is State.RUNNING
+    peak = 0.0
+    for _ in range(1100):                                   # two 1 s segments
+        loop.cycle()
+        peak = max(peak, bus.y[0])
+    assert core.state is State.READY and core.active_waypoint == 6
+    assert peak > 0.159 and abs(bus.y[0] - 0.15) < 0.5e-3
+
+
+def test_hexapod_waypoints_checked_against_workspace_singularity_and_speed():
+    loop, core, bus = make_loop("hexapod", "model-based")
+    cycles(loop, 10)
+    start = list(bus.y)
+    assert send_waypoint(core, 1, 0.0, 0.0, 1.2) is Ack.OUTSIDE_WORKSPACE
+    assert send_waypoint(core, 1, 0.0, 0.0, 0.66, rpy=(0.0, 0.0, math.radians(90.0))) in (
+        Ack.SINGULAR, Ack.OUTSIDE_WORKSPACE)
+    assert send_waypoint(core, 1, 0.0, 0.0, 0.75, segment=0.1, accel=0.05) is Ack.TOO_FAST
+    cycles(loop, 100)
+    assert np.max(np.abs(np.array(bus.y) - start)) < 0.3e-3
+    assert send_waypoint(core, 1, 0.02, 0.0, 0.60, flags=3) is Ack.ACCEPTED         # last + start now
+    assert core.state is State.RUNNING
+    cycles(loop, 700)
+    assert core.state is State.READY, core.sup.fault_code.name
+    assert np.allclose(core.platform.dk.pose[:3], [0.02, 0.0, 0.60], atol=1e-3)
+
+
+def test_home_and_park_move_and_park_ends_idle():
+    loop, core, bus = make_loop("testbench", "adaptive")
+    assert core.host_command(Command.PARK, 0) is Ack.ACCEPTED
+    cycles(loop, 4000)
+    assert core.state is State.IDLE and abs(bus.y[0] - core.cfg.testbench_park_m) < 0.5e-3
+    assert core.host_command(Command.HOME, 0) is Ack.ACCEPTED
+    cycles(loop, 4000)
+    assert core.state is State.READY and abs(bus.y[0] - core.cfg.testbench_home_m) < 0.5e-3
