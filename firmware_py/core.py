@@ -22,7 +22,7 @@ from .control import (IN_ACTIVE, IN_AR, IN_FORCE, IN_FRESH, IN_G_AX, IN_TAU, IN_
                       ST_INTEGRAL, ST_MASS, ST_U)
 from .control import MODEL_BASED, JointController
 from .geometry import GRAVITY_M_S2, Geometry, default_geometry
-from .supervisor import ACTIVE, Ack, Action, Fault, State, Supervisor
+from .supervisor import ACTIVE, Ack, Action, Command, Fault, State, Supervisor
 from .trajectory import JointTrajectory, sls_coefficients, through_points
 
 RIGS = ("testbench", "hexapod")
@@ -231,7 +231,7 @@ class ControllerCore:
                            "accel_time": accel_time, "flags": flags, "pose": pos + rot})
         self.expected_seq = (seq + 1) % 256
         if flags & FLAG_START and self.state is State.READY:
-            self.host_command(8, 0)                                   # START
+            self.host_command(Command.START, 0)
         return Ack.ACCEPTED
 
     def trajectory_target(self) -> np.ndarray:
@@ -251,9 +251,10 @@ class ControllerCore:
         strokes = np.array([pos[2]])
         if not self._peak_velocity_ok(previous, strokes, segment_time, accel_time):
             return Ack.TOO_FAST, None
-        static = (self.cfg.moving_mass_kg + self.cfg.mass_max_kg) * GRAVITY_M_S2
-        if min(static, (self.cfg.moving_mass_kg + float(self.joint.st[0, ST_MASS])) * GRAVITY_M_S2) > \
-                self.cfg.waypoint_force_max_n:
+        # the static load as estimated plus the segment's peak SLS acceleration
+        peak_accel = abs(pos[2] - float(previous[0])) / (segment_time - accel_time) * math.pi / (2.0 * accel_time)
+        force = (self.cfg.moving_mass_kg + float(self.joint.st[0, ST_MASS])) * (GRAVITY_M_S2 + peak_accel)
+        if force > self.cfg.waypoint_force_max_n:
             return Ack.TOO_FAST, None
         return Ack.ACCEPTED, strokes
 
