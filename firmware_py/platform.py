@@ -15,35 +15,11 @@ from .kinematics import DirectKinematics, ik_into, jacobian_into
 
 
 @njit(cache=True)
-def abs_det_into(matrix, lu):
-    """|det(matrix)| by Gaussian elimination with partial pivoting in the scratch `lu`."""
-    n = matrix.shape[0]
-    for i in range(n):
-        for j in range(n):
-            lu[i, j] = matrix[i, j]
-    det = 1.0
-    for k in range(n):
-        pivot = k
-        for i in range(k + 1, n):
-            if abs(lu[i, k]) > abs(lu[pivot, k]):
-                pivot = i
-        if lu[pivot, k] == 0.0:
-            return 0.0
-        if pivot != k:
-            for j in range(n):
-                lu[k, j], lu[pivot, j] = lu[pivot, j], lu[k, j]
-        det *= lu[k, k]
-        for i in range(k + 1, n):
-            f = lu[i, k] / lu[k, k]
-            for j in range(k, n):
-                lu[i, j] -= f * lu[k, j]
-    return abs(det)
-
-
-@njit(cache=True)
 def solve6_into(matrix, rhs, lu, out):
-    """out = matrix^-1 rhs (6x6, partial pivoting, scratch lu); False when singular."""
+    """out = matrix^-1 rhs by Gaussian elimination with partial pivoting in the scratch lu;
+    returns |det(matrix)| (0.0 when singular, out then undefined)."""
     n = matrix.shape[0]
+    det = 1.0
     for i in range(n):
         out[i] = rhs[i]
         for j in range(n):
@@ -54,11 +30,12 @@ def solve6_into(matrix, rhs, lu, out):
             if abs(lu[i, k]) > abs(lu[pivot, k]):
                 pivot = i
         if lu[pivot, k] == 0.0:
-            return False
+            return 0.0
         if pivot != k:
             for j in range(n):
                 lu[k, j], lu[pivot, j] = lu[pivot, j], lu[k, j]
             out[k], out[pivot] = out[pivot], out[k]
+        det *= lu[k, k]
         for i in range(k + 1, n):
             f = lu[i, k] / lu[k, k]
             for j in range(k, n):
@@ -69,7 +46,7 @@ def solve6_into(matrix, rhs, lu, out):
         for j in range(k + 1, n):
             s -= lu[k, j] * out[j]
         out[k] = s / lu[k, k]
-    return True
+    return abs(det)
 
 
 class PlatformModel:
@@ -99,6 +76,8 @@ class PlatformModel:
         self.accel = np.zeros(6)
         self.force_n = np.zeros(N_LEGS)
         self._lu = np.empty((6, 6))
+        self._zero6 = np.zeros(6)
+        self._scratch6 = np.empty(6)
         self.radius = float(np.linalg.norm(geometry.platform_anchor_m[0]))
         self.det_home = 1.0
         self.det_ratio = 1.0
@@ -112,7 +91,7 @@ class PlatformModel:
         # rotation columns scaled by the platform radius: dimensionless, as the condition index
         self.jacobian_scaled[:, 0:3] = self.jacobian[:, 0:3]
         np.multiply(self.jacobian[:, 3:6], 1.0 / self.radius, out=self.jacobian_scaled[:, 3:6])
-        return abs_det_into(self.jacobian_scaled, self._lu)
+        return solve6_into(self.jacobian_scaled, self._zero6, self._lu, self._scratch6)
 
     def update_measured_kinematics(self, position_m, quat) -> None:
         ik_into(self.dk.base, self.dk.platform, position_m, quat, self.rot, self.platform_world, self.lengths,
@@ -146,7 +125,7 @@ class PlatformModel:
                 self._ref_lengths_ik, self._ref_units)
         jacobian_into(self._ref_units, self._ref_world, self._ref_jacobian)
         self.prev_twist[:] = self.twist
-        if not solve6_into(self._ref_jacobian, stroke_rates, self._lu, self.twist):
+        if solve6_into(self._ref_jacobian, stroke_rates, self._lu, self.twist) == 0.0:
             self.force_n[:] = np.nan
             return False
         np.subtract(self.twist, self.prev_twist, out=self.accel)
