@@ -43,14 +43,13 @@ def prepared_core(cfg: ControllerConfig, rig: str, controller: str, period_s: fl
     core.meas_fresh[:] = True
     core.valve_state[:] = 3
     core.update()                                   # initialises at the measured state
-    core.sup.booted(auto_enable=True)
-    core._do_action()
+    core.activated(auto_enable=True)
     replay(core, trajectory)
     return core, trajectory
 
 
 def replay(core: ControllerCore, trajectory) -> None:
-    core._play(trajectory, [1])
+    core.play(trajectory, [1])
     core.sup.start_running()
 
 

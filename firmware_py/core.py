@@ -133,9 +133,10 @@ class ControllerCore:
         start = self.yr.copy() if self.initialised else self.meas_y.copy()
         distance = float(np.max(np.abs(np.asarray(target) - start)))
         duration = max(distance / speed_m_s + accel_time_s, 2.0 * accel_time_s)
-        self._play(through_points(np.array([start, target]), accel_time_s, duration), [self.active_waypoint])
+        self.play(through_points(np.array([start, target]), accel_time_s, duration), [self.active_waypoint])
 
-    def _play(self, trajectory: JointTrajectory, seqs: list[int]) -> None:
+    def play(self, trajectory: JointTrajectory, seqs: list[int]) -> None:
+        """Follow `trajectory` (joint strokes) from now; `seqs` name its segments in CTRL_STATUS."""
         self.trajectory = trajectory
         self.trajectory_t0 = self.time_s
         self.trajectory_seqs = seqs
@@ -171,7 +172,7 @@ class ControllerCore:
         elif action is Action.STOP:
             ta = cfg.homing_accel_time_s
             coeffs = sls_coefficients(self.yr, self.vr, self.yr + self.vr * ta, ta, 2.0 * ta, True)
-            self._play(JointTrajectory(coeffs[None]), [self.active_waypoint])
+            self.play(JointTrajectory(coeffs[None]), [self.active_waypoint])
         elif action is Action.RESET:
             self.reset_cycles = RESET_GRACE_CYCLES
             self.missing[:] = 0
@@ -190,7 +191,7 @@ class ControllerCore:
         take = next((k + 1 for k, w in enumerate(self.queue) if w["flags"] & FLAG_LAST), len(self.queue))
         chosen, self.queue = self.queue[:take], self.queue[take:]
         points = np.array([self.yr] + [w["strokes"] for w in chosen])
-        self._play(through_points(points, [w["accel_time"] for w in chosen], [w["segment_time"] for w in chosen]),
+        self.play(through_points(points, [w["accel_time"] for w in chosen], [w["segment_time"] for w in chosen]),
                    [w["seq"] for w in chosen])
         self.sup.start_running()
 
@@ -315,6 +316,11 @@ class ControllerCore:
 
     def fault(self, code: Fault) -> None:
         self.sup.fault(code)
+
+    def activated(self, auto_enable: bool) -> None:
+        """Activation is over (valves in HOLD): IDLE, or READY holding the measured position."""
+        self.sup.booted(auto_enable)
+        self._do_action()
 
     def update(self, overrun: bool = False) -> None:
         """One cycle: supervise the inputs, reference, estimation and control, outputs."""

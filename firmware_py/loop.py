@@ -302,9 +302,7 @@ class ControllerLoop:
                 self.dispatch(msg)
         self.core.reset_cycles = RESET_GRACE_CYCLES  # one Reset pulse: clears faults left from before
         self._run_cycles(cfg.hold_cycles, should_stop)
-        self.core.sup.booted(cfg.auto_enable)
-        if self.core.sup.action:
-            self.core._do_action()
+        self.core.activated(cfg.auto_enable)
         self.log(f"active: rig={self.core.rig} state={self.core.state.name} pacing={self.pacing} "
                  f"rate={1.0 / self.period_s:g} Hz")
 

@@ -46,7 +46,7 @@ def test_steady_cycles_allocate_no_numpy_memory(rig, controller):
     def run(n):
         for _ in range(n):
             if core.trajectory is None:            # replay: RUNNING again (an event, outside the window)
-                core._play(trajectory, [1])
+                core.play(trajectory, [1])
                 core.sup.start_running()
             loop.cycle()
 
