@@ -10,12 +10,13 @@ identified actuator of Table A.3 (150 mm, 0 kg) integrated by forward-Euler sub-
 from __future__ import annotations
 
 import collections
+import time
 
 import can
 
 from protocol.codec import CODECS
 
-HEARTBEAT_EVERY = 20           # cycles (the controller checks heartbeats on its wall clock)
+HEARTBEAT_S = 0.05             # wall clock, as the nodes' timers (the controller checks on its clock)
 
 
 class FakeBus:
@@ -36,6 +37,7 @@ class FakeBus:
         self.nodes = nodes or list(range(1, n_legs + 1))
         self.operational = False
         self.syncs = 0
+        self._last_heartbeat = 0.0
         self.silent = set()           # legs whose LEG_STATE is not sent
         self.corrupt = set()          # legs whose LEG_STATE has a bad CRC
         self.sent = collections.Counter()
@@ -74,6 +76,7 @@ class FakeBus:
 
     # nodes -------------------------------------------------------------------------------
     def _heartbeats(self) -> None:
+        self._last_heartbeat = time.monotonic()
         for msg in self._hb.values():
             self.queue.append(msg)
 
@@ -81,7 +84,8 @@ class FakeBus:
         self.syncs += 1
         if not self.operational:
             return
-        if self.syncs % HEARTBEAT_EVERY == 0:
+        now = time.monotonic()
+        if now - self._last_heartbeat >= HEARTBEAT_S:
             self._heartbeats()
         for leg in range(self.n):
             latched, self.latched[leg] = self.latched[leg], None

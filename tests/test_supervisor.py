@@ -3,6 +3,7 @@ the bus, e-stop in the same cycle, waypoint checks with reason codes (a rejected
 never moves anything). Through the real loop and core, with the in-process fake bus."""
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -179,3 +180,12 @@ def test_home_and_park_move_and_park_ends_idle():
     assert core.host_command(Command.HOME, 0) is Ack.ACCEPTED
     cycles(loop, 4000)
     assert core.state is State.READY and abs(bus.y[0] - core.cfg.testbench_home_m) < 0.5e-3
+
+
+def test_a_silent_node_heartbeat_faults():
+    loop, core, bus = make_loop("testbench", "pi", {"timing": {"heartbeat_timeout_ms": 10.0}})
+    bus.nodes = []                                    # the node stops its heartbeat ...
+    bus._hb.clear()
+    time.sleep(0.05)
+    loop.cycle()                                      # ... and the next cycle notices
+    assert core.state is State.FAULT and core.sup.fault_code is Fault.HEARTBEAT_LOST
