@@ -89,6 +89,7 @@ class ControllerCore:
         self.missing = np.zeros(n, dtype=np.int64)
         self.bad = np.zeros(n, dtype=np.int64)
         self._mask = np.zeros(n, dtype=bool)
+        self._mask3 = np.zeros((n, 3), dtype=bool)
         self._abs = np.zeros(n)
         self.overruns_in_row = 0
         self.dk_failures = 0
@@ -414,7 +415,10 @@ class ControllerCore:
     def _limits(self, active: bool) -> None:
         cfg, sup, joint = self.cfg, self.sup, self.joint
         u = joint.st[:, ST_U]
-        if not (np.isfinite(u).all() and np.isfinite(joint.kalman_x).all()):
+        np.isfinite(u, out=self._mask)
+        finite = self._mask.all()
+        np.isfinite(joint.kalman_x, out=self._mask3)
+        if not (finite and self._mask3.all()):
             sup.fault(Fault.NOT_FINITE)
         np.abs(self.meas_force, out=self._abs)
         if self._abs.max() > cfg.force_max_n:
@@ -446,7 +450,8 @@ class ControllerCore:
         if state in ACTIVE:
             self.cw_m[:] = 1.0
             np.multiply(self.joint.st[:, ST_U], 1.0 / self.cfg.valve_full_scale_v, out=self.spool)
-            if not np.isfinite(self.spool).all():
+            np.isfinite(self.spool, out=self._mask)
+            if not self._mask.all():
                 self.spool[:] = 0.0
                 self.cw_m[:] = 0.0
         else:

@@ -87,12 +87,14 @@ def _link_wrench(mass, com, inertia, e1x, e1y, e1z, e2x, e2y, e2z, e3x, e3y, e3z
 
 
 @njit(cache=True)
-def _lu_solve_transposed_into(jac, rhs, lu, out):
-    """Solve jac^T out = rhs (6x6) by Gaussian elimination with partial pivoting; False if singular."""
-    n = jac.shape[0]
+def gauss_solve_into(matrix, rhs, lu, out, transposed):
+    """Solve matrix out = rhs (or matrix^T out = rhs) by Gaussian elimination with partial
+    pivoting in the scratch `lu`; returns |det(matrix)|, 0.0 when singular (out undefined)."""
+    n = matrix.shape[0]
+    det = 1.0
     for i in range(n):
         for j in range(n):
-            lu[i, j] = jac[j, i]
+            lu[i, j] = matrix[j, i] if transposed else matrix[i, j]
         out[i] = rhs[i]
     for col in range(n):
         pivot = col
@@ -102,11 +104,12 @@ def _lu_solve_transposed_into(jac, rhs, lu, out):
                 best = abs(lu[row, col])
                 pivot = row
         if not best > 1e-300:
-            return False
+            return 0.0
         if pivot != col:
             for j in range(n):
                 lu[col, j], lu[pivot, j] = lu[pivot, j], lu[col, j]
             out[col], out[pivot] = out[pivot], out[col]
+        det *= lu[col, col]
         for row in range(col + 1, n):
             factor = lu[row, col] / lu[col, col]
             for j in range(col, n):
@@ -117,7 +120,7 @@ def _lu_solve_transposed_into(jac, rhs, lu, out):
         for j in range(row + 1, n):
             s -= lu[row, j] * out[j]
         out[row] = s / lu[row, row]
-    return True
+    return abs(det)
 
 
 @njit(cache=True)
@@ -274,7 +277,7 @@ class InverseDynamics:
 
     def joint_forces_from_wrench(self, wrench) -> bool:
         """tau = Jx^-T W for the pose of the last call."""
-        ok = _lu_solve_transposed_into(self.jacobian, wrench, self._lu, self.force_n)
+        ok = gauss_solve_into(self.jacobian, wrench, self._lu, self.force_n, True) > 0.0
         if not ok:
             self.force_n[:] = np.nan
         return ok

@@ -26,7 +26,7 @@ import numpy as np
 
 from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
-from protocol.e2e import RxStatus
+from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.outbox import Outbox
 
 from .core import RESET_GRACE_CYCLES, ControllerCore
@@ -37,7 +37,6 @@ CONTROLLER_NODE, IMU_NODE = 16, 7
 KIND_HOST_CMD, KIND_WAYPOINT = 1, 2
 PACINGS = ("realtime", "lockstep")
 HISTORY = 1 << 16                       # cycles kept for the timing percentiles
-BAD = (RxStatus.CRC_ERROR, RxStatus.WRONG_SEQUENCE, RxStatus.BAD_LENGTH, RxStatus.REPEATED)
 
 
 class ActivationError(RuntimeError):
@@ -119,7 +118,7 @@ class ControllerLoop:
             self.stats.unknown_frames += 1
             return
         if status is not RxStatus.OK:
-            if status in BAD:
+            if status in E2E_REJECTED:
                 self.stats.e2e_errors += 1
                 leg = self._leg_of_id.get(frame_id)
                 if leg is not None:

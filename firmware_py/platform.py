@@ -7,46 +7,10 @@ singularity proximity, and the virtual-work actuator forces along the reference
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
-from .dynamics import InverseDynamics
+from .dynamics import InverseDynamics, gauss_solve_into
 from .geometry import N_LEGS, Geometry
 from .kinematics import DirectKinematics, ik_into, jacobian_into
-
-
-@njit(cache=True)
-def solve6_into(matrix, rhs, lu, out):
-    """out = matrix^-1 rhs by Gaussian elimination with partial pivoting in the scratch lu;
-    returns |det(matrix)| (0.0 when singular, out then undefined)."""
-    n = matrix.shape[0]
-    det = 1.0
-    for i in range(n):
-        out[i] = rhs[i]
-        for j in range(n):
-            lu[i, j] = matrix[i, j]
-    for k in range(n):
-        pivot = k
-        for i in range(k + 1, n):
-            if abs(lu[i, k]) > abs(lu[pivot, k]):
-                pivot = i
-        if lu[pivot, k] == 0.0:
-            return 0.0
-        if pivot != k:
-            for j in range(n):
-                lu[k, j], lu[pivot, j] = lu[pivot, j], lu[k, j]
-            out[k], out[pivot] = out[pivot], out[k]
-        det *= lu[k, k]
-        for i in range(k + 1, n):
-            f = lu[i, k] / lu[k, k]
-            for j in range(k, n):
-                lu[i, j] -= f * lu[k, j]
-            out[i] -= f * out[k]
-    for k in range(n - 1, -1, -1):
-        s = out[k]
-        for j in range(k + 1, n):
-            s -= lu[k, j] * out[j]
-        out[k] = s / lu[k, k]
-    return abs(det)
 
 
 class PlatformModel:
@@ -91,7 +55,7 @@ class PlatformModel:
         # rotation columns scaled by the platform radius: dimensionless, as the condition index
         self.jacobian_scaled[:, 0:3] = self.jacobian[:, 0:3]
         np.multiply(self.jacobian[:, 3:6], 1.0 / self.radius, out=self.jacobian_scaled[:, 3:6])
-        return solve6_into(self.jacobian_scaled, self._zero6, self._lu, self._scratch6)
+        return gauss_solve_into(self.jacobian_scaled, self._zero6, self._lu, self._scratch6, False)
 
     def update_measured_kinematics(self, position_m, quat) -> None:
         ik_into(self.dk.base, self.dk.platform, position_m, quat, self.rot, self.platform_world, self.lengths,
@@ -125,7 +89,7 @@ class PlatformModel:
                 self._ref_lengths_ik, self._ref_units)
         jacobian_into(self._ref_units, self._ref_world, self._ref_jacobian)
         self.prev_twist[:] = self.twist
-        if solve6_into(self._ref_jacobian, stroke_rates, self._lu, self.twist) == 0.0:
+        if gauss_solve_into(self._ref_jacobian, stroke_rates, self._lu, self.twist, False) == 0.0:
             self.force_n[:] = np.nan
             return False
         np.subtract(self.twist, self.prev_twist, out=self.accel)

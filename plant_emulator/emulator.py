@@ -24,7 +24,7 @@ from firmware_py.rotation import quat_to_rpy
 from protocol.cliutil import StopFlag  # noqa: F401  (re-exported: the emulator's process uses it)
 from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
-from protocol.e2e import RxStatus
+from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.outbox import Outbox
 
 from . import hydraulics as hy
@@ -214,7 +214,7 @@ class Emulator:
                 self._nmt(command, node)
             return
         if status is not RxStatus.OK:
-            if status in (RxStatus.CRC_ERROR, RxStatus.WRONG_SEQUENCE, RxStatus.BAD_LENGTH, RxStatus.REPEATED):
+            if status in E2E_REJECTED:
                 self.counters.e2e_errors += 1
                 node = self._cmd_slot.get(frame_id)
                 if node is not None and status is not RxStatus.REPEATED:

@@ -29,6 +29,10 @@ class RxStatus(IntEnum):
     UNKNOWN_ID = 6       # id not in the DBC (or not decoded by this receiver)
 
 
+#: Outcomes that mean a frame arrived and was rejected by the E2E check (counted as E2E errors).
+E2E_REJECTED = frozenset({RxStatus.REPEATED, RxStatus.WRONG_SEQUENCE, RxStatus.CRC_ERROR, RxStatus.BAD_LENGTH})
+
+
 def protect(buf: bytearray, data_id: int, length: int) -> None:
     """Advance the alive counter in byte 1 and write the CRC into byte 0, in place."""
     e2e_p01_protect(buf, data_id, data_id_mode=E2E_P01_DATAID_BOTH, length=length, increment_counter=True)

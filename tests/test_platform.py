@@ -4,24 +4,26 @@ DK pose estimate, gravity along the legs and the reference forces against Invers
 import numpy as np
 import pytest
 
-from firmware_py.dynamics import InverseDynamics
+from firmware_py.dynamics import InverseDynamics, gauss_solve_into
 from firmware_py.geometry import default_geometry
 from firmware_py.kinematics import ik_batch
-from firmware_py.platform import PlatformModel, solve6_into
+from firmware_py.platform import PlatformModel
 from firmware_py.rotation import rpy_to_quat
 
 G = default_geometry()
 
 
-def test_solve6_matches_numpy():
+def test_gauss_solve_matches_numpy():
     rng = np.random.default_rng(4)
     lu, x = np.empty((6, 6)), np.empty(6)
     for _ in range(50):
         a, b = rng.standard_normal((6, 6)), rng.standard_normal(6)
-        det = solve6_into(a, b, lu, x)
+        det = gauss_solve_into(a, b, lu, x, False)
         np.testing.assert_allclose(x, np.linalg.solve(a, b), rtol=1e-9, atol=1e-12)
         assert det == pytest.approx(abs(np.linalg.det(a)), rel=1e-9)
-    assert solve6_into(np.zeros((6, 6)), np.ones(6), lu, x) == 0.0
+        gauss_solve_into(a, b, lu, x, True)
+        np.testing.assert_allclose(x, np.linalg.solve(a.T, b), rtol=1e-9, atol=1e-12)
+    assert gauss_solve_into(np.zeros((6, 6)), np.ones(6), lu, x, False) == 0.0
 
 
 def test_pose_estimate_gravity_and_reference_forces():
