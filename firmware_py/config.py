@@ -63,7 +63,7 @@ RANGES: dict[str, dict[str, object]] = {
         "dk_failures_fault": (1, 10000), "dk_tolerance_um": (0.001, 1000.0), "dk_max_iterations": (1, 100),
         "singularity_ratio_min": (0.0, 1.0), "auto_enable": bool, "homing_speed_mm_s": (0.1, 1000.0),
         "homing_accel_time_s": (0.001, 10.0), "waypoint_queue": (1, 255),
-        "waypoint_velocity_max_mm_s": (0.1, 1e4), "waypoint_force_max_n": (1.0, 1e6),
+        "waypoint_velocity_max_mm_s": (0.1, 1e4), "waypoint_step_max_mm": (0.0, 300.0), "waypoint_force_max_n": (1.0, 1e6),
         "waypoint_path_samples": (2, 1000),
     },
 }
@@ -147,6 +147,7 @@ class ControllerConfig:
     homing_accel_time_s: float
     waypoint_queue: int
     waypoint_velocity_max_m_s: float
+    waypoint_step_max_m: float
     waypoint_force_max_n: float
     waypoint_path_samples: int
 
@@ -221,6 +222,7 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         singularity_ratio_min=sv["singularity_ratio_min"], auto_enable=sv["auto_enable"],
         homing_speed_m_s=sv["homing_speed_mm_s"] * MM, homing_accel_time_s=sv["homing_accel_time_s"],
         waypoint_queue=sv["waypoint_queue"], waypoint_velocity_max_m_s=sv["waypoint_velocity_max_mm_s"] * MM,
+        waypoint_step_max_m=sv["waypoint_step_max_mm"] * MM,
         waypoint_force_max_n=sv["waypoint_force_max_n"], waypoint_path_samples=sv["waypoint_path_samples"],
     )
 

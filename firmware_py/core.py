@@ -23,12 +23,12 @@ from .control import (IN_ACTIVE, IN_AR, IN_FORCE, IN_FRESH, IN_G_AX, IN_TAU, IN_
 from .control import MODEL_BASED, JointController
 from .geometry import GRAVITY_M_S2, Geometry, default_geometry
 from .supervisor import ACTIVE, Ack, Action, Command, Fault, State, Supervisor
-from .trajectory import JointTrajectory, sls_coefficients, through_points
+from .trajectory import JointTrajectory, hold_at, sls_coefficients, through_points
 
 RIGS = ("testbench", "hexapod")
 VALVE_FAULT_STATES = (4, 5)            # CiA 408 FAULT_HOLD, FAULT_DISABLED
 RESET_GRACE_CYCLES = 4                 # valves need a SYNC or two to leave FAULT after R
-FLAG_LAST, FLAG_START = 1, 2
+FLAG_LAST, FLAG_START, FLAG_STEP = 1, 2, 4
 
 
 class ControllerCore:
@@ -79,7 +79,7 @@ class ControllerCore:
         self.ar = np.zeros(n)
         self.hold_position = np.zeros(n)
         self.trajectory: JointTrajectory | None = None
-        self.trajectory_t0 = 0.0
+        self.trajectory_start_cycle = 0        # the trajectory's clock: t = (cycles - this) * period
         self.trajectory_seqs: list[int] = []
         self.trajectory_ends = np.full(cfg.waypoint_queue + 2, np.inf)     # end time of each segment
         self.trajectory_segments = 0
@@ -139,7 +139,7 @@ class ControllerCore:
     def play(self, trajectory: JointTrajectory, seqs: list[int]) -> None:
         """Follow `trajectory` (joint strokes) from now; `seqs` name its segments in CTRL_STATUS."""
         self.trajectory = trajectory
-        self.trajectory_t0 = self.time_s
+        self.trajectory_start_cycle = self.cycles
         self.trajectory_seqs = seqs
         seg = trajectory.segments[:, 0]
         n = len(seg)
@@ -191,9 +191,12 @@ class ControllerCore:
             return
         take = next((k + 1 for k, w in enumerate(self.queue) if w["flags"] & FLAG_LAST), len(self.queue))
         chosen, self.queue = self.queue[:take], self.queue[take:]
-        points = np.array([self.yr] + [w["strokes"] for w in chosen])
-        self.play(through_points(points, [w["accel_time"] for w in chosen], [w["segment_time"] for w in chosen]),
-                   [w["seq"] for w in chosen])
+        if chosen[0]["flags"] & FLAG_STEP:                # a step reference (chapters 5.4, 7.6.1)
+            self.play(hold_at(chosen[0]["strokes"], chosen[0]["segment_time"]), [chosen[0]["seq"]])
+        else:
+            points = np.array([self.yr] + [w["strokes"] for w in chosen])
+            self.play(through_points(points, [w["accel_time"] for w in chosen],
+                                     [w["segment_time"] for w in chosen]), [w["seq"] for w in chosen])
         self.sup.start_running()
 
     def waypoint_position(self, tag: int, x: float, y: float, z: float) -> None:
@@ -223,10 +226,13 @@ class ControllerCore:
             return Ack.NOT_FINITE
         if not (accel_time > 0.0 and segment_time >= 2.0 * accel_time):
             return Ack.BAD_ARGUMENT
+        step = bool(flags & FLAG_STEP)
+        if step and (not flags & FLAG_LAST or (self.queue and not self.queue[-1]["flags"] & FLAG_LAST)):
+            return Ack.BAD_ARGUMENT                         # a step is a trajectory of its own
         previous = self.queue[-1]["strokes"] if self.queue else (
             self.trajectory_target() if self.trajectory is not None else self.yr.copy())
-        result, strokes = (self._check_hexapod(previous, pos, rot, segment_time, accel_time) if self.hexapod
-                           else self._check_testbench(previous, pos, rot, segment_time, accel_time))
+        result, strokes = (self._check_hexapod(previous, pos, rot, segment_time, accel_time, step) if self.hexapod
+                           else self._check_testbench(previous, pos, rot, segment_time, accel_time, step))
         if result is not Ack.ACCEPTED:
             return result
         self.queue.append({"seq": seq, "strokes": strokes, "segment_time": segment_time,
@@ -241,18 +247,23 @@ class ControllerCore:
         self.trajectory.evaluate_into(1e9, out, np.empty(self.n), np.empty(self.n))
         return out
 
-    def _peak_velocity_ok(self, previous, strokes, segment_time, accel_time) -> bool:
-        peak = float(np.max(np.abs(strokes - previous))) / (segment_time - accel_time)
-        return peak <= self.cfg.waypoint_velocity_max_m_s
+    def _peak_velocity_ok(self, previous, strokes, segment_time, accel_time, step: bool) -> bool:
+        """A step is bounded by its size; a segment by its peak joint velocity."""
+        distance = float(np.max(np.abs(strokes - previous)))
+        if step:
+            return distance <= self.cfg.waypoint_step_max_m
+        return distance / (segment_time - accel_time) <= self.cfg.waypoint_velocity_max_m_s
 
-    def _check_testbench(self, previous, pos, rot, segment_time, accel_time):
+    def _check_testbench(self, previous, pos, rot, segment_time, accel_time, step):
         margin = self.cfg.stroke_margin_m
         if max(abs(pos[0]), abs(pos[1]), *(abs(r) for r in rot)) > 1e-9 or not (
                 margin <= pos[2] <= self.stroke_m - margin):
             return Ack.OUTSIDE_WORKSPACE, None
         strokes = np.array([pos[2]])
-        if not self._peak_velocity_ok(previous, strokes, segment_time, accel_time):
+        if not self._peak_velocity_ok(previous, strokes, segment_time, accel_time, step):
             return Ack.TOO_FAST, None
+        if step:
+            return Ack.ACCEPTED, strokes
         # the static load as estimated plus the segment's peak SLS acceleration
         peak_accel = abs(pos[2] - float(previous[0])) / (segment_time - accel_time) * math.pi / (2.0 * accel_time)
         force = (self.cfg.moving_mass_kg + float(self.joint.st[0, ST_MASS])) * (GRAVITY_M_S2 + peak_accel)
@@ -260,7 +271,7 @@ class ControllerCore:
             return Ack.TOO_FAST, None
         return Ack.ACCEPTED, strokes
 
-    def _check_hexapod(self, previous, pos, rot, segment_time, accel_time):
+    def _check_hexapod(self, previous, pos, rot, segment_time, accel_time, step):
         from .kinematics import ik_batch
         from .rotation import rpy_to_quat
         from .workspace import MIN_CONDITION_INDEX, check_poses
@@ -275,7 +286,7 @@ class ControllerCore:
             return Ack.SINGULAR, None
         lengths, _ = ik_batch(g, position[None], quat[None])
         strokes = lengths[0] - g.leg_min_m
-        if not self._peak_velocity_ok(previous, strokes, segment_time, accel_time):
+        if not self._peak_velocity_ok(previous, strokes, segment_time, accel_time, step):
             return Ack.TOO_FAST, None
         # the joint-space path between the waypoints, pose by pose
         samples = self.cfg.waypoint_path_samples
@@ -375,7 +386,8 @@ class ControllerCore:
         # reference
         active = sup.state in ACTIVE
         if active and self.trajectory is not None:
-            t = self.time_s - self.trajectory_t0
+            # integer cycles, not an accumulated float: a log's analysis rebuilds the same reference
+            t = (self.cycles - self.trajectory_start_cycle) * self.period_s
             self.trajectory.evaluate_into(t, self.yr, self.vr, self.ar)
             while self._segment < self.trajectory_segments - 1 and t >= self.trajectory_ends[self._segment]:
                 self._segment += 1
@@ -385,6 +397,8 @@ class ControllerCore:
                 self.hold_position[:] = self.yr
                 self.trajectory = None
                 sup.motion_done()
+                if self.queue and self.queue[0]["flags"] & FLAG_START and sup.state is State.READY:
+                    self._start_queue()               # queued "start now": as soon as the last one ends
         elif active:
             self.yr[:] = self.hold_position
             self.vr[:] = 0.0

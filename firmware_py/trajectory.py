@@ -142,6 +142,16 @@ def through_points(points, ta_s, tm_s, start_velocity=None) -> JointTrajectory:
     return JointTrajectory(segments)
 
 
+def hold_at(point, duration_s: float) -> JointTrajectory:
+    """A step reference: jump to `point` (n_joints) and hold it for `duration_s`, at rest."""
+    coeffs = np.zeros((1, len(point), 8))
+    coeffs[0, :, Y0] = point
+    coeffs[0, :, TA] = duration_s / 2.0
+    coeffs[0, :, TM] = duration_s
+    coeffs[0, :, DECEL] = 1.0
+    return JointTrajectory(coeffs)
+
+
 def concatenate(parts: list[JointTrajectory]) -> JointTrajectory:
     """Parts played one after the other (each part starts where and when the previous ended)."""
     chained = []

@@ -9,6 +9,7 @@ from __future__ import annotations
 import sys
 
 from firmware_py import commands as firmware_commands
+from hil import commands as hil_commands
 from plant_emulator import commands as emulator_commands
 from protocol import commands as protocol_commands
 from protocol.cliutil import OneLineArgumentParser, run
@@ -24,6 +25,7 @@ def build_parser() -> OneLineArgumentParser:
     protocol_commands.add_parsers(sub)
     firmware_commands.add_parsers(sub)
     emulator_commands.add_parsers(sub)
+    hil_commands.add_parsers(sub)
     return parser
 
 

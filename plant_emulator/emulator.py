@@ -103,7 +103,7 @@ class Emulator:
             names += [f"LEG_STATE_{n}", f"LEG_PRESSURE_{n}", f"VALVE_STATUS_{n}", f"EMCY_{n}", f"HEARTBEAT_{n}"]
         if self.has_imu:
             names += ["IMU_ATTITUDE", "IMU_RATE", f"EMCY_{IMU_NODE}", f"HEARTBEAT_{IMU_NODE}"]
-        return names
+        return names + ["EMU_TRUTH"]
 
     # -- transmit -----------------------------------------------------------------------------
     def _send(self, message: can.Message) -> None:
@@ -368,6 +368,20 @@ class Emulator:
                 rate = rig.platform_body_rate() + cfg.imu_rate_noise_rad_s * rng.standard_normal(3)
                 box.values[box.index["RATE_X"]:box.index["RATE_Z"] + 1] = rate
                 self._emit(IMU_NODE, "IMU_RATE")
+        self._send_truth(counter)
+
+    def _send_truth(self, counter: int) -> None:
+        """EMU_TRUTH: the simulated pose for HIL metrics (after the leg frames: the
+        controller's collection never waits for it)."""
+        box = self.out["EMU_TRUTH"]
+        box.values[box.index["SYNC_PHASE"]] = counter % 16
+        if self.has_imu:
+            position, _ = self.rig.platform_pose()
+            for axis, value in zip("XYZ", position):
+                box.values[box.index[axis]] = value
+        else:
+            box.values[box.index["Z"]] = self.rig.state[0, hy.S_Y]
+        self._emit(0, "EMU_TRUTH")
 
     # -- process loop -------------------------------------------------------------------------
     def run(self, should_stop) -> None:

@@ -1,0 +1,92 @@
+"""`hydrapod hil ...`: run a scenario, analyse a log, list the scenarios."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from protocol.cliutil import number_in_range
+from protocol.errors import UserInputError
+
+
+def _scenario(name: str):
+    from .scenarios import SCENARIOS
+    if name not in SCENARIOS:
+        raise UserInputError(f"unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")
+    return SCENARIOS[name]
+
+
+def _controllers(text: str | None) -> tuple[str, ...] | None:
+    if text is None:
+        return None
+    from firmware_py.control import CONTROLLER_NAMES
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    bad = [n for n in names if n not in CONTROLLER_NAMES]
+    if bad or not names:
+        raise UserInputError(f"--controllers: unknown controller {bad[0] if bad else text!r} "
+                             f"(known: {', '.join(CONTROLLER_NAMES)})")
+    return names
+
+
+def _finish(args, doc: dict) -> int:
+    from .report import format_terminal
+    print(json.dumps(doc, indent=1, default=str) if args.json else format_terminal(doc))
+    return 0 if doc["passed"] else 1
+
+
+def _run(args) -> int:
+    from .runner import RunOptions, run_scenario
+    scenario = _scenario(args.scenario)
+    out = Path(args.out) if args.out else Path("hil-out") / scenario.name
+    options = RunOptions(out_dir=out, bus=args.bus, pacing=args.pacing, rate_hz=500.0, short=args.short,
+                         controllers=_controllers(args.controllers), duration_s=args.duration_s)
+    return _finish(args, run_scenario(scenario, options))
+
+
+def _analyze(args) -> int:
+    from .runner import analyze_log
+    scenario = _scenario(args.scenario)
+    log = Path(args.log)
+    out = Path(args.out) if args.out else log.parent
+    return _finish(args, analyze_log(scenario, log, out))
+
+
+def _list(args) -> int:
+    from .scenarios import SCENARIOS
+    rows = [{"name": s.name, "rig": s.rig, "pacing": s.pacing, "controllers": list(s.controllers),
+             "thesis": s.chapter, "title": s.title} for s in SCENARIOS.values()]
+    if args.json:
+        print(json.dumps(rows, indent=1))
+    else:
+        for r in rows:
+            print(f"{r['name']:<20} {r['rig']:<10} {r['pacing']:<9} {','.join(r['controllers']):<20} "
+                  f"{r['thesis']:<22} {r['title']}")
+    return 0
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    hil = sub.add_parser("hil", help="hardware-in-the-loop: thesis experiments against the emulator, log analysis")
+    hil_sub = hil.add_subparsers(dest="hil_command", required=True, metavar="SUBCOMMAND", parser_class=type(hil))
+    p = hil_sub.add_parser("run", help="run a scenario: emulator + controller processes, this process as host")
+    p.add_argument("scenario", metavar="SCENARIO")
+    p.add_argument("--bus", metavar="SPEC", help="bus to run on (default: a fresh on-host multicast group and "
+                                                 "port; 'default' = socketcan:vcan0 if present, else the default group)")
+    p.add_argument("--pacing", choices=("lockstep", "realtime"), default=None,
+                   help="default: the scenario's (lockstep, realtime for the timing scenarios)")
+    p.add_argument("--out", metavar="DIR", help="output directory (default: hil-out/SCENARIO)")
+    p.add_argument("--short", action="store_true", help="the short variant (what make test runs)")
+    p.add_argument("--controllers", metavar="LIST", help="comma-separated subset of the scenario's controllers")
+    p.add_argument("--duration-s", type=number_in_range(float, 1.0, 86400.0), default=None,
+                   help="realtime scenarios: seconds of running (default 60; 10 with --short)")
+    p.add_argument("--json", action="store_true", help="print metrics.json instead of the summary")
+    p.set_defaults(handler=_run)
+    p = hil_sub.add_parser("analyze", help="the scenario's analysis on a recorded log (BLF or ASC), e.g. from the rig")
+    p.add_argument("log", metavar="LOG")
+    p.add_argument("--scenario", required=True)
+    p.add_argument("--out", metavar="DIR", help="where metrics.json, plots and report.md go (default: beside LOG)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_analyze)
+    p = hil_sub.add_parser("list", help="the scenarios")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_list)

@@ -1,0 +1,174 @@
+"""The host on the bus during a HIL run: records every frame, sends HOST_CMD, waypoints and
+EMU_CTRL, and waits in bus time (SYNC frames), never in wall time alone.
+
+The recorder is python-can's own writer (`can.Logger`: BLF or ASC by the file's suffix);
+frames this host sends are written too (the multicast bus does not echo them back).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import can
+
+from firmware_py.supervisor import Ack, Command, State
+from protocol.codec import CODECS, EncodeStatus, FrameDecoder
+from protocol.e2e import RxStatus
+from protocol.outbox import Outbox
+
+KIND_HOST_CMD, KIND_WAYPOINT = 1, 2
+FLAG_LAST, FLAG_START, FLAG_STEP = 1, 2, 4
+EMU_SET_LOAD, EMU_INJECT, EMU_CLEAR, EMU_CLEAR_ALL = 1, 2, 3, 4
+
+
+class HostError(RuntimeError):
+    """The run cannot go on: no bus traffic, a refused command, a state never reached."""
+
+
+class Host:
+    def __init__(self, bus: can.BusABC, log_path: str, watch: Callable[[], None] = lambda: None,
+                 stall_timeout_s: float = 10.0):
+        self.bus = bus
+        self.writer = can.Logger(log_path)
+        self.watch = watch                      # raises when a child died (called every ~0.2 s)
+        self.stall_timeout_s = stall_timeout_s
+        self.decoder = FrameDecoder(["SYNC", "CTRL_STATUS", "CTRL_ACK"])
+        self.syncs = 0
+        self.state: State | None = None
+        self.fault_code = 0
+        self.controller = -1
+        self.acks: dict[tuple[int, int], int] = {}
+        self.frames_sent = 0
+        self.frames_received = 0
+        self._cmd = Outbox("HOST_CMD")
+        self._pos = Outbox("HOST_WAYPOINT_POS")
+        self._rot = Outbox("HOST_WAYPOINT_ROT")
+        self._time = Outbox("HOST_WAYPOINT_TIME")
+        self._emu = Outbox("EMU_CTRL")
+        self._cmd_seq = 0
+        self.waypoint_seq = 0
+        self._last_watch = 0.0
+        self._status = CODECS["CTRL_STATUS"].index
+        self._ack = CODECS["CTRL_ACK"].index
+
+    # -- receive ---------------------------------------------------------------------------
+    def pump(self, timeout_s: float) -> can.Message | None:
+        """Receive and record one frame (None when nothing came within `timeout_s`)."""
+        now = time.monotonic()
+        if now - self._last_watch > 0.2:
+            self._last_watch = now
+            self.watch()
+        msg = self.bus.recv(timeout_s)
+        if msg is None:
+            return None
+        msg.channel = None                     # BLF/ASC channel numbers, not the bus's name
+        self.writer.on_message_received(msg)
+        self.frames_received += 1
+        status = self.decoder.receive_message(msg)
+        if status is RxStatus.OK:
+            if msg.arbitration_id == 0x080:
+                self.syncs += 1
+            elif msg.arbitration_id == CODECS["CTRL_STATUS"].frame_id:
+                v = self.decoder.values["CTRL_STATUS"]
+                self.state = State(int(v[self._status["STATE"]]))
+                self.fault_code = int(v[self._status["FAULT_CODE"]])
+                self.controller = int(v[self._status["CONTROLLER"]])
+            elif msg.arbitration_id == CODECS["CTRL_ACK"].frame_id:
+                v = self.decoder.values["CTRL_ACK"]
+                self.acks[(int(v[self._ack["KIND"]]), int(v[self._ack["SEQ"]]))] = int(v[self._ack["RESULT"]])
+        return msg
+
+    def wait_cycles(self, cycles: int) -> None:
+        """Let `cycles` SYNC periods of bus time pass (recording everything)."""
+        self.wait_until(lambda: False, cycles, what=None)
+
+    def wait_until(self, condition: Callable[[], bool], max_cycles: int, what: str | None,
+                   wall_timeout_s: float | None = None) -> bool:
+        """Pump until `condition()` or `max_cycles` SYNCs (or `wall_timeout_s`); HostError if
+        `what` is named and the condition was not met, or when the bus goes quiet."""
+        end = self.syncs + max_cycles
+        last_traffic = time.monotonic()
+        give_up = None if wall_timeout_s is None else last_traffic + wall_timeout_s
+        while self.syncs < end and (give_up is None or time.monotonic() < give_up):
+            if condition():
+                return True
+            if self.pump(0.05) is not None:
+                last_traffic = time.monotonic()
+            elif time.monotonic() - last_traffic > self.stall_timeout_s:
+                raise HostError(f"no frame on the bus for {self.stall_timeout_s:g} s "
+                                f"(after {self.syncs} SYNCs)")
+        if condition():
+            return True
+        if what is not None:
+            raise HostError(f"{what} not reached within {max_cycles} cycles "
+                            f"(state {self.state.name if self.state is not None else 'unknown'}, "
+                            f"fault code {self.fault_code})")
+        return False
+
+    def wait_state(self, *states: State, max_cycles: int = 5000, wall_timeout_s: float | None = None) -> None:
+        self.wait_until(lambda: self.state in states, max_cycles,
+                        what=f"controller state {'/'.join(s.name for s in states)}", wall_timeout_s=wall_timeout_s)
+
+    # -- send ------------------------------------------------------------------------------
+    def send(self, box: Outbox) -> None:
+        status = box.codec.encode_into(box.values, box.message.data)
+        if status is not EncodeStatus.OK:       # never send a saturated waypoint or command
+            raise HostError(f"{box.codec.name}: a value is out of the DBC's range or not finite ({status.name})")
+        msg = box.message
+        msg.timestamp = time.time()
+        self.bus.send(msg)
+        msg.channel = None
+        msg.is_rx = False
+        self.writer.on_message_received(msg)
+        self.frames_sent += 1
+
+    def _await_ack(self, kind: int, seq: int, what: str, max_cycles: int = 500) -> Ack:
+        self.wait_until(lambda: (kind, seq) in self.acks, max_cycles, what=f"CTRL_ACK for {what}")
+        return Ack(self.acks.pop((kind, seq)))
+
+    def command(self, command: Command, argument: int = 0, expect_ok: bool = True) -> Ack:
+        self._cmd_seq = (self._cmd_seq + 1) % 256
+        v, i = self._cmd.values, self._cmd.index
+        v[i["COMMAND"]], v[i["ARGUMENT"]], v[i["SEQ"]] = int(command), argument, self._cmd_seq
+        self.send(self._cmd)
+        result = self._await_ack(KIND_HOST_CMD, self._cmd_seq, f"HOST_CMD {command.name}")
+        if expect_ok and result is not Ack.ACCEPTED:
+            raise HostError(f"HOST_CMD {command.name} {argument} refused: {result.name}")
+        return result
+
+    def waypoint(self, position_m, rpy_rad=(0.0, 0.0, 0.0), segment_time_s: float = 1.0,
+                 accel_time_s: float = 0.1, flags: int = 0, expect_ok: bool = True) -> Ack:
+        """POS, ROT and TIME frames of one waypoint (TAG = low 4 bits of SEQ); its CTRL_ACK."""
+        seq = self.waypoint_seq
+        tag = seq & 0x0F
+        for box, names, values in ((self._pos, ("X", "Y", "Z"), position_m),
+                                   (self._rot, ("ROLL", "PITCH", "YAW"), rpy_rad)):
+            box.values[box.index["TAG"]] = tag
+            for name, value in zip(names, values):
+                box.values[box.index[name]] = value
+            self.send(box)
+        v, i = self._time.values, self._time.index
+        v[i["TAG"]], v[i["SEQ"]], v[i["FLAGS"]] = tag, seq, flags
+        v[i["SEGMENT_TIME"]], v[i["ACCEL_TIME"]] = segment_time_s, accel_time_s
+        self.send(self._time)
+        result = self._await_ack(KIND_WAYPOINT, seq, f"waypoint {seq}")
+        if result is Ack.ACCEPTED:
+            self.waypoint_seq = (seq + 1) % 256
+        elif expect_ok:
+            raise HostError(f"waypoint {seq} at {[round(p * 1e3, 3) for p in position_m]} mm refused: "
+                            f"{result.name}")
+        return result
+
+    def emulator(self, command: int, target: int = 0, fault: int = 0, load_kg: float = 0.0,
+                 param: int = 0) -> None:
+        v, i = self._emu.values, self._emu.index
+        v[i["COMMAND"]], v[i["TARGET"]], v[i["FAULT"]] = command, target, fault
+        v[i["LOAD_MASS"]], v[i["FAULT_PARAM"]] = load_kg, param
+        self.send(self._emu)
+
+    def set_load(self, load_kg: float) -> None:
+        self.emulator(EMU_SET_LOAD, load_kg=load_kg)
+
+    def close(self) -> None:
+        self.writer.stop()

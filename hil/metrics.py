@@ -1,0 +1,73 @@
+"""Metrics computed from decoded logs: step response, tracking error, IAE, timing.
+
+Pure functions of arrays (SI in, SI out); the scenarios pick the windows.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .logdata import LogData
+
+SETTLING_BAND = 0.05          # settling time: last exit from +/- 5 % of the step
+
+
+def step_response(t_s, y, y0: float, step: float, band: float = SETTLING_BAND) -> dict:
+    """Overshoot (% of the step), settling time (s, last exit from the band), rise time 10-90 %."""
+    t_s, y = np.asarray(t_s, float), np.asarray(y, float)
+    response = (y - y0) / step
+    overshoot = max(0.0, float(np.nanmax(response) - 1.0) * 100.0)
+    outside = np.nonzero(np.abs(response - 1.0) > band)[0]
+    settling = float(t_s[outside[-1] + 1]) if len(outside) and outside[-1] + 1 < len(t_s) else (
+        float("nan") if len(outside) else 0.0)
+    above10 = np.nonzero(response >= 0.1)[0]
+    above90 = np.nonzero(response >= 0.9)[0]
+    rise = float(t_s[above90[0]] - t_s[above10[0]]) if len(above10) and len(above90) else float("nan")
+    final = float(np.mean(response[-max(len(response) // 10, 1):]))
+    return {"overshoot_pct": overshoot, "settling_s": settling, "rise_s": rise,
+            "steady_error_pct": (final - 1.0) * 100.0}
+
+
+def iae(error, period_s: float) -> float:
+    """Integral of the absolute error, rectangle rule on the cycle grid (NaN samples skipped)."""
+    return float(np.nansum(np.abs(error)) * period_s)
+
+
+def percentiles(values, qs=(50, 99)) -> dict:
+    values = np.asarray(values, float)
+    values = values[np.isfinite(values)]
+    if not len(values):
+        return {f"p{q}": None for q in qs} | {"max": None, "n": 0}
+    return {f"p{q}": float(np.percentile(values, q)) for q in qs} | {"max": float(values.max()), "n": len(values)}
+
+
+def ctrl_status_timing(log: LogData) -> dict:
+    """From CTRL_STATUS (every 16th SYNC): the controller's own period error and compute time
+    (each the max over its 16-cycle window), overruns (unwrapped from modulo 256)."""
+    status = log.get("CTRL_STATUS")
+    if not len(status):
+        return {"windows": 0, "overruns": None}
+    wraps = np.diff(status["OVERRUNS"]) < 0
+    overruns = int(status["OVERRUNS"][-1] + 256 * np.count_nonzero(wraps))
+    return {"windows": len(status), "overruns": overruns,
+            "period_error_us": _us(percentiles(status["PERIOD_ERROR_MAX"])),
+            "compute_time_us": _us(percentiles(status["COMPUTE_TIME_MAX"]))}
+
+
+def sync_jitter(log: LogData, period_s: float) -> dict:
+    """SYNC-to-SYNC intervals as the recorder timestamped them (includes its own latency)."""
+    t = log.sync_time_s
+    dt = np.diff(t)
+    error = np.abs(dt - period_s)
+    return {"intervals": int(np.count_nonzero(np.isfinite(error))),
+            "period_error_us": _us(percentiles(error))}
+
+
+def _us(stats: dict) -> dict:
+    return {k: (round(v * 1e6, 1) if isinstance(v, float) else v) for k, v in stats.items()}
+
+
+def last_value_before(series_cycles, series_values, cycle: int, default=np.nan):
+    """The value of the last frame at or before `cycle`."""
+    idx = np.searchsorted(series_cycles, cycle, side="right") - 1
+    return series_values[idx] if idx >= 0 else default

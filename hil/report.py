@@ -1,0 +1,83 @@
+"""metrics.json and report.md of a run (or of an analysed log)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from .logdata import LogData
+from .metrics import ctrl_status_timing
+from .scenario import Scenario
+
+
+def write_outputs(scenario: Scenario, log: LogData, out: Path, extra: dict, rate_hz: float = 500.0) -> dict:
+    analysis = scenario.analyze(log, out, rate_hz)
+    timing = ctrl_status_timing(log)
+    failure = extra.get("failure")
+    doc = {
+        "scenario": scenario.name,
+        "passed": bool(all(c.passed for c in analysis.checks if c.required) and analysis.checks and not failure),
+        "metrics": analysis.metrics,
+        "thesis": analysis.thesis,
+        "checks": [c.as_dict() for c in analysis.checks],
+        "e2e_errors": log.e2e_errors,
+        "overruns": timing["overruns"],
+        "log": {"path": log.path, "frames": log.frames, "cycles": log.n_cycles, "lost_frames": log.lost_frames,
+                "lost_by_message": log.lost, "unknown_frames": log.unknown_frames, "rx_status": log.rx_counts},
+        "ctrl_status_timing": timing,
+        "figures": [f.file for f in analysis.figures],
+        **extra,
+    }
+    (out / "metrics.json").write_text(json.dumps(doc, indent=1, default=_plain))
+    (out / "report.md").write_text(format_report(scenario, doc, analysis))
+    return doc
+
+
+def _plain(value):
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return str(value)
+
+
+def format_checks(doc: dict) -> str:
+    rows = ["| check | expected | measured | pass |", "|---|---|---|---|"]
+    rows += [f"| {c['name']} | {c['expected']} | {c['measured']} | "
+             f"{('yes' if c['passed'] else '**no**') if c['required'] else ('matches' if c['passed'] else 'deviates (reported)')} |"
+             for c in doc["checks"]]
+    return "\n".join(rows)
+
+
+def format_report(scenario: Scenario, doc: dict, analysis) -> str:
+    lines = [f"# {scenario.name}: {scenario.title}", "",
+             f"Thesis: {scenario.chapter}. Rig: {scenario.rig}. Result: **{'PASSED' if doc['passed'] else 'FAILED'}**.",
+             ""]
+    if doc.get("failure"):
+        lines += ["## Run failure", "", "```", doc["failure"], "```", ""]
+    lines += ["## Checks (thesis beside measured)", "", format_checks(doc), ""]
+    for table in analysis.tables:
+        lines += [table, ""]
+    for figure in analysis.figures:
+        lines += [f"### {figure.caption}", "", f"Beside: {figure.thesis}", "", f"![{figure.caption}]({figure.file})", ""]
+    t = doc["ctrl_status_timing"]
+    lines += ["## Bus and timing (from the log)", "",
+              f"- frames {doc['log']['frames']}, cycles {doc['log']['cycles']}, E2E errors {doc['e2e_errors']}, "
+              f"frames missing from counter sequences {doc['log']['lost_frames']}",
+              f"- overruns (CTRL_STATUS) {doc['overruns']}; controller period error per 16-cycle window "
+              f"{t.get('period_error_us')}; compute time {t.get('compute_time_us')}"]
+    if doc.get("failure") is None and "children" in doc:
+        for name, child in doc["children"].items():
+            lines.append(f"- {name}: exit {child['exit_status']}: `{child['summary_line']}`")
+    return "\n".join(lines) + "\n"
+
+
+def format_terminal(doc: dict) -> str:
+    lines = [f"{doc['scenario']}: {'PASSED' if doc['passed'] else 'FAILED'}"]
+    for c in doc["checks"]:
+        mark = ("ok" if c["passed"] else "FAIL") if c["required"] else ("ok" if c["passed"] else "deviates")
+        lines.append(f"  [{mark}] {c['name']}: {c['measured']} (expected {c['expected']})")
+    lines.append(f"  e2e_errors={doc['e2e_errors']} overruns={doc['overruns']} frames={doc['log']['frames']} "
+                 f"lost={doc['log']['lost_frames']}")
+    if doc.get("failure"):
+        lines.append("  run failure: " + doc["failure"].replace("\n", "\n    "))
+    return "\n".join(lines)

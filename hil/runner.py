@@ -1,0 +1,255 @@
+"""`hydrapod hil run`: emulator and controller as separate processes on a fresh bus, this
+process as the host and recorder, then the analysis of the recorded log alone.
+
+Order of a run: open the bus and the recorder -> start the emulator -> start the controller
+-> wait for READY -> the scenario's script -> SIGTERM the controller (valves HOLD, then
+DISABLED; its last frames are recorded) -> SIGTERM the emulator -> close the log -> read
+the log back and analyse it -> metrics.json, plots, report.md.
+"""
+
+from __future__ import annotations
+
+import json
+import secrets
+import socket
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from firmware_py.control import CONTROLLER_NAMES
+from firmware_py.supervisor import Command, State
+from protocol.bus import BusSpec, default_bus_spec, open_bus, parse_bus_spec
+from protocol.errors import UserInputError
+
+from .host import Host, HostError
+from .logdata import read_log
+from .processes import Child, ChildFailed, describe_status
+from .report import write_outputs
+from .scenario import Scenario
+
+LOG_NAME = "run.blf"
+LOCKSTEP_EMULATOR_SYNC_TIMEOUT_PERIODS = 5000      # wall clock: > the controller's 50 ms lockstep wait
+START_TIMEOUT_S = 90.0                             # imports, kernels, MuJoCo, activation
+
+
+@dataclass
+class RunOptions:
+    out_dir: Path
+    bus: str | None = None           # None: a fresh multicast group and port; "default": the default bus
+    pacing: str | None = None        # None: the scenario's
+    rate_hz: float = 500.0
+    short: bool = False
+    controllers: tuple[str, ...] | None = None
+    duration_s: float | None = None  # realtime scenarios: how long
+    notes: list[str] = field(default_factory=list)
+
+
+def fresh_bus_spec() -> BusSpec:
+    """A multicast group and UDP port of its own, so runs can go in parallel."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("", 0))
+        port = sock.getsockname()[1]
+    return BusSpec("udp_multicast", f"239.255.{secrets.randbelow(254) + 1}.{secrets.randbelow(254) + 1}", port)
+
+
+def resolve_bus(text: str | None) -> BusSpec:
+    if text is None:
+        return fresh_bus_spec()
+    if text == "default":
+        return default_bus_spec()
+    return parse_bus_spec(text)
+
+
+def _toml(data: dict) -> str:
+    lines = []
+    for section, values in data.items():
+        lines.append(f"[{section}]")
+        for key, value in values.items():
+            lines.append(f"{key} = {json.dumps(value)}")
+    return "\n".join(lines) + "\n"
+
+
+class Run:
+    """What a scenario's script drives: the host, and the controller process (restartable)."""
+
+    def __init__(self, scenario: Scenario, options: RunOptions, spec: BusSpec, out: Path):
+        self.scenario, self.options, self.spec, self.out = scenario, options, spec, out
+        self.pacing = options.pacing or scenario.pacing
+        self.period_s = 1.0 / options.rate_hz
+        self.short = options.short
+        self.notes = options.notes
+        self.children: list[Child] = []
+        self.controller: Child | None = None
+        self.host: Host | None = None
+        self._controller_runs = 0
+
+    # -- children -------------------------------------------------------------------------
+    def _watch(self) -> None:
+        for child in self.children:
+            child.check_alive()
+
+    def start_emulator(self) -> None:
+        overrides = {section: dict(values) for section, values in self.scenario.emulator_overrides.items()}
+        if self.pacing == "lockstep":
+            overrides.setdefault("nodes", {})["sync_timeout_periods"] = LOCKSTEP_EMULATOR_SYNC_TIMEOUT_PERIODS
+        config = self.out / "emulator.toml"
+        config.write_text(_toml(overrides))
+        child = Child("emulator", ["-m", "plant_emulator", "--bus", str(self.spec), "--rig", self.scenario.rig,
+                                   "--rate-hz", str(self.options.rate_hz), "--load-kg", str(self.scenario.load_kg),
+                                   "--config", str(config), "--summary", str(self.out / "emulator.json")], self.out)
+        self.notes += child.start(realtime_priority=70 if self.pacing == "realtime" else None)
+        self.children.append(child)
+
+    def start_controller(self, controller: str, overrides: dict | None = None, tag: str = "") -> None:
+        merged = {section: dict(values) for section, values in self.scenario.controller_overrides.items()}
+        for section, values in (overrides or {}).items():
+            merged.setdefault(section, {}).update(values)
+        self._controller_runs += 1
+        name = f"controller{tag}"
+        config = self.out / f"{name}.toml"
+        config.write_text(_toml(merged))
+        child = Child(name, ["-m", "firmware_py", "--bus", str(self.spec), "--rig", self.scenario.rig,
+                             "--rate-hz", str(self.options.rate_hz), "--pacing", self.pacing,
+                             "--controller", controller, "--config", str(config),
+                             "--summary", str(self.out / f"{name}.json")], self.out)
+        child.start()
+        self.children.append(child)
+        self.controller = child
+        self.host.state = None
+        self.host.wait_state(State.READY, max_cycles=10**9, wall_timeout_s=START_TIMEOUT_S)
+
+    def stop_controller(self) -> None:
+        """SIGTERM: the controller holds, disables and exits 0; its last frames are recorded."""
+        child = self.controller
+        if child is None:
+            return
+        child.terminate()
+        give_up = time.monotonic() + 20.0
+        while child.returncode is None and time.monotonic() < give_up:
+            self.host.pump(0.02)
+        code = child.wait(1.0)
+        if code != 0:
+            raise ChildFailed(f"{child.name} exited with status {describe_status(code)} after SIGTERM; "
+                              f"stderr tail:\n{child.tail()}")
+        self.controller = None
+
+    def stop_all(self) -> None:
+        errors = []
+        try:
+            self.stop_controller()
+        except (ChildFailed, HostError) as error:
+            errors.append(str(error))
+        for child in self.children:
+            if child.returncode is None:
+                child.terminate()
+                try:
+                    code = child.wait(20.0)
+                    if code != 0:
+                        errors.append(f"{child.name} exited with status {describe_status(code)}; "
+                                      f"stderr tail:\n{child.tail()}")
+                except ChildFailed as error:
+                    errors.append(str(error))
+        # frames still in flight
+        give_up = time.monotonic() + 0.3
+        while time.monotonic() < give_up and self.host.pump(0.05) is not None:
+            pass
+        if errors:
+            raise ChildFailed("\n".join(errors))
+
+    def kill_all(self) -> None:
+        for child in self.children:
+            child.kill()
+
+    # -- helpers for scripts -----------------------------------------------------------------
+    def cycles(self, seconds: float) -> int:
+        return max(int(round(seconds / self.period_s)), 1)
+
+    def wait_s(self, seconds: float) -> None:
+        self.host.wait_cycles(self.cycles(seconds))
+
+    def select(self, controller: str) -> None:
+        self.host.command(Command.SELECT_CONTROLLER, CONTROLLER_NAMES[controller])
+        self.host.wait_until(lambda: self.host.controller == CONTROLLER_NAMES[controller], 200,
+                             what=f"controller {controller} in CTRL_STATUS")
+
+    def wait_motion_done(self, max_s: float) -> None:
+        """Until the controller is back in READY after a motion (CTRL_STATUS every 16 SYNC)."""
+        self.host.wait_until(lambda: self.host.state is State.RUNNING or self.host.state is State.HOMING,
+                             self.cycles(1.0), what=None)
+        self.host.wait_state(State.READY, max_cycles=self.cycles(max_s))
+
+
+def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
+    """Run, record, analyse; returns the metrics document (also written to the out dir)."""
+    if options.controllers:
+        unknown = [c for c in options.controllers if c not in scenario.controllers]
+        if unknown:
+            raise UserInputError(f"--controllers: {unknown[0]!r} is not run by {scenario.name} "
+                                 f"(it runs: {', '.join(scenario.controllers)})")
+    pacing = options.pacing or scenario.pacing
+    if pacing not in scenario.pacings:
+        raise UserInputError(f"--pacing {pacing}: {scenario.name} runs in {' or '.join(scenario.pacings)} pacing")
+    spec = resolve_bus(options.bus)
+    out = Path(options.out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise UserInputError(f"--out {out}: cannot create the directory ({error.strerror})") from None
+    for stale in ("metrics.json", "report.md", LOG_NAME):
+        (out / stale).unlink(missing_ok=True)
+    run = Run(scenario, options, spec, out)
+    bus = open_bus(spec)
+    run.host = Host(bus, str(out / LOG_NAME), watch=run._watch)
+    failure = None
+    started = time.monotonic()
+    try:
+        run.start_emulator()
+        run.start_controller(scenario.first_controller(options.controllers))
+        scenario.script(run)
+        run.stop_all()
+    except (ChildFailed, HostError) as error:
+        failure = str(error)
+        try:
+            run.stop_all()
+        except (ChildFailed, HostError) as late:
+            failure += "\n" + str(late)
+    except BaseException:
+        run.kill_all()
+        raise
+    finally:
+        run.kill_all()
+        run.host.close()
+        bus.shutdown()
+    wall_s = time.monotonic() - started
+    log = read_log(out / LOG_NAME)
+    doc = write_outputs(scenario, log, out, extra={
+        "bus": str(spec), "pacing": pacing, "rate_hz": options.rate_hz, "short": options.short,
+        "wall_time_s": round(wall_s, 1), "frames_sent_by_host": run.host.frames_sent,
+        "frames_received_by_host": run.host.frames_received, "notes": run.notes,
+        "children": _children_summaries(run), "failure": failure})
+    return doc
+
+
+def _children_summaries(run: Run) -> dict:
+    out = {}
+    for child in run.children:
+        path = run.out / f"{child.name}.json"
+        entry = {"exit_status": child.returncode, "summary_line": child.summary_line()}
+        if path.is_file():
+            try:
+                entry["summary"] = json.loads(path.read_text())
+            except ValueError:
+                pass
+        out[child.name] = entry
+    return out
+
+
+def analyze_log(scenario: Scenario, log_path: Path, out: Path) -> dict:
+    """`hydrapod hil analyze`: the same analysis on any recorded log (rig or emulator)."""
+    log = read_log(log_path)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise UserInputError(f"--out {out}: cannot create the directory ({error.strerror})") from None
+    return write_outputs(scenario, log, out, extra={"analysed_log": str(log_path)})
+

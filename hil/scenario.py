@@ -1,0 +1,63 @@
+"""What a scenario is: the rig, the controllers, the host's script, the analysis of a log,
+and the expected outcome (checks), each beside the thesis's figure."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .logdata import LogData
+
+
+@dataclass
+class Check:
+    name: str
+    passed: bool
+    measured: str
+    expected: str
+    required: bool = True       # False: a thesis comparison reported (and in the closing note), not asserted
+
+    def as_dict(self) -> dict:
+        return {"name": self.name, "passed": bool(self.passed), "measured": self.measured, "expected": self.expected,
+                "required": self.required}
+
+
+@dataclass
+class Figure:
+    file: str                  # PNG in the run directory
+    caption: str               # what it shows
+    thesis: str                # the thesis figure it stands beside, and what that figure shows
+
+
+@dataclass
+class Analysis:
+    metrics: dict
+    thesis: dict
+    checks: list[Check]
+    figures: list[Figure] = field(default_factory=list)
+    tables: list[str] = field(default_factory=list)     # markdown, for report.md and the terminal
+
+
+class Scenario:
+    name = ""
+    title = ""
+    chapter = ""
+    rig = "testbench"
+    pacing = "lockstep"                       # default pacing
+    pacings: tuple[str, ...] = ("lockstep", "realtime")
+    controllers: tuple[str, ...] = ("pi", "adaptive")
+    load_kg = 0.0                             # the emulator's load at start
+    controller_overrides: dict = {}           # controller TOML sections for this experiment
+    emulator_overrides: dict = {}
+
+    def first_controller(self, chosen: tuple[str, ...] | None) -> str:
+        return (chosen or self.controllers)[0]
+
+    def chosen(self, run) -> tuple[str, ...]:
+        return run.options.controllers or self.controllers
+
+    def script(self, run) -> None:            # drives the host during the run
+        raise NotImplementedError
+
+    def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
+        raise NotImplementedError

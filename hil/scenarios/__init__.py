@@ -1,0 +1,8 @@
+"""The scenarios `hydrapod hil` runs, by name."""
+
+from __future__ import annotations
+
+from ..scenario import Scenario
+from .sha_step import ShaStep
+
+SCENARIOS: dict[str, Scenario] = {s.name: s for s in (ShaStep(),)}

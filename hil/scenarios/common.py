@@ -1,0 +1,56 @@
+"""Pieces the scenarios share: what was running when (from the log), and host moves."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from firmware_py.control import CONTROLLER_NAMES
+
+from ..host import EMU_SET_LOAD, FLAG_LAST, FLAG_START, FLAG_STEP
+from ..logdata import LogData
+from ..metrics import last_value_before
+
+NAME_OF_CONTROLLER = {v: k for k, v in CONTROLLER_NAMES.items()}
+MM = 1e-3
+
+
+def controller_at(log: LogData, cycle: int) -> str | None:
+    """The controller CTRL_STATUS reported last at or before `cycle`."""
+    status = log.get("CTRL_STATUS")
+    value = last_value_before(status.cycle, status["CONTROLLER"], cycle)
+    return None if np.isnan(value) else NAME_OF_CONTROLLER.get(int(value))
+
+
+def load_at(log: LogData, cycle: int) -> float | None:
+    """The emulator load set last (EMU_CTRL SET_LOAD) before `cycle`; None on a log without one."""
+    load = None
+    for event in log.events_named("EMU_CTRL"):
+        if event.cycle > cycle:
+            break
+        if int(event.values["COMMAND"]) == EMU_SET_LOAD:
+            load = round(event.values["LOAD_MASS"], 3)
+    return load
+
+
+def leg_positions(log: LogData, n_legs: int) -> np.ndarray:
+    """(n_cycles, n_legs) encoder strokes, m (NaN where a frame is missing)."""
+    return np.column_stack([log.get(f"LEG_STATE_{leg + 1}").per_cycle(log.n_cycles, "POSITION")
+                            for leg in range(n_legs)])
+
+
+def move_stroke(run, stroke_m: float, speed_m_s: float = 0.1, accel_s: float = 0.1, settle_s: float = 0.5,
+                from_m: float | None = None) -> None:
+    """Test bench: an SLS move to `stroke_m`, then rest for `settle_s`."""
+    distance = abs(stroke_m - from_m) if from_m is not None else 0.3
+    duration = max(distance / speed_m_s + accel_s, 2.0 * accel_s + 0.1)
+    duration = round(duration, 3)
+    run.host.waypoint((0.0, 0.0, stroke_m), segment_time_s=duration, accel_time_s=accel_s,
+                      flags=FLAG_LAST | FLAG_START)
+    run.wait_s(duration + settle_s)
+
+
+def step_stroke(run, stroke_m: float, hold_s: float) -> None:
+    """Test bench: a step reference to `stroke_m`, held `hold_s`."""
+    run.host.waypoint((0.0, 0.0, stroke_m), segment_time_s=hold_s, accel_time_s=hold_s / 2,
+                      flags=FLAG_LAST | FLAG_START | FLAG_STEP)
+    run.wait_s(hold_s + 0.05)

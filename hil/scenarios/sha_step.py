@@ -1,0 +1,142 @@
+"""sha-step: thesis 7.6.1, 10 mm steps at 50/150/250 mm with 0/3/6 kg, PI and adaptive."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..logdata import LogData
+from ..metrics import step_response
+from ..plotting import colour_for_load, plt, save
+from ..reference import rebuild
+from ..scenario import Analysis, Check, Figure, Scenario
+from .common import MM, controller_at, leg_positions, load_at, move_stroke, step_stroke
+
+THESIS = {"step_mm": 10, "pi_overshoot_pct": 25, "pi_settling_s": 0.5, "adaptive_overshoot_pct_max": 14,
+          "adaptive_settling_s": 1.0, "figure": "Fig. 7.16"}
+# Asserted: the thesis's PI figures with the spread of its Fig. 7.16, and settling. Reported
+# beside them, not asserted: the adaptive controller's < 14 % (the emulator, calibrated to
+# Table A.3's small-signal models, sticks after steps at 50 mm with 6 kg: stick-slip the
+# linear models do not have, and which Table 7.2's gains do not cure).
+PI_OVERSHOOT_BAND_PCT = (12.0, 35.0)
+PI_SETTLING_MAX_S = 0.8
+ADAPTIVE_OVERSHOOT_MAX_PCT = 14.0
+ADAPTIVE_SETTLING_MAX_S = 1.5
+PRE_STEP_S = 0.1
+
+
+class ShaStep(Scenario):
+    name = "sha-step"
+    title = "step response of the servo-hydraulic actuator, PI and adaptive"
+    chapter = "7.6.1 (Fig. 7.16)"
+    controllers = ("pi", "adaptive")
+
+    def plan(self, short: bool):
+        positions = (50.0, 250.0) if short else (50.0, 150.0, 250.0)
+        loads = (0.0, 6.0) if short else (0.0, 3.0, 6.0)
+        return positions, loads, (1.2 if short else 2.0)
+
+    def script(self, run) -> None:
+        positions, loads, hold_s = self.plan(run.short)
+        here = 0.150
+        for controller in self.chosen(run):
+            run.select(controller)
+            for load in loads:
+                run.host.set_load(load)
+                for position in positions:
+                    move_stroke(run, position * MM, settle_s=1.0, from_m=here)
+                    step_stroke(run, (position + THESIS["step_mm"]) * MM, hold_s)
+                    here = (position + THESIS["step_mm"]) * MM
+
+    def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
+        period = 1.0 / rate_hz
+        ref = rebuild(log, "testbench", period)
+        y = leg_positions(log, 1)[:, 0]
+        rows = []
+        for motion in ref.motions:
+            if not motion.step:
+                continue
+            k0 = motion.start
+            before = ref.yr[k0 - 1, 0] if k0 > 0 else np.nan
+            target = motion.trajectory.segments[0, 0, 0]
+            window = slice(k0, motion.end_cycle + 1)
+            pre = y[max(k0 - int(PRE_STEP_S / period), 0):k0]
+            y0 = float(np.nanmean(pre))
+            step = target - before
+            t = (np.arange(window.start, window.stop) - k0) * period
+            m = step_response(t, y[window], y0, step)
+            rows.append({"controller": controller_at(log, k0), "load_kg": load_at(log, k0),
+                         "position_mm": round(before * 1e3, 1), "step_mm": round(step * 1e3, 2),
+                         "bias_mm": round((y0 - before) * 1e3, 3), **{k: round(v, 4) for k, v in m.items()},
+                         "_t": t, "_y": (y[window] - y0) * 1e3})
+        checks = []
+        summary = {}
+        for controller in ("pi", "adaptive"):
+            mine = [r for r in rows if r["controller"] == controller]
+            if not mine:
+                continue
+            os_ = np.array([r["overshoot_pct"] for r in mine])
+            ts = np.array([r["settling_s"] for r in mine])
+            ts = np.where(np.isnan(ts), np.inf, ts)          # never settled inside the window
+            summary[controller] = {"steps": len(mine), "overshoot_pct_mean": float(os_.mean()),
+                                   "overshoot_pct_min": float(os_.min()), "overshoot_pct_max": float(os_.max()),
+                                   "settling_s_median": float(np.median(ts)), "settling_s_max": float(np.max(ts))}
+        if "pi" in summary:
+            s = summary["pi"]
+            lo, hi = PI_OVERSHOOT_BAND_PCT
+            checks.append(Check("PI overshoot (mean over the steps)", lo <= s["overshoot_pct_mean"] <= hi,
+                                f"{s['overshoot_pct_mean']:.1f} % (range {s['overshoot_pct_min']:.1f}-"
+                                f"{s['overshoot_pct_max']:.1f})",
+                                f"thesis ~{THESIS['pi_overshoot_pct']} %; band {lo:g}-{hi:g} %"))
+            checks.append(Check("PI settling (5 %), median step", s["settling_s_median"] <= PI_SETTLING_MAX_S,
+                                f"{s['settling_s_median']:.2f} s (max {s['settling_s_max']:.2f})",
+                                f"thesis ~{THESIS['pi_settling_s']} s; <= {PI_SETTLING_MAX_S} s"))
+            checks.append(Check("PI settling (5 %), every step", s["settling_s_max"] <= PI_SETTLING_MAX_S,
+                                f"max {s['settling_s_max']:.2f} s", f"<= {PI_SETTLING_MAX_S} s", required=False))
+            checks.append(Check("PI overshoot similar at every set point", s["overshoot_pct_max"] <= hi,
+                                f"max {s['overshoot_pct_max']:.1f} %", f"thesis: ~25 % at every set point, <= {hi:g} %",
+                                required=False))
+        if "adaptive" in summary:
+            s = summary["adaptive"]
+            checks.append(Check("adaptive settling (5 %), median step", s["settling_s_median"] <= ADAPTIVE_SETTLING_MAX_S,
+                                f"{s['settling_s_median']:.2f} s (max {s['settling_s_max']:.2f})",
+                                f"thesis ~{THESIS['adaptive_settling_s']} s; <= {ADAPTIVE_SETTLING_MAX_S} s"))
+            checks.append(Check("adaptive overshoot, every step", s["overshoot_pct_max"] < ADAPTIVE_OVERSHOOT_MAX_PCT,
+                                f"max {s['overshoot_pct_max']:.1f} % (mean {s['overshoot_pct_mean']:.1f})",
+                                f"thesis < {THESIS['adaptive_overshoot_pct_max']} %", required=False))
+        if "pi" in summary and "adaptive" in summary:
+            checks.append(Check("adaptive overshoots less than PI (mean)",
+                                summary["adaptive"]["overshoot_pct_mean"] < summary["pi"]["overshoot_pct_mean"],
+                                f"{summary['adaptive']['overshoot_pct_mean']:.1f} vs {summary['pi']['overshoot_pct_mean']:.1f} %",
+                                "thesis: adaptive < PI", required=False))
+        if not rows:
+            checks.append(Check("steps found in the log", False, "0", ">= 1"))
+        figures = []
+        if out is not None and rows:
+            figures.append(self._plot(rows, out))
+        table = ["| controller | load kg | y0 mm | overshoot % | settling s | rise s |", "|---|---|---|---|---|---|"]
+        table += [f"| {r['controller']} | {r['load_kg']} | {r['position_mm']} | {r['overshoot_pct']:.1f} | "
+                  f"{r['settling_s']:.3f} | {r['rise_s']:.3f} |" for r in rows]
+        metrics = {"steps": [{k: v for k, v in r.items() if not k.startswith("_")} for r in rows],
+                   "summary": summary}
+        return Analysis(metrics, THESIS, checks, figures, ["\n".join(table)])
+
+    def _plot(self, rows, out: Path) -> Figure:
+        controllers = [c for c in ("pi", "adaptive") if any(r["controller"] == c for r in rows)]
+        fig, axes = plt.subplots(1, len(controllers), figsize=(5.5 * len(controllers), 4), squeeze=False)
+        for ax, controller in zip(axes[0], controllers):
+            for r in rows:
+                if r["controller"] == controller:
+                    ax.plot(r["_t"], r["_y"], color=colour_for_load(r["load_kg"] or 0.0), lw=1,
+                            label=f"{r['load_kg']} kg @ {r['position_mm']:.0f} mm")
+            ax.axhline(THESIS["step_mm"], color="k", lw=0.5, ls="--")
+            ax.set_title(f"{controller}: 10 mm steps")
+            ax.set_xlabel("t [s]")
+            ax.set_ylabel("y - y0 [mm]")
+            ax.legend(fontsize=6)
+            ax.grid(alpha=0.3)
+        path = out / "sha_step.png"
+        save(fig, path)
+        return Figure(path.name, "Step responses (bias removed, synchronised with the step)",
+                      "thesis Fig. 7.16: (a) PI, ~25 % overshoot, settles ~0.5 s; (b) adaptive, < 14 %, ~1 s")
