@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ..scenario import Scenario
+from .pm import PmCircle, PmDiagonal
 from .sha_step import ShaStep
 
-SCENARIOS: dict[str, Scenario] = {s.name: s for s in (ShaStep(),)}
+SCENARIOS: dict[str, Scenario] = {s.name: s for s in (ShaStep(), PmDiagonal(), PmCircle())}

@@ -1,0 +1,97 @@
+"""HIL runner end to end: `hydrapod hil run sha-step --short` starts the emulator and the
+controller as processes on a fresh multicast bus, records a BLF log, and the metrics come
+from that log; stock tools (cantools, python-can's reader) decode the same log."""
+
+import json
+import subprocess
+import sys
+
+import can
+import cantools
+import pytest
+
+from hil.logdata import read_log
+from protocol.dbc import dbc_path
+
+HYDRAPOD = [sys.executable, "-m", "hil.cli"]
+
+
+@pytest.fixture(scope="module")
+def sha_step_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sha-step")
+    proc = subprocess.run(HYDRAPOD + ["hil", "run", "sha-step", "--short", "--out", str(out), "--json"],
+                          capture_output=True, text=True, timeout=600)
+    return out, proc
+
+
+def test_sha_step_short_passes_with_zero_e2e_errors(sha_step_run):
+    out, proc = sha_step_run
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    doc = json.loads((out / "metrics.json").read_text())
+    assert {"scenario", "passed", "metrics", "thesis", "e2e_errors", "overruns"} <= set(doc)
+    assert doc["passed"] and doc["scenario"] == "sha-step"
+    assert doc["e2e_errors"] == 0 and doc["log"]["lost_frames"] == 0
+    assert doc["failure"] is None
+    steps = doc["metrics"]["steps"]
+    assert {s["controller"] for s in steps} == {"pi", "adaptive"} and len(steps) == 8
+    assert all(abs(s["step_mm"] - 10.0) < 0.01 for s in steps)
+    for name in ("emulator", "controller"):
+        assert doc["children"][name]["exit_status"] == 0
+    assert (out / "report.md").read_text().count("thesis") >= 3
+    assert (out / "sha_step.png").stat().st_size > 10_000
+
+
+def test_analyze_reproduces_the_run_metrics_from_the_log_alone(sha_step_run, tmp_path):
+    out, _ = sha_step_run
+    proc = subprocess.run(HYDRAPOD + ["hil", "analyze", str(out / "run.blf"), "--scenario", "sha-step",
+                                      "--out", str(tmp_path), "--json"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    again = json.loads((tmp_path / "metrics.json").read_text())
+    first = json.loads((out / "metrics.json").read_text())
+    assert again["metrics"] == first["metrics"]
+
+
+def test_the_log_decodes_with_stock_cantools_and_python_can(sha_step_run):
+    out, _ = sha_step_run
+    db = cantools.database.load_file(str(dbc_path()))
+    counts, positions = {}, []
+    with can.LogReader(str(out / "run.blf")) as reader:          # python-can's reader (can.player's)
+        for msg in reader:
+            counts[msg.arbitration_id] = counts.get(msg.arbitration_id, 0) + 1
+            if msg.arbitration_id == db.get_message_by_name("LEG_STATE_1").frame_id:
+                positions.append(db.decode_message(msg.arbitration_id, msg.data)["POSITION"])
+    log = read_log(out / "run.blf")
+    assert sum(counts.values()) == log.frames
+    assert len(positions) == len(log.get("LEG_STATE_1"))
+    # cantools (mm) and the project's codec (m) agree frame by frame
+    assert max(abs(p / 1000.0 - q) for p, q in zip(positions, log.get("LEG_STATE_1")["POSITION"])) < 1e-9
+    assert counts[0x080] == log.n_cycles
+
+
+def test_every_cycle_has_its_leg_frame_despite_on_host_reordering(sha_step_run):
+    out, _ = sha_step_run
+    log = read_log(out / "run.blf")
+    cycles = log.get("LEG_STATE_1").cycle
+    assert len(set(cycles.tolist())) == len(cycles)        # never two in one cycle
+
+
+@pytest.mark.parametrize("argv, culprit", [
+    (["hil", "run", "no-such"], "no-such"),
+    (["hil", "run", "sha-step", "--bus", "udp_multicast:10.0.0.1"], "10.0.0.1"),
+    (["hil", "run", "sha-step", "--controllers", "pi,fuzzy"], "fuzzy"),
+    (["hil", "run", "sha-step", "--controllers", "model-based"], "model-based"),
+    (["hil", "analyze", "/nonexistent/run.blf", "--scenario", "sha-step"], "run.blf"),
+    (["hil", "analyze", "x.txt", "--scenario", "sha-step"], "x.txt"),
+])
+def test_cli_errors_are_one_line_and_exit_2(argv, culprit, tmp_path):
+    proc = subprocess.run(HYDRAPOD + argv + (["--out", str(tmp_path)] if argv[1] == "run" else []),
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and culprit in lines[0] and "Traceback" not in proc.stderr
+
+
+def test_list_names_the_scenarios():
+    proc = subprocess.run(HYDRAPOD + ["hil", "list", "--json"], capture_output=True, text=True, timeout=60)
+    names = {row["name"] for row in json.loads(proc.stdout)}
+    assert {"sha-step", "pm-diagonal", "pm-circle"} <= names
