@@ -3,6 +3,7 @@ and the expected outcome (checks), each beside the thesis's figure."""
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,7 +39,7 @@ class Analysis:
     tables: list[str] = field(default_factory=list)     # markdown, for report.md and the terminal
 
 
-class Scenario:
+class Scenario(ABC):
     name = ""
     title = ""
     chapter = ""
@@ -56,8 +57,10 @@ class Scenario:
     def chosen(self, run) -> tuple[str, ...]:
         return run.options.controllers or self.controllers
 
-    def script(self, run) -> None:            # drives the host during the run
-        raise NotImplementedError
+    @abstractmethod
+    def script(self, run) -> None:
+        """Drive the host during the run."""
 
+    @abstractmethod
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
-        raise NotImplementedError
+        """Metrics and checks from the decoded log alone."""

@@ -3,6 +3,7 @@ and model-based control; IAE per axis of the end-effector position."""
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from pathlib import Path
 
 import numpy as np
@@ -36,8 +37,9 @@ class PlatformMovement(Scenario):
     motion_name = ""
     thesis: dict = {}
 
+    @abstractmethod
     def motion(self) -> Motion:
-        raise NotImplementedError
+        """The thesis's movement (chapter 11.3)."""
 
     def script(self, run) -> None:
         geometry = default_geometry()
