@@ -17,6 +17,8 @@ import math
 
 import numpy as np
 
+from protocol.values import FLAG_LAST, FLAG_START, FLAG_STEP
+
 from .config import ControllerConfig
 from .control import (IN_ACTIVE, IN_AR, IN_FORCE, IN_FRESH, IN_G_AX, IN_TAU, IN_VR, IN_Y, IN_YR, ST_ERROR,
                       ST_INTEGRAL, ST_MASS, ST_U)
@@ -28,7 +30,6 @@ from .trajectory import JointTrajectory, hold_at, sls_coefficients, through_poin
 RIGS = ("testbench", "hexapod")
 VALVE_FAULT_STATES = (4, 5)            # CiA 408 FAULT_HOLD, FAULT_DISABLED
 RESET_GRACE_CYCLES = 4                 # valves need a SYNC or two to leave FAULT after R
-FLAG_LAST, FLAG_START, FLAG_STEP = 1, 2, 4
 
 
 class ControllerCore:

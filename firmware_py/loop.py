@@ -28,13 +28,13 @@ from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.outbox import Outbox
+from protocol.values import KIND_HOST_CMD, KIND_WAYPOINT
 
 from .core import RESET_GRACE_CYCLES, ControllerCore
 from .supervisor import Fault, State
 
 NMT_START, NMT_OPERATIONAL = 1, 5
 CONTROLLER_NODE, IMU_NODE = 16, 7
-KIND_HOST_CMD, KIND_WAYPOINT = 1, 2
 PACINGS = ("realtime", "lockstep")
 HISTORY = 1 << 16                       # cycles kept for the timing percentiles
 

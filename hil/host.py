@@ -16,10 +16,7 @@ from firmware_py.supervisor import Ack, Command, State
 from protocol.codec import CODECS, EncodeStatus, FrameDecoder
 from protocol.e2e import RxStatus
 from protocol.outbox import Outbox
-
-KIND_HOST_CMD, KIND_WAYPOINT = 1, 2
-FLAG_LAST, FLAG_START, FLAG_STEP = 1, 2, 4
-EMU_SET_LOAD, EMU_INJECT, EMU_CLEAR, EMU_CLEAR_ALL = 1, 2, 3, 4
+from protocol.values import EMU_SET_LOAD, KIND_HOST_CMD, KIND_WAYPOINT
 
 
 class HostError(RuntimeError):

@@ -9,7 +9,7 @@ first; gaps in the SYNC counter count); a frame belongs to the cycle whose SYNC 
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import can
@@ -66,7 +66,6 @@ class LogData:
     rx_counts: dict[str, dict[str, int]]       # message -> status -> frames
     lost: dict[str, int]                       # message -> frames missing from the counter sequence
     unknown_frames: int
-    extra: dict = field(default_factory=dict)
 
     @property
     def e2e_errors(self) -> int:
@@ -80,6 +79,11 @@ class LogData:
 
     def get(self, name: str) -> Series:
         return self.series.get(name) or _empty(name)
+
+    def leg_positions(self, n_legs: int) -> np.ndarray:
+        """(n_cycles, n_legs) encoder strokes, m (NaN where a frame is missing)."""
+        return np.column_stack([self.get(f"LEG_STATE_{leg + 1}").per_cycle(self.n_cycles, "POSITION")
+                                for leg in range(n_legs)])
 
     def events_named(self, *names: str) -> list[Event]:
         return [e for e in self.events if e.name in names]

@@ -54,15 +54,6 @@ def ctrl_status_timing(log: LogData) -> dict:
             "compute_time_us": _us(percentiles(status["COMPUTE_TIME_MAX"]))}
 
 
-def sync_jitter(log: LogData, period_s: float) -> dict:
-    """SYNC-to-SYNC intervals as the recorder timestamped them (includes its own latency)."""
-    t = log.sync_time_s
-    dt = np.diff(t)
-    error = np.abs(dt - period_s)
-    return {"intervals": int(np.count_nonzero(np.isfinite(error))),
-            "period_error_us": _us(percentiles(error))}
-
-
 def _us(stats: dict) -> dict:
     return {k: (round(v * 1e6, 1) if isinstance(v, float) else v) for k, v in stats.items()}
 

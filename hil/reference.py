@@ -24,8 +24,8 @@ import numpy as np
 
 from firmware_py.supervisor import Ack, Command, State
 from firmware_py.trajectory import JointTrajectory, hold_at, through_points
+from protocol.values import FLAG_LAST, FLAG_START, FLAG_STEP, KIND_HOST_CMD, KIND_WAYPOINT
 
-from .host import FLAG_LAST, FLAG_START, FLAG_STEP, KIND_HOST_CMD, KIND_WAYPOINT
 from .logdata import LogData
 
 
@@ -38,9 +38,6 @@ class Motion:
     trajectory: JointTrajectory
     step: bool
     poses: list[tuple]         # the waypoints' poses (x, y, z, roll, pitch, yaw), SI
-
-    def first_cycle(self) -> int:
-        return self.start          # the first update that evaluates it is that of log cycle `start`
 
     def time_at(self, cycle: int, period_s: float) -> float:
         return (cycle + 1 - self.start) * period_s
@@ -95,7 +92,7 @@ def rebuild(log: LogData, rig: str, period_s: float, initial_position=None) -> R
     motions: list[Motion] = []
     running: Motion | None = None
     last_point = None if initial_position is None else np.asarray(initial_position, float)
-    positions = _measured(log, n)
+    positions = log.leg_positions(n)
 
     def start(cycle_start: int, log_cycle: int):
         nonlocal queue, running, last_point
@@ -103,7 +100,7 @@ def rebuild(log: LogData, rig: str, period_s: float, initial_position=None) -> R
             return
         take = next((k + 1 for k, w in enumerate(queue) if w["flags"] & FLAG_LAST), len(queue))
         chosen, queue = queue[:take], queue[take:]
-        origin = last_point if last_point is not None else positions[max(log_cycle, 0)]
+        origin = last_point if last_point is not None else positions[min(max(log_cycle, 0), len(positions) - 1)]
         if chosen[0]["flags"] & FLAG_STEP:
             trajectory = hold_at(chosen[0]["strokes"], chosen[0]["segment_time"])
         else:
@@ -161,13 +158,6 @@ def rebuild(log: LogData, rig: str, period_s: float, initial_position=None) -> R
     advance(log.n_cycles + 10**9)
     yr = _evaluate(motions, log.n_cycles, n, period_s, unknown_from, _fault_cycles(log))
     return Reference(yr, motions)
-
-
-def _measured(log: LogData, n: int) -> np.ndarray:
-    out = np.full((max(log.n_cycles, 1), n), np.nan)
-    for leg in range(n):
-        out[:, leg] = log.get(f"LEG_STATE_{leg + 1}").per_cycle(log.n_cycles, "POSITION")[:len(out)]
-    return out
 
 
 def _fault_cycles(log: LogData) -> int | None:

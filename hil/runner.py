@@ -81,7 +81,6 @@ class Run:
         self.children: list[Child] = []
         self.controller: Child | None = None
         self.host: Host | None = None
-        self._controller_runs = 0
 
     # -- children -------------------------------------------------------------------------
     def _watch(self) -> None:
@@ -100,12 +99,11 @@ class Run:
         self.notes += child.start(realtime_priority=70 if self.pacing == "realtime" else None)
         self.children.append(child)
 
-    def start_controller(self, controller: str, overrides: dict | None = None, tag: str = "") -> None:
+    def start_controller(self, controller: str, overrides: dict | None = None) -> None:
         merged = {section: dict(values) for section, values in self.scenario.controller_overrides.items()}
         for section, values in (overrides or {}).items():
             merged.setdefault(section, {}).update(values)
-        self._controller_runs += 1
-        name = f"controller{tag}"
+        name = "controller"
         config = self.out / f"{name}.toml"
         config.write_text(_toml(merged))
         child = Child(name, ["-m", "firmware_py", "--bus", str(self.spec), "--rig", self.scenario.rig,

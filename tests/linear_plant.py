@@ -9,6 +9,8 @@ the encoder quantises to 0.125 mm; the load cell reads m (y'' + g).
 import numpy as np
 from scipy import signal
 
+from hil.metrics import step_response
+
 TABLE_A3 = {  # Po mm: (b0, b1, k01) for 0, 3, 6 kg
     60: ((12036, 116, 249), (9929, 102, 245), (8453, 94, 236)),
     150: ((11425, 106, 236), (9591, 97, 229), (7696, 90, 227)),
@@ -40,9 +42,6 @@ class LinearPlant:
 
 
 def step_metrics(t, y, y0, step):
-    """Overshoot (%) and 5 % settling time (s) of a step from y0 by `step`."""
-    response = (np.asarray(y) - y0) / step
-    overshoot = max(0.0, (response.max() - 1.0) * 100.0)
-    outside = np.nonzero(np.abs(response - 1.0) > 0.05)[0]
-    settling = t[outside[-1] + 1] if len(outside) else 0.0
-    return overshoot, settling
+    """Overshoot (%) and 5 % settling time (s) of a step from y0 by `step` (the HIL metric)."""
+    m = step_response(t, y, y0, step)
+    return m["overshoot_pct"], m["settling_s"]

@@ -5,9 +5,9 @@ multi-point trajectory queued the same way (the rules of firmware_py/core.py).""
 import numpy as np
 
 from firmware_py.supervisor import Ack
-from hil.host import FLAG_LAST, FLAG_START, FLAG_STEP, KIND_WAYPOINT
 from hil.logdata import Event, LogData, Series
 from hil.reference import rebuild
+from protocol.values import FLAG_LAST, FLAG_START, FLAG_STEP, KIND_WAYPOINT
 from tests.test_controller_alloc import make_loop
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from firmware_py.control import CONTROLLER_NAMES
+from protocol.values import EMU_SET_LOAD, FLAG_LAST, FLAG_START, FLAG_STEP
 
-from ..host import EMU_SET_LOAD, FLAG_LAST, FLAG_START, FLAG_STEP
 from ..logdata import LogData
 from ..metrics import last_value_before
 
@@ -30,12 +30,6 @@ def load_at(log: LogData, cycle: int) -> float | None:
         if int(event.values["COMMAND"]) == EMU_SET_LOAD:
             load = round(event.values["LOAD_MASS"], 3)
     return load
-
-
-def leg_positions(log: LogData, n_legs: int) -> np.ndarray:
-    """(n_cycles, n_legs) encoder strokes, m (NaN where a frame is missing)."""
-    return np.column_stack([log.get(f"LEG_STATE_{leg + 1}").per_cycle(log.n_cycles, "POSITION")
-                            for leg in range(n_legs)])
 
 
 def move_stroke(run, stroke_m: float, speed_m_s: float = 0.1, accel_s: float = 0.1, settle_s: float = 0.5,

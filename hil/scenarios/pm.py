@@ -11,14 +11,14 @@ import numpy as np
 from firmware_py.geometry import default_geometry
 from firmware_py.kinematics import DirectKinematics
 from firmware_py.trajectory import Motion, circle_motion, diagonal_motion
+from protocol.values import FLAG_LAST, FLAG_START
 
-from ..host import FLAG_LAST, FLAG_START
 from ..logdata import LogData
 from ..metrics import iae
 from ..plotting import plt, save
 from ..reference import rebuild
 from ..scenario import Analysis, Check, Figure, Scenario
-from .common import controller_at, leg_positions
+from .common import controller_at
 
 AXES = ("x", "y", "z")
 SETTLE_AFTER_S = 0.5            # the IAE window ends this long after the movement's last point
@@ -67,7 +67,7 @@ class PlatformMovement(Scenario):
         geometry = default_geometry()
         ta = self.motion().ta_s
         ref = rebuild(log, "hexapod", period)
-        strokes = leg_positions(log, 6)
+        strokes = log.leg_positions(6)
         truth = np.column_stack([log.get("EMU_TRUTH").per_cycle(log.n_cycles, a) for a in ("X", "Y", "Z")])
         runs = {}
         for motion in ref.motions:

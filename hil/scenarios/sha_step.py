@@ -11,7 +11,7 @@ from ..metrics import step_response
 from ..plotting import colour_for_load, plt, save
 from ..reference import rebuild
 from ..scenario import Analysis, Check, Figure, Scenario
-from .common import MM, controller_at, leg_positions, load_at, move_stroke, step_stroke
+from .common import MM, controller_at, load_at, move_stroke, step_stroke
 
 THESIS = {"step_mm": 10, "pi_overshoot_pct": 25, "pi_settling_s": 0.5, "adaptive_overshoot_pct_max": 14,
           "adaptive_settling_s": 1.0, "figure": "Fig. 7.16"}
@@ -52,7 +52,7 @@ class ShaStep(Scenario):
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
         period = 1.0 / rate_hz
         ref = rebuild(log, "testbench", period)
-        y = leg_positions(log, 1)[:, 0]
+        y = log.leg_positions(1)[:, 0]
         rows = []
         for motion in ref.motions:
             if not motion.step:
