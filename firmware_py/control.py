@@ -158,7 +158,7 @@ class JointController:
     """
 
     def __init__(self, cfg: ControllerConfig, n_legs: int, period_s: float, *, moving_mass_kg: float,
-                 mass_offset_kg: float, initial_position_m: float = 0.0):
+                 mass_offset_kg: float, initial_position_m: float = 0.0, ki_factor: float = 1.0):
         self.cfg, self.n_legs, self.period_s = cfg, n_legs, period_s
         self.mode = PI
         jp = np.zeros(JP_SIZE)
@@ -173,10 +173,10 @@ class JointController:
         jp[JP_RLS_ZETA] = cfg.rls_filter_zeta
         jp[JP_D_WN] = 2 * math.pi * cfg.differentiator_hz
         jp[JP_D_ZETA] = cfg.differentiator_zeta
-        jp[JP_KI_SCALE] = cfg.ki_scale
+        jp[JP_KI_SCALE] = cfg.ki_scale * ki_factor
         jp[JP_MASS_OFFSET] = mass_offset_kg
         jp[JP_PI_KP] = cfg.pi_kp
-        jp[JP_PI_KI] = cfg.pi_ki
+        jp[JP_PI_KI] = cfg.pi_ki * ki_factor
         jp[JP_KPL] = cfg.kpl_v_pa
         jp[JP_U_MAX] = cfg.saturation_v * cfg.spool_max
         jp[JP_MOVING_MASS] = moving_mass_kg

@@ -4,6 +4,7 @@ and model-based control; IAE per axis of the end-effector position."""
 from __future__ import annotations
 
 from abc import abstractmethod
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -36,10 +37,22 @@ class PlatformMovement(Scenario):
                             "limits": {"velocity_max_mm_s": 1500.0}}
     motion_name = ""
     thesis: dict = {}
+    # The thesis's timing (a simulation) is beyond the emulated rig: its actuators (the test
+    # bench's, as identified) on this slender 6-UPS leave the horizontal directions with a
+    # joint-space inertia of 190-260 kg per leg and a ~1 Hz mode that the joint-space PI
+    # loops barely damp; at the thesis's ta/tm both controllers reach the tracking-error
+    # limit. The movement runs `time_scale` times slower (ta and tm scaled); README
+    # "Hexapod gains" has the measurements.
+    time_scale = 1.0
 
     @abstractmethod
+    def thesis_motion(self) -> Motion:
+        """The thesis's movement (chapter 11.3) at the thesis's timing."""
+
     def motion(self) -> Motion:
-        """The thesis's movement (chapter 11.3)."""
+        """The movement as run: the thesis's, `time_scale` times slower."""
+        m = self.thesis_motion()
+        return replace(m, ta_s=m.ta_s * self.time_scale, tm_s=m.tm_s * self.time_scale)
 
     def script(self, run) -> None:
         geometry = default_geometry()
@@ -94,6 +107,10 @@ class PlatformMovement(Scenario):
             }
             series[controller] = ((cycles - first) * period, x_ref, x_true, x_dk)
         checks = []
+        status = log.get("CTRL_STATUS")
+        faults = sorted({int(c) for c in status["FAULT_CODE"][status["FAULT_CODE"] != 0]})
+        checks.append(Check("no controller fault during the run", not faults,
+                            f"fault codes {faults}" if faults else "none", "none"))
         if not runs:
             checks.append(Check(f"{self.motion_name} movement found in the log", False, "0 runs", ">= 1"))
         if "adaptive" in results and "model-based" in results:
@@ -123,7 +140,8 @@ class PlatformMovement(Scenario):
             for a in AXES:
                 table.append(f"| {controller} | {a} | {r['iae_truth_m_s'][a]:.5f} | {r['iae_dk_m_s'][a]:.5f} | "
                              f"{thesis.get(a, float('nan')):.5f} | {r['max_error_truth_mm'][a]:.2f} |")
-        return Analysis({"movement": self.motion_name, "controllers": results}, self.thesis, checks, figures,
+        return Analysis({"movement": self.motion_name, "time_scale": self.time_scale, "controllers": results},
+                        self.thesis, checks, figures,
                         ["\n".join(table)])
 
     def _plots(self, series, out: Path) -> list[Figure]:
@@ -188,7 +206,9 @@ class PmDiagonal(PlatformMovement):
     thesis = {"iae_pi_plus_p": {"x": 0.071408, "y": 0.074467, "z": 0.1019},
               "iae_model_based": {"x": 0.063427, "y": 0.064862, "z": 0.079075}, "ta_s": 0.05, "tm_s": 0.4}
 
-    def motion(self) -> Motion:
+    time_scale = 2.0
+
+    def thesis_motion(self) -> Motion:
         return diagonal_motion(default_geometry())
 
 
@@ -200,5 +220,7 @@ class PmCircle(PlatformMovement):
     thesis = {"iae_pi_plus_p": {"x": 0.0070614, "y": 0.012584, "z": 0.0038265},
               "iae_model_based": {"x": 0.0069071, "y": 0.01151, "z": 0.003308}, "ta_s": 0.05, "tm_s": 0.25}
 
-    def motion(self) -> Motion:
+    time_scale = 2.0
+
+    def thesis_motion(self) -> Motion:
         return circle_motion(default_geometry())
