@@ -5,5 +5,6 @@ from __future__ import annotations
 from ..scenario import Scenario
 from .pm import PmCircle, PmDiagonal
 from .sha_step import ShaStep
+from .sha_tracking import ShaPerturbation, ShaTracking
 
-SCENARIOS: dict[str, Scenario] = {s.name: s for s in (ShaStep(), PmDiagonal(), PmCircle())}
+SCENARIOS: dict[str, Scenario] = {s.name: s for s in (ShaStep(), ShaTracking(), ShaPerturbation(), PmDiagonal(), PmCircle())}

