@@ -1,10 +1,16 @@
-# hydrapod — make test: create .venv if missing, install with the test extra, run the suite.
+# hydrapod — make demo: the main job (emulator + controller on the default bus, pm-circle with the
+# model-based controller in realtime, metrics table and plots in hil-out/).
+# make test: create .venv if missing, install with the test extra, run the suite.
 PYTHON ?= python3
 VENV   ?= .venv
 PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed
 
-.PHONY: test venv bus-load socketcan-check clean
+PACING ?= realtime
+demo: $(STAMP)
+	$(VENV)/bin/hydrapod hil run pm-circle --pacing $(PACING) --bus default --out hil-out
+
+.PHONY: demo test venv bus-load socketcan-check clean
 
 venv: $(STAMP)
 

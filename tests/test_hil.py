@@ -94,4 +94,32 @@ def test_cli_errors_are_one_line_and_exit_2(argv, culprit, tmp_path):
 def test_list_names_the_scenarios():
     proc = subprocess.run(HYDRAPOD + ["hil", "list", "--json"], capture_output=True, text=True, timeout=60)
     names = {row["name"] for row in json.loads(proc.stdout)}
-    assert {"sha-step", "pm-diagonal", "pm-circle"} <= names
+    assert {"sha-step", "sha-tracking", "sha-perturbation", "pm-diagonal", "pm-circle", "rt-testbench",
+            "rt-hexapod"} <= names
+
+
+# scenario, arguments, what its metrics must hold (besides passing with a clean bus)
+SCENARIO_RUNS = {
+    "sha-tracking": (["--short"], lambda m: {(r["controller"], r["load_kg"], round(r["w_rad_s"], 1))
+                                            for r in m["runs"]} == {(c, load, w) for c in ("pi", "adaptive")
+                                                                    for load in (0.0, 6.0) for w in (0.5, 2.0)}),
+    "sha-perturbation": ([], lambda m: all(len(r["load_changes"]) == 3 for r in m["runs"].values())
+                         and set(m["runs"]) == {"pi", "adaptive"}),
+    "pm-circle": ([], lambda m: set(m["controllers"]) == {"adaptive", "model-based"} and m["time_scale"] == 2.0),
+}
+
+
+@pytest.mark.parametrize("scenario", list(SCENARIO_RUNS))
+def test_scenario_runs_from_the_command_and_passes(scenario, tmp_path):
+    args, holds = SCENARIO_RUNS[scenario]
+    proc = subprocess.run(HYDRAPOD + ["hil", "run", scenario, "--out", str(tmp_path), "--json"] + args,
+                          capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    doc = json.loads((tmp_path / "metrics.json").read_text())
+    assert doc["passed"] and doc["failure"] is None
+    # sha-step asserts exactly 0; here a rare datagram the on-host multicast dropped under
+    # load (seen once in a pm-circle run, 163k frames) must stay rare and be counted
+    assert doc["e2e_errors"] <= 1e-4 * doc["log"]["frames"], doc["e2e_errors"]
+    assert doc["log"]["lost_frames"] == 0
+    assert holds(doc["metrics"]), doc["metrics"]
+    assert list(tmp_path.glob("*.png")) and "thesis" in (tmp_path / "report.md").read_text()

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from ..scenario import Scenario
 from .pm import PmCircle, PmDiagonal
+from .realtime import RealtimeHexapod, RealtimeTestbench
 from .sha_step import ShaStep
 from .sha_tracking import ShaPerturbation, ShaTracking
 
-SCENARIOS: dict[str, Scenario] = {s.name: s for s in (ShaStep(), ShaTracking(), ShaPerturbation(), PmDiagonal(), PmCircle())}
+SCENARIOS: dict[str, Scenario] = {s.name: s for s in (ShaStep(), ShaTracking(), ShaPerturbation(), PmDiagonal(), PmCircle(),
+                                                      RealtimeTestbench(), RealtimeHexapod())}
