@@ -1,0 +1,61 @@
+"""The hexapod's joint-space loops with the emulator's hexapod, in process (no bus): the
+testbench's Ki diverges on the 190 kg horizontal joint-space inertia; `[hexapod] ki_factor`
+(default 0.25) holds it (README "Hexapod gains")."""
+
+import numpy as np
+import pytest
+
+from firmware_py.config import load_config
+from firmware_py.control import CONTROLLER_NAMES, JP_KI_SCALE, JP_PI_KI
+from firmware_py.core import ControllerCore
+from firmware_py.supervisor import State
+from plant_emulator.params import load_config as load_emulator_config
+from plant_emulator.rigs import HexapodRig
+
+PERIOD_S = 0.002
+ENCODER_M = 0.125e-3
+
+
+def hold_after_kick(ki_factor: float, seconds: float = 4.0, kick_m: float = 0.005):
+    """Hold at home, leg 0's reference moved by `kick_m`; returns (final state, peak |xy| mm)."""
+    cfg = load_config(overrides={"hexapod": {"ki_factor": ki_factor}})
+    rig = HexapodRig(load_emulator_config())
+    core = ControllerCore(cfg, "hexapod", PERIOD_S, CONTROLLER_NAMES["adaptive"])
+
+    def measure():
+        core.meas_y[:] = np.round(rig.stroke_m / ENCODER_M) * ENCODER_M
+        core.meas_force[:] = rig.rod_force_n
+        core.meas_fresh[:] = True
+        core.valve_state[:] = 3
+
+    measure()
+    core.update()
+    core.activated(True)
+    assert core.state is State.READY
+    core.hold_position[0] += kick_m
+    peak = 0.0
+    for _ in range(int(seconds / PERIOD_S)):
+        measure()
+        core.update()
+        rig.command[:] = core.spool
+        rig.advance(PERIOD_S)
+        peak = max(peak, float(np.hypot(*rig.platform_pose()[0][:2])) * 1e3)
+        if core.state is State.FAULT:
+            break
+    return core.state, peak
+
+
+def test_ki_factor_scales_every_controllers_integral_gain_on_the_hexapod_only():
+    cfg = load_config(overrides={"hexapod": {"ki_factor": 0.25}})
+    hexapod = ControllerCore(cfg, "hexapod", PERIOD_S)
+    bench = ControllerCore(cfg, "testbench", PERIOD_S)
+    assert hexapod.joint.jp[JP_PI_KI] == pytest.approx(0.25 * cfg.pi_ki)
+    assert hexapod.joint.jp[JP_KI_SCALE] == pytest.approx(0.25 * cfg.ki_scale)
+    assert bench.joint.jp[JP_PI_KI] == cfg.pi_ki and bench.joint.jp[JP_KI_SCALE] == cfg.ki_scale
+
+
+def test_testbench_integral_gain_diverges_on_the_hexapod_and_the_default_holds():
+    state, peak = hold_after_kick(1.0)
+    assert state is State.FAULT and peak > 100.0          # the oscillation grew to the error limit
+    state, peak = hold_after_kick(load_config().hexapod_ki_factor)
+    assert state is State.READY and peak < 50.0           # the kick's own offset is ~21 mm
