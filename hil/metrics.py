@@ -50,12 +50,19 @@ def ctrl_status_timing(log: LogData) -> dict:
     wraps = np.diff(status["OVERRUNS"]) < 0
     overruns = int(status["OVERRUNS"][-1] + 256 * np.count_nonzero(wraps))
     return {"windows": len(status), "overruns": overruns,
-            "period_error_us": _us(percentiles(status["PERIOD_ERROR_MAX"])),
-            "compute_time_us": _us(percentiles(status["COMPUTE_TIME_MAX"]))}
+            "period_error_us": in_us(percentiles(status["PERIOD_ERROR_MAX"])),
+            "compute_time_us": in_us(percentiles(status["COMPUTE_TIME_MAX"]))}
 
 
-def _us(stats: dict) -> dict:
+def in_us(stats: dict) -> dict:
+    """Seconds -> microseconds (0.1 us) for the float entries of a `percentiles` result."""
     return {k: (round(v * 1e6, 1) if isinstance(v, float) else v) for k, v in stats.items()}
+
+
+def fault_codes(log: LogData) -> list[int]:
+    """Every non-zero FAULT_CODE the controller reported in CTRL_STATUS, sorted."""
+    code = log.get("CTRL_STATUS")["FAULT_CODE"]
+    return sorted({int(c) for c in code[code != 0]})
 
 
 def last_value_before(series_cycles, series_values, cycle: int, default=np.nan):

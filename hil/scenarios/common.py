@@ -32,6 +32,15 @@ def load_at(log: LogData, cycle: int) -> float | None:
     return load
 
 
+def each_controller_and_load(run, loads):
+    """For each controller of the run and each load: select it, set the load, yield both."""
+    for controller in run.scenario.chosen(run):
+        run.select(controller)
+        for load in loads:
+            run.host.set_load(load)
+            yield controller, load
+
+
 def move_stroke(run, stroke_m: float, speed_m_s: float = 0.1, accel_s: float = 0.1, settle_s: float = 0.5,
                 from_m: float | None = None) -> None:
     """Test bench: an SLS move to `stroke_m`, then rest for `settle_s`."""

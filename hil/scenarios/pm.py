@@ -15,7 +15,7 @@ from firmware_py.trajectory import Motion, circle_motion, diagonal_motion
 from protocol.values import FLAG_LAST, FLAG_START
 
 from ..logdata import LogData
-from ..metrics import iae
+from ..metrics import fault_codes, iae
 from ..plotting import plt, save
 from ..reference import rebuild
 from ..scenario import Analysis, Check, Figure, Scenario
@@ -43,7 +43,7 @@ class PlatformMovement(Scenario):
     # loops barely damp; at the thesis's ta/tm both controllers reach the tracking-error
     # limit. The movement runs `time_scale` times slower (ta and tm scaled); README
     # "Hexapod gains" has the measurements.
-    time_scale = 1.0
+    time_scale = 2.0
 
     @abstractmethod
     def thesis_motion(self) -> Motion:
@@ -107,8 +107,7 @@ class PlatformMovement(Scenario):
             }
             series[controller] = ((cycles - first) * period, x_ref, x_true, x_dk)
         checks = []
-        status = log.get("CTRL_STATUS")
-        faults = sorted({int(c) for c in status["FAULT_CODE"][status["FAULT_CODE"] != 0]})
+        faults = fault_codes(log)
         checks.append(Check("no controller fault during the run", not faults,
                             f"fault codes {faults}" if faults else "none", "none"))
         if not runs:
@@ -206,8 +205,6 @@ class PmDiagonal(PlatformMovement):
     thesis = {"iae_pi_plus_p": {"x": 0.071408, "y": 0.074467, "z": 0.1019},
               "iae_model_based": {"x": 0.063427, "y": 0.064862, "z": 0.079075}, "ta_s": 0.05, "tm_s": 0.4}
 
-    time_scale = 2.0
-
     def thesis_motion(self) -> Motion:
         return diagonal_motion(default_geometry())
 
@@ -219,8 +216,6 @@ class PmCircle(PlatformMovement):
     motion_name = "circle"
     thesis = {"iae_pi_plus_p": {"x": 0.0070614, "y": 0.012584, "z": 0.0038265},
               "iae_model_based": {"x": 0.0069071, "y": 0.01151, "z": 0.003308}, "ta_s": 0.05, "tm_s": 0.25}
-
-    time_scale = 2.0
 
     def thesis_motion(self) -> Motion:
         return circle_motion(default_geometry())

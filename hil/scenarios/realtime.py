@@ -13,7 +13,7 @@ from firmware_py.geometry import default_geometry
 from protocol.values import FLAG_LAST, FLAG_START
 
 from ..logdata import LogData
-from ..metrics import ctrl_status_timing, percentiles
+from ..metrics import ctrl_status_timing, fault_codes, in_us, percentiles
 from ..plotting import plt, save
 from ..scenario import Analysis, Check, Figure, Scenario
 from .common import MM
@@ -54,11 +54,9 @@ class Realtime(Scenario):
         period = 1.0 / rate_hz
         timing = ctrl_status_timing(log)
         intervals = np.diff(log.sync_time_s)
-        sync = percentiles(np.abs(intervals - period), (50, 99))
-        sync_us = {k: (round(v * 1e6, 1) if isinstance(v, float) else v) for k, v in sync.items()}
+        sync_us = in_us(percentiles(np.abs(intervals - period), (50, 99)))
         seconds = log.n_cycles * period
-        status = log.get("CTRL_STATUS")
-        faults = sorted({int(c) for c in status["FAULT_CODE"][status["FAULT_CODE"] != 0]})
+        faults = fault_codes(log)
         checks = [Check("ran for the requested time", seconds >= 0.95 * SHORT_S, f"{seconds:.1f} s of cycles",
                         f">= {SHORT_S:g} s (60 s by default)"),
                   Check("no controller fault", not faults, f"fault codes {faults}" if faults else "none", "none")]

@@ -11,7 +11,7 @@ from ..metrics import step_response
 from ..plotting import colour_for_load, plt, save
 from ..reference import rebuild
 from ..scenario import Analysis, Check, Figure, Scenario
-from .common import MM, controller_at, load_at, move_stroke, step_stroke
+from .common import MM, controller_at, each_controller_and_load, load_at, move_stroke, step_stroke
 
 THESIS = {"step_mm": 10, "pi_overshoot_pct": 25, "pi_settling_s": 0.5, "adaptive_overshoot_pct_max": 14,
           "adaptive_settling_s": 1.0, "figure": "Fig. 7.16"}
@@ -30,7 +30,6 @@ class ShaStep(Scenario):
     name = "sha-step"
     title = "step response of the servo-hydraulic actuator, PI and adaptive"
     chapter = "7.6.1 (Fig. 7.16)"
-    controllers = ("pi", "adaptive")
 
     def plan(self, short: bool):
         positions = (50.0, 250.0) if short else (50.0, 150.0, 250.0)
@@ -40,14 +39,11 @@ class ShaStep(Scenario):
     def script(self, run) -> None:
         positions, loads, hold_s = self.plan(run.short)
         here = 0.150
-        for controller in self.chosen(run):
-            run.select(controller)
-            for load in loads:
-                run.host.set_load(load)
-                for position in positions:
-                    move_stroke(run, position * MM, settle_s=1.0, from_m=here)
-                    step_stroke(run, (position + THESIS["step_mm"]) * MM, hold_s)
-                    here = (position + THESIS["step_mm"]) * MM
+        for _ in each_controller_and_load(run, loads):
+            for position in positions:
+                move_stroke(run, position * MM, settle_s=1.0, from_m=here)
+                step_stroke(run, (position + THESIS["step_mm"]) * MM, hold_s)
+                here = (position + THESIS["step_mm"]) * MM
 
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
         period = 1.0 / rate_hz

@@ -22,7 +22,7 @@ from ..logdata import LogData
 from ..plotting import colour_for_load, plt, save
 from ..reference import rebuild
 from ..scenario import Analysis, Check, Figure, Scenario
-from .common import MM, controller_at, load_at, move_stroke
+from .common import MM, controller_at, each_controller_and_load, load_at, move_stroke
 
 CENTRE_MM, AMPLITUDE_MM = 150.0, 125.0
 POINTS_PER_PERIOD = 16
@@ -45,7 +45,7 @@ def sine_waypoints(run, w_rad_s: float, periods: int = 1) -> float:
     return tm * n
 
 
-def sine_runs(log: LogData, period_s: float) -> tuple[list[dict], np.ndarray, np.ndarray]:
+def sine_runs(log: LogData, period_s: float) -> list[dict]:
     """Each sine chunk in the log (>= POINTS_PER_PERIOD segments): controller, load, w and
     the per-cycle error y_r - y over it."""
     ref = rebuild(log, "testbench", period_s)
@@ -67,14 +67,13 @@ def sine_runs(log: LogData, period_s: float) -> tuple[list[dict], np.ndarray, np
                      "max_error_mm": float(np.nanmax(np.abs(error)) * 1e3),
                      "rms_error_mm": float(np.sqrt(np.nanmean(error ** 2)) * 1e3),
                      "reference_vs_sine_mm": float(np.nanmax(np.abs(ref.yr[window, 0] - ideal)) * 1e3)})
-    return runs, ref.yr, y
+    return runs
 
 
 class ShaTracking(Scenario):
     name = "sha-tracking"
     title = "sinusoidal tracking 150 + 125 sin(wt) mm, PI and adaptive"
     chapter = "7.6.2 (Fig. 7.19)"
-    controllers = ("pi", "adaptive")
     controller_overrides = TRACKING_OVERRIDES
     thesis = {"figure": "Fig. 7.19", "max_error_low_w_mm": 1.0, "w_range_rad_s": [0.1, 10.0],
               "claim": "max |error| <= 1 mm at low w; the adaptive controller better than PI"}
@@ -92,18 +91,15 @@ class ShaTracking(Scenario):
     def script(self, run) -> None:
         ws, loads = self.plan(run.short)
         here = 0.150
-        for controller in self.chosen(run):
-            run.select(controller)
-            for load in loads:
-                run.host.set_load(load)
-                for w in ws:
-                    move_stroke(run, (CENTRE_MM - AMPLITUDE_MM) * MM, settle_s=0.5, from_m=here)
-                    here = (CENTRE_MM - AMPLITUDE_MM) * MM
-                    run.wait_s(sine_waypoints(run, w) + 0.3)
-                    run.wait_motion_done(5.0)
+        for _ in each_controller_and_load(run, loads):
+            for w in ws:
+                move_stroke(run, (CENTRE_MM - AMPLITUDE_MM) * MM, settle_s=0.5, from_m=here)
+                here = (CENTRE_MM - AMPLITUDE_MM) * MM
+                run.wait_s(sine_waypoints(run, w) + 0.3)
+                run.wait_motion_done(5.0)
 
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
-        runs, _, _ = sine_runs(log, 1.0 / rate_hz)
+        runs = sine_runs(log, 1.0 / rate_hz)
         checks = []
         if not runs:
             checks.append(Check("sine runs found in the log", False, "0", ">= 1"))
@@ -170,7 +166,6 @@ class ShaPerturbation(Scenario):
     name = "sha-perturbation"
     title = "sine tracking while masses are added and removed, PI and adaptive"
     chapter = "7.6.3 (Figs. 7.20-7.21)"
-    controllers = ("pi", "adaptive")
     controller_overrides = TRACKING_OVERRIDES
     W_RAD_S = 0.5
     LOADS_KG = ((0.25, 3.0), (0.5, 6.0), (0.75, 0.0))          # (fraction of the period, load)
@@ -196,7 +191,7 @@ class ShaPerturbation(Scenario):
 
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
         period_s = 1.0 / rate_hz
-        runs, _, _ = sine_runs(log, period_s)
+        runs = sine_runs(log, period_s)
         changes = [e for e in log.events_named("EMU_CTRL") if int(e.values["COMMAND"]) == EMU_SET_LOAD]
         checks, results = [], {}
         for r in runs:
