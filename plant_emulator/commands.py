@@ -43,7 +43,8 @@ def _run(args) -> int:
     c = emulator.counters
     print(f"emulator: rig={rig.name} syncs={c.syncs} sim_time_s={rig.time_s:.3f} frames_in={c.frames_in} "
           f"frames_out={c.frames_out} e2e_errors={c.e2e_errors} valve_faults={c.valve_faults} "
-          f"sync_sequence_errors={c.sync_sequence_errors}", flush=True)
+          f"sync_sequence_errors={c.sync_sequence_errors} host_stalls={c.host_stalls} "
+          f"host_stall_max_ms={c.host_stall_max_s * 1e3:.1f}", flush=True)
     return 0
 
 

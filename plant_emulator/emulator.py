@@ -52,12 +52,15 @@ class Counters:
     valve_faults: int = 0
     emergencies: int = 0
     unknown_frames: int = 0
+    host_stalls: int = 0              # this process not scheduled for > 1 SYNC period (node clocks paused)
+    host_stall_max_s: float = 0.0
     injected: dict = field(default_factory=dict)
 
     def as_dict(self) -> dict:
         return {k: getattr(self, k) for k in ("syncs", "frames_in", "frames_out", "e2e_errors",
                                               "sync_sequence_errors", "valve_faults", "emergencies",
-                                              "unknown_frames")} | {"injected": dict(self.injected)}
+                                              "unknown_frames", "host_stalls")} | {
+            "host_stall_max_ms": round(self.host_stall_max_s * 1e3, 3), "injected": dict(self.injected)}
 
 
 class Emulator:
@@ -65,6 +68,7 @@ class Emulator:
 
     def __init__(self, bus: can.BusABC | None, rig, cfg: EmulatorConfig, clock=time.monotonic):
         self.bus, self.rig, self.cfg, self.clock = bus, rig, cfg, clock
+        rig.warm_up()                     # kernels loaded before the first SYNC, not in it
         self.legs = range(1, rig.n_legs + 1)
         self.has_imu = rig.n_legs == 6
         self.nodes = list(self.legs) + ([IMU_NODE] if self.has_imu else [])
@@ -384,14 +388,36 @@ class Emulator:
         self._emit(0, "EMU_TRUTH")
 
     # -- process loop -------------------------------------------------------------------------
+    def pause_node_clocks(self, seconds: float) -> None:
+        """The emulated nodes' timers stand still for `seconds` (this process was not running).
+
+        A real valve's SYNC watchdog is a hardware timer; ours is this process's wall clock.
+        When the whole host stalls (measured here: 3-27 ms freezes of both CPUs at once, a few
+        per minute) the controller could not send SYNC and we could not watch for it either.
+        Without the pause, every such freeze read as a lost SYNC and faulted the valves.
+        """
+        self.counters.host_stalls += 1
+        self.counters.host_stall_max_s = max(self.counters.host_stall_max_s, seconds)
+        if self.last_sync_time is not None:
+            self.last_sync_time += seconds
+        self.next_heartbeat += seconds
+
     def run(self, should_stop) -> None:
         """Receive and dispatch until `should_stop()`; timers between frames."""
         self.boot()
         wait = 0.0
         while not should_stop():
-            msg = self.bus.recv(timeout=min(max(wait, 0.0005), 0.05))
+            timeout = min(max(wait, 0.0005), 0.05)
+            wake = self.clock() + timeout
+            msg = self.bus.recv(timeout=timeout)
+            received = self.clock()
+            if received - wake > self.cfg.sync_period_s:         # woken this late: not scheduled
+                self.pause_node_clocks(received - wake)
             if msg is not None:
                 self.handle(msg)
+                busy = self.clock() - received
+                if busy > self.cfg.sync_period_s:                # a stall inside the handling
+                    self.pause_node_clocks(busy)
             wait = self.poll()
 
     def summary(self) -> dict:

@@ -168,6 +168,13 @@ class TestbenchRig(_RigBase):
         self.rod_force_n[0] = self.load_mass_kg * (self.out[0] + GRAVITY_M_S2) + self.out[2]
         self.time_s += period_s
 
+    def warm_up(self) -> None:
+        """Load the compiled kernels now: their first call costs 0.2-0.25 s (numba's cache),
+        which in the first SYNC made the nodes miss ~45 realtime cycles. Scratch copies only."""
+        testbench_advance(self.state[0].copy(), 0.0, False, 1, self.cfg.substep_s, self.cfg.supply_pressure_pa,
+                          self.cfg.hp, self.cfg.friction, self.guide_friction, self.cfg.piston_rod_mass_kg,
+                          self.load_mass_kg, np.zeros(3))
+
     @property
     def acceleration_m_s2(self) -> float:
         return float(self.out[0])
@@ -231,6 +238,13 @@ class HexapodRig(_RigBase):
                             cfg.hp, cfg.friction)
         self._measure_rod_forces()
         self.time_s += steps * model.opt.timestep
+
+    def warm_up(self) -> None:
+        """As TestbenchRig.warm_up: the kernels loaded on scratch copies, the rig untouched."""
+        cfg, state = self.cfg, self.state.copy()
+        legs_drive_into(state, self._velocity, cfg.hp, cfg.friction, np.zeros(6), np.zeros(6))
+        legs_hydraulics(state, self._stroke.copy(), self._velocity.copy(), np.zeros(6), self.jammed, 1,
+                        cfg.substep_s, cfg.supply_pressure_pa, cfg.hp, cfg.friction)
 
     def _measure_rod_forces(self) -> None:
         """Axial force of each connect constraint (rod end -> platform), compression positive.

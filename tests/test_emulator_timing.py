@@ -1,0 +1,98 @@
+"""The emulator's own timing: kernels loaded before the first SYNC, and node clocks that stand
+still while the emulator process is not scheduled (host stalls), without hiding a controller
+that really went silent."""
+
+from __future__ import annotations
+
+import copy
+
+import can
+import numpy as np
+import pytest
+
+from plant_emulator.emulator import Emulator
+from plant_emulator.params import load_config
+from plant_emulator.rigs import make_rig
+from protocol.outbox import Outbox
+
+PERIOD_S = 0.002
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return load_config()
+
+
+@pytest.mark.parametrize("rig_name", ["testbench", "hexapod"])
+def test_warm_up_leaves_the_rig_untouched(cfg, rig_name):
+    rig = make_rig(rig_name, cfg)
+    rig.command[:] = 0.3
+    state, time_s, force = rig.state.copy(), rig.time_s, rig.rod_force_n.copy()
+    rig.warm_up()
+    np.testing.assert_array_equal(rig.state, state)
+    np.testing.assert_array_equal(rig.rod_force_n, force)
+    assert rig.time_s == time_s
+    # and it did not change what the next step computes
+    twin = copy.deepcopy(rig) if rig_name == "testbench" else None
+    if twin is not None:
+        rig.advance(PERIOD_S)
+        twin.advance(PERIOD_S)
+        np.testing.assert_array_equal(rig.state, twin.state)
+
+
+class ScriptedBus:
+    """recv() plays a script on a fake clock: ("frame", msg) arrives at once; ("quiet",) lets
+    the timeout pass; ("stall", s) wakes s seconds after the timeout (the process was not
+    scheduled), with nothing received."""
+
+    def __init__(self, script):
+        self.script = list(script)
+        self.now = 0.0
+
+    def clock(self) -> float:
+        return self.now
+
+    def recv(self, timeout):
+        step = self.script.pop(0)
+        if step[0] == "frame":
+            return step[1]
+        self.now += timeout + (step[1] if step[0] == "stall" else 0.0)
+        return None
+
+    def send(self, msg):
+        pass
+
+
+def sync_frame(counter: int) -> can.Message:
+    box = Outbox("SYNC")
+    box.values[0] = counter
+    assert box.encode()
+    return copy.deepcopy(box.message)
+
+
+def run_script(cfg, script) -> Emulator:
+    """Until the script ends or the SYNC watchdog fires."""
+    bus = ScriptedBus(script)
+    emulator = Emulator(bus, make_rig("testbench", cfg), cfg, clock=bus.clock)
+    emulator.run(lambda: not bus.script or emulator.sync_lost_reported)
+    return emulator
+
+
+def test_a_host_stall_does_not_read_as_a_lost_sync(cfg):
+    stall_s = 10 * PERIOD_S                          # > the 3-period watchdog
+    emulator = run_script(cfg, [("frame", sync_frame(1)), ("stall", stall_s), ("frame", sync_frame(2)),
+                                ("quiet",)])
+    assert emulator.counters.syncs == 2
+    assert emulator.counters.host_stalls == 1
+    assert emulator.counters.host_stall_max_s == pytest.approx(stall_s)
+    assert not emulator.sync_lost_reported
+
+
+def test_a_silent_controller_still_trips_the_watchdog(cfg):
+    # the same 20 ms without SYNC, but this process was awake the whole time
+    script = [("frame", sync_frame(1))] + [("quiet",)] * 40
+    emulator = run_script(cfg, script)
+    assert emulator.counters.host_stalls == 0
+    assert emulator.sync_lost_reported
+    watchdog_s = cfg.sync_timeout_periods * PERIOD_S
+    assert watchdog_s < emulator.clock() - emulator.last_sync_time <= watchdog_s + PERIOD_S
