@@ -276,42 +276,42 @@ class ControllerCore:
         return Ack.ACCEPTED, strokes
 
     def _check_hexapod(self, previous, pos, rot, segment_time, accel_time, step):
+        """Target and joint-space path in one workspace check (its cost is mostly per call)."""
         from .kinematics import ik_batch
         from .rotation import rpy_to_quat
         from .workspace import MIN_CONDITION_INDEX, check_poses
 
         g = self.geometry
-        position = np.array(pos)
-        quat = rpy_to_quat(*rot)
-        report = check_poses(g, position[None], quat[None])
+        samples = self.cfg.waypoint_path_samples
+        poses, quats = np.empty((samples + 1, 3)), np.empty((samples + 1, 4))
+        poses[0], quats[0] = pos, rpy_to_quat(*rot)                 # row 0: the target itself
+        lengths, _ = ik_batch(g, poses[:1], quats[:1])
+        strokes = lengths[0] - g.leg_min_m
+        # the joint-space path between the waypoints, pose by pose, back from the target
+        n = 1
+        self._check_dk.pose[:] = np.concatenate([poses[0], quats[0]])
+        for s in np.linspace(1.0, 0.0, samples):
+            self._check_dk.solve(g.leg_min_m + previous + s * (strokes - previous))
+            if not self._check_dk.converged:
+                break
+            poses[n], quats[n] = self._check_dk.pose[0:3], self._check_dk.pose[3:7]
+            n += 1
+        report = check_poses(g, poses[:n], quats[:n])
         if not report.reachable[0]:
             return Ack.OUTSIDE_WORKSPACE, None
         if report.condition_index[0] < MIN_CONDITION_INDEX:
             return Ack.SINGULAR, None
-        lengths, _ = ik_batch(g, position[None], quat[None])
-        strokes = lengths[0] - g.leg_min_m
         if not self._peak_velocity_ok(previous, strokes, segment_time, accel_time, step):
             return Ack.TOO_FAST, None
-        # the joint-space path between the waypoints, pose by pose
-        samples = self.cfg.waypoint_path_samples
-        poses, quats = np.empty((samples, 3)), np.empty((samples, 4))
-        self._check_dk.pose[:] = np.concatenate([position, quat])
-        for k, s in enumerate(np.linspace(1.0, 0.0, samples)):
-            self._check_dk.solve(g.leg_min_m + previous + s * (strokes - previous))
-            if not self._check_dk.converged:
-                return Ack.OUTSIDE_WORKSPACE, None
-            poses[k], quats[k] = self._check_dk.pose[0:3], self._check_dk.pose[3:7]
-        path = check_poses(g, poses, quats)
-        if not path.reachable.all():
+        if n < samples + 1 or not report.reachable.all():
             return Ack.OUTSIDE_WORKSPACE, None
-        if np.min(path.condition_index) < MIN_CONDITION_INDEX:
+        if np.min(report.condition_index) < MIN_CONDITION_INDEX:
             return Ack.SINGULAR, None
         # static load plus the peak SLS acceleration of the segment's translation
-        start_pose = poses[-1]
-        peak_accel = (position - start_pose) / (segment_time - accel_time) * math.pi / (2.0 * accel_time)
+        peak_accel = (poses[0] - poses[n - 1]) / (segment_time - accel_time) * math.pi / (2.0 * accel_time)
         twist = np.zeros(6)
         accel = np.concatenate([peak_accel, np.zeros(3)])
-        if not self._check_dynamics.forces(position, quat, twist, accel):
+        if not self._check_dynamics.forces(poses[0], quats[0], twist, accel):
             return Ack.SINGULAR, None
         if np.max(np.abs(self._check_dynamics.force_n)) > self.cfg.waypoint_force_max_n:
             return Ack.TOO_FAST, None

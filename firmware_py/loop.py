@@ -9,6 +9,11 @@ cycle k: send SYNC k; collect cycle k's LEG_STATE frames until all are in or the
 closes (realtime: a fraction of the period; lockstep: a timeout); copy them into the
 core; `core.update()`; encode and send VALVE_CMD_* (applied by the valves at SYNC k+1),
 CTRL_STATUS when due, CTRL_ACK for host frames, the heartbeat when due.
+host work: a waypoint commit is checked against the workspace along its path (0.5-3 ms on
+the hexapod), longer than the sensor window. Commits therefore wait in a FIFO and are
+checked after the cycle's write, one per cycle; HOST_CMD frames are handled at once
+(E-stop and disable take effect in the cycle they arrive in) unless commits are still
+waiting, in which case the others keep their place behind them.
 pacing: `realtime` - absolute deadlines on the monotonic clock, sleep then spin, late
 cycles counted as overruns and skipped (never bursts); `lockstep` - SYNC k+1 as soon as
 cycle k's exchange is complete.
@@ -20,6 +25,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,11 +37,12 @@ from protocol.outbox import Outbox
 from protocol.values import KIND_HOST_CMD, KIND_WAYPOINT
 
 from .core import RESET_GRACE_CYCLES, ControllerCore
-from .supervisor import Fault, State
+from .supervisor import Command, Fault, State
 
 NMT_START, NMT_OPERATIONAL = 1, 5
 CONTROLLER_NODE, IMU_NODE = 16, 7
 PACINGS = ("realtime", "lockstep")
+IMMEDIATE_COMMANDS = (int(Command.ESTOP), int(Command.DISABLE))   # never queued behind host work
 HISTORY = 1 << 16                       # cycles kept for the timing percentiles
 
 
@@ -100,6 +107,7 @@ class ControllerLoop:
         self.heartbeat_seen = {node: -math.inf for node in self.nodes}
         self.nmt_state = {node: -1 for node in self.nodes}
         self.acks: list[tuple[int, int, int]] = []
+        self.host_work: deque[tuple] = deque()      # (handler, values) in arrival order
         self.stats = Stats()
         self.compute_s = np.zeros(HISTORY)
         self.period_error_s = np.zeros(HISTORY)
@@ -140,18 +148,42 @@ class ControllerLoop:
         if frame_id == self._ids["HOST_CMD"]:
             _, _, command, argument, seq = self.decoder.values["HOST_CMD"]
             self.stats.host_commands += 1
-            result = self.core.host_command(int(command), int(argument))
-            self.acks.append((KIND_HOST_CMD, int(seq), int(result)))
+            values = (int(command), int(argument), int(seq))
+            if self.host_work and values[0] not in IMMEDIATE_COMMANDS:
+                self.host_work.append((self._host_command, values))
+            else:
+                self._host_command(*values)
         elif frame_id == self._ids["HOST_WAYPOINT_POS"]:
             _, _, tag, x, y, z = self.decoder.values["HOST_WAYPOINT_POS"]
-            self.core.waypoint_position(int(tag), float(x), float(y), float(z))
+            self._stage(self.core.waypoint_position, (int(tag), float(x), float(y), float(z)))
         elif frame_id == self._ids["HOST_WAYPOINT_ROT"]:
             _, _, tag, roll, pitch, yaw = self.decoder.values["HOST_WAYPOINT_ROT"]
-            self.core.waypoint_rotation(int(tag), float(roll), float(pitch), float(yaw))
+            self._stage(self.core.waypoint_rotation, (int(tag), float(roll), float(pitch), float(yaw)))
         elif frame_id == self._ids["HOST_WAYPOINT_TIME"]:
             _, _, tag, seq, segment, accel, flags = self.decoder.values["HOST_WAYPOINT_TIME"]
-            result = self.core.waypoint_time(int(tag), int(seq), float(segment), float(accel), int(flags))
-            self.acks.append((KIND_WAYPOINT, int(seq), int(result)))
+            self.host_work.append((self._commit, (int(tag), int(seq), float(segment), float(accel), int(flags))))
+
+    # -- host work (outside the sensor window) ----------------------------------------------
+    def _host_command(self, command: int, argument: int, seq: int) -> None:
+        self.acks.append((KIND_HOST_CMD, seq, int(self.core.host_command(command, argument))))
+
+    def _stage(self, handler, values: tuple) -> None:
+        """Waypoint halves: at once, unless commits wait (a reused TAG must not overtake them)."""
+        if self.host_work:
+            self.host_work.append((handler, values))
+        else:
+            handler(*values)
+
+    def _commit(self, tag: int, seq: int, segment: float, accel: float, flags: int) -> None:
+        self.acks.append((KIND_WAYPOINT, seq, int(self.core.waypoint_time(tag, seq, segment, accel, flags))))
+
+    def do_host_work(self) -> None:
+        """After the cycle's write: queued host frames in order, up to and including one commit."""
+        while self.host_work:
+            handler, values = self.host_work.popleft()
+            handler(*values)
+            if handler == self._commit:
+                return
 
     def _collect(self, deadline: float) -> None:
         """Receive until every LEG_STATE of the cycle is in or the window closes; frames
@@ -250,8 +282,8 @@ class ControllerLoop:
                 self.core.fault(Fault.HEARTBEAT_LOST)
 
     # -- one cycle ------------------------------------------------------------------------
-    def cycle(self, deadline: float | None = None) -> None:
-        """SYNC, collect, read, update, write. `deadline`: when the next SYNC is due (realtime)."""
+    def cycle(self) -> None:
+        """SYNC, collect, read, update, write, then host work (pacing is `_run_cycles`'s)."""
         now = self.clock()
         k = self.stats.cycles % HISTORY
         if not math.isnan(self._last_sync):
@@ -279,6 +311,7 @@ class ControllerLoop:
         self.compute_s[k] = compute
         self._compute_max = max(self._compute_max, compute)
         self.stats.cycles += 1
+        self.do_host_work()                     # after the write: its cost never delays VALVE_CMD
 
     # -- lifecycle ------------------------------------------------------------------------
     def activate(self, should_stop=lambda: False) -> None:
