@@ -40,7 +40,8 @@ def _run(args) -> int:
     scenario = _scenario(args.scenario)
     out = Path(args.out) if args.out else Path("hil-out") / scenario.name
     options = RunOptions(out_dir=out, bus=args.bus, pacing=args.pacing, rate_hz=500.0, short=args.short,
-                         controllers=_controllers(args.controllers), duration_s=args.duration_s)
+                         controllers=_controllers(args.controllers), duration_s=args.duration_s,
+                         valve_watchdog_periods=args.valve_watchdog_periods)
     return _finish(args, run_scenario(scenario, options))
 
 
@@ -79,6 +80,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--controllers", metavar="LIST", help="comma-separated subset of the scenario's controllers")
     p.add_argument("--duration-s", type=number_in_range(float, 1.0, 86400.0), default=None,
                    help="realtime scenarios: seconds of running (default 60; 10 with --short)")
+    p.add_argument("--valve-watchdog-periods", type=number_in_range(float, 1.0, 10000.0), default=None,
+                   help="realtime: the emulated valves' SYNC watchdog in periods (default 25 on a shared host; "
+                        "3 is the valves' own, for an RT kernel)")
     p.add_argument("--json", action="store_true", help="print metrics.json instead of the summary")
     p.set_defaults(handler=_run)
     p = hil_sub.add_parser("analyze", help="the scenario's analysis on a recorded log (BLF or ASC), e.g. from the rig")

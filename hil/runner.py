@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from firmware_py.control import CONTROLLER_NAMES
-from firmware_py.supervisor import Command, State
+from firmware_py.supervisor import Command, Fault, State
 from protocol.bus import BusSpec, default_bus_spec, open_bus, parse_bus_spec
 from protocol.errors import UserInputError
 
@@ -29,6 +29,11 @@ from .scenario import Scenario
 
 LOG_NAME = "run.blf"
 LOCKSTEP_EMULATOR_SYNC_TIMEOUT_PERIODS = 5000      # wall clock: > the controller's 50 ms lockstep wait
+# Realtime on a shared, non-RT host: one vCPU alone stalls 4-27 ms a few times a minute
+# (measured with a SCHED_FIFO 2 ms sleeper on each CPU). The valves' own 3-period watchdog
+# then trips on the machine, not on the controller. HIL runs widen it; the realtime
+# scenarios report every SYNC gap the 3-period watchdog would have tripped on.
+REALTIME_EMULATOR_SYNC_TIMEOUT_PERIODS = 25.0
 START_TIMEOUT_S = 90.0                             # imports, kernels, MuJoCo, activation
 
 
@@ -41,6 +46,7 @@ class RunOptions:
     short: bool = False
     controllers: tuple[str, ...] | None = None
     duration_s: float | None = None  # realtime scenarios: how long
+    valve_watchdog_periods: float | None = None   # realtime: the emulated valves' SYNC watchdog
     notes: list[str] = field(default_factory=list)
 
 
@@ -89,8 +95,13 @@ class Run:
 
     def start_emulator(self) -> None:
         overrides = {section: dict(values) for section, values in self.scenario.emulator_overrides.items()}
+        nodes = overrides.setdefault("nodes", {})
         if self.pacing == "lockstep":
-            overrides.setdefault("nodes", {})["sync_timeout_periods"] = LOCKSTEP_EMULATOR_SYNC_TIMEOUT_PERIODS
+            nodes["sync_timeout_periods"] = LOCKSTEP_EMULATOR_SYNC_TIMEOUT_PERIODS
+        else:
+            nodes["sync_timeout_periods"] = self.options.valve_watchdog_periods or REALTIME_EMULATOR_SYNC_TIMEOUT_PERIODS
+            self.notes.append(f"emulated valves' SYNC watchdog: {nodes['sync_timeout_periods']:g} periods "
+                              f"(--valve-watchdog-periods; README 'Timing')")
         config = self.out / "emulator.toml"
         config.write_text(_toml(overrides))
         child = Child("emulator", ["-m", "plant_emulator", "--bus", str(self.spec), "--rig", self.scenario.rig,
@@ -114,7 +125,12 @@ class Run:
         self.children.append(child)
         self.controller = child
         self.host.state = None
-        self.host.wait_state(State.READY, max_cycles=10**9, wall_timeout_s=START_TIMEOUT_S)
+        # FAULT ends the wait too: a controller that faults while starting never gets READY
+        self.host.wait_state(State.READY, State.FAULT, max_cycles=10**9, wall_timeout_s=START_TIMEOUT_S)
+        if self.host.state is State.FAULT:
+            code = self.host.fault_code
+            name = Fault(code).name if code in Fault._value2member_map_ else f"code {code}"
+            raise HostError(f"{controller}: the controller went to FAULT while starting ({name})")
 
     def stop_controller(self) -> None:
         """SIGTERM: the controller holds, disables and exits 0; its last frames are recorded."""

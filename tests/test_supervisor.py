@@ -189,3 +189,49 @@ def test_a_silent_node_heartbeat_faults():
     time.sleep(0.05)
     loop.cycle()                                      # ... and the next cycle notices
     assert core.state is State.FAULT and core.sup.fault_code is Fault.HEARTBEAT_LOST
+
+
+HOST_OUTBOXES = {}        # one per message, as on the host: the E2E counters advance per frame
+
+
+def _host_frame(name, values):
+    from copy import deepcopy
+
+    from protocol.outbox import Outbox
+    box = HOST_OUTBOXES.setdefault(name, Outbox(name))
+    for key, value in values.items():
+        box.values[box.index[key]] = value
+    assert box.encode()
+    return deepcopy(box.message)
+
+
+def host_frames(seq, z, flags=0):
+    """The three frames of a test-bench waypoint, encoded as the host sends them."""
+    tag = seq & 0x0F
+    return [_host_frame("HOST_WAYPOINT_POS", {"TAG": tag, "X": 0.0, "Y": 0.0, "Z": z}),
+            _host_frame("HOST_WAYPOINT_ROT", {"TAG": tag, "ROLL": 0.0, "PITCH": 0.0, "YAW": 0.0}),
+            _host_frame("HOST_WAYPOINT_TIME", {"TAG": tag, "SEQ": seq, "SEGMENT_TIME": 1.0, "ACCEL_TIME": 0.2,
+                                               "FLAGS": flags})]
+
+
+def host_command_frame(command, seq):
+    return _host_frame("HOST_CMD", {"COMMAND": int(command), "ARGUMENT": 0, "SEQ": seq})
+
+
+def test_waypoint_commits_wait_for_the_host_work_slot_and_estop_does_not():
+    from protocol.values import KIND_HOST_CMD, KIND_WAYPOINT
+    loop, core, bus = make_loop("testbench", "pi")
+    z = core.hold_position[0]
+    for frame in host_frames(0, z + 0.01) + host_frames(1, z + 0.02, flags=1):
+        loop.dispatch(frame)                         # as if received inside the sensor window
+    loop.dispatch(host_command_frame(Command.START, 1))
+    assert loop.acks == [] and len(core.queue) == 0  # nothing checked yet: the cycle goes first
+    loop.do_host_work()                              # one commit per slot
+    assert loop.acks == [(KIND_WAYPOINT, 0, int(Ack.ACCEPTED))] and len(core.queue) == 1
+    loop.dispatch(host_command_frame(Command.ESTOP, 2))
+    assert core.state is State.ESTOP                 # never queued behind host work
+    loop.do_host_work()
+    loop.do_host_work()                              # the second commit, then START, in order
+    assert [a[:2] for a in loop.acks] == [(KIND_WAYPOINT, 0), (KIND_HOST_CMD, 2), (KIND_WAYPOINT, 1),
+                                          (KIND_HOST_CMD, 1)]
+    assert loop.acks[2][2] == int(Ack.BAD_STATE) and not loop.host_work    # after the E-stop
