@@ -41,7 +41,7 @@ def _run(args) -> int:
     out = Path(args.out) if args.out else Path("hil-out") / scenario.name
     options = RunOptions(out_dir=out, bus=args.bus, pacing=args.pacing, rate_hz=500.0, short=args.short,
                          controllers=_controllers(args.controllers), duration_s=args.duration_s,
-                         valve_watchdog_periods=args.valve_watchdog_periods)
+                         valve_watchdog_periods=args.valve_watchdog_periods, start_timeout_s=args.start_timeout_s)
     return _finish(args, run_scenario(scenario, options))
 
 
@@ -83,6 +83,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--valve-watchdog-periods", type=number_in_range(float, 1.0, 10000.0), default=None,
                    help="realtime: the emulated valves' SYNC watchdog in periods (default 25 on a shared host; "
                         "3 is the valves' own, for an RT kernel)")
+    p.add_argument("--start-timeout-s", type=number_in_range(float, 1.0, 3600.0), default=90.0,
+                   help="how long the processes may take to come up (default 90; a VM without KVM needs more)")
     p.add_argument("--json", action="store_true", help="print metrics.json instead of the summary")
     p.set_defaults(handler=_run)
     p = hil_sub.add_parser("analyze", help="the scenario's analysis on a recorded log (BLF or ASC), e.g. from the rig")

@@ -87,13 +87,15 @@ class Host:
         end = self.syncs + max_cycles
         last_traffic = time.monotonic()
         give_up = None if wall_timeout_s is None else last_traffic + wall_timeout_s
+        # a start-up wait names its own, longer bound (the processes may still be importing)
+        stall_s = max(self.stall_timeout_s, wall_timeout_s or 0.0)
         while self.syncs < end and (give_up is None or time.monotonic() < give_up):
             if condition():
                 return True
             if self.pump(0.05) is not None:
                 last_traffic = time.monotonic()
-            elif time.monotonic() - last_traffic > self.stall_timeout_s:
-                raise HostError(f"no frame on the bus for {self.stall_timeout_s:g} s "
+            elif time.monotonic() - last_traffic > stall_s:
+                raise HostError(f"no frame on the bus for {stall_s:g} s "
                                 f"(after {self.syncs} SYNCs)")
         if condition():
             return True

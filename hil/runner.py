@@ -47,6 +47,7 @@ class RunOptions:
     controllers: tuple[str, ...] | None = None
     duration_s: float | None = None  # realtime scenarios: how long
     valve_watchdog_periods: float | None = None   # realtime: the emulated valves' SYNC watchdog
+    start_timeout_s: float = START_TIMEOUT_S       # a slow machine (a VM in software emulation) needs more
     notes: list[str] = field(default_factory=list)
 
 
@@ -109,6 +110,9 @@ class Run:
                                    "--config", str(config), "--summary", str(self.out / "emulator.json")], self.out)
         self.notes += child.start(realtime_priority=70 if self.pacing == "realtime" else None)
         self.children.append(child)
+        # its boot-up heartbeats: the controller's 5 s activation window starts only then
+        self.host.wait_until(lambda: self.host.frames_received > 0, 10**9, what="the emulator's first frame",
+                             wall_timeout_s=self.options.start_timeout_s)
 
     def start_controller(self, controller: str, overrides: dict | None = None) -> None:
         merged = {section: dict(values) for section, values in self.scenario.controller_overrides.items()}
@@ -126,7 +130,7 @@ class Run:
         self.controller = child
         self.host.state = None
         # FAULT ends the wait too: a controller that faults while starting never gets READY
-        self.host.wait_state(State.READY, State.FAULT, max_cycles=10**9, wall_timeout_s=START_TIMEOUT_S)
+        self.host.wait_state(State.READY, State.FAULT, max_cycles=10**9, wall_timeout_s=self.options.start_timeout_s)
         if self.host.state is State.FAULT:
             code = self.host.fault_code
             name = Fault(code).name if code in Fault._value2member_map_ else f"code {code}"

@@ -95,7 +95,7 @@ def test_list_names_the_scenarios():
     proc = subprocess.run(HYDRAPOD + ["hil", "list", "--json"], capture_output=True, text=True, timeout=60)
     names = {row["name"] for row in json.loads(proc.stdout)}
     assert {"sha-step", "sha-tracking", "sha-perturbation", "pm-diagonal", "pm-circle", "rt-testbench",
-            "rt-hexapod"} <= names
+            "rt-hexapod", "sha-identification"} <= names
 
 
 # scenario, arguments, what its metrics must hold (besides passing with a clean bus)

@@ -5,8 +5,10 @@ from __future__ import annotations
 from ..scenario import Scenario
 from .pm import PmCircle, PmDiagonal
 from .realtime import RealtimeHexapod, RealtimeTestbench
+from .sha_identification import ShaIdentification
 from .sha_step import ShaStep
 from .sha_tracking import ShaPerturbation, ShaTracking
 
-SCENARIOS: dict[str, Scenario] = {s.name: s for s in (ShaStep(), ShaTracking(), ShaPerturbation(), PmDiagonal(), PmCircle(),
+SCENARIOS: dict[str, Scenario] = {s.name: s for s in (ShaStep(), ShaTracking(), ShaPerturbation(), ShaIdentification(), PmDiagonal(),
+                                                      PmCircle(),
                                                       RealtimeTestbench(), RealtimeHexapod())}

@@ -1,0 +1,262 @@
+"""sha-identification: thesis 5.4.1 (experiment) and 5.2 (identification) on the recorded log.
+
+The actuator runs under proportional position control (the `pi` controller with Ki = 0,
+restarted for each gain) around set points with 0-6 kg. Around each set point the host
+queues a pseudo-random multilevel reference (PRMS: levels of -10 ... +10 mm held 0.3-0.6 s,
+step waypoints). The analysis (log only) takes the 150 ms after every level change and
+identifies K, Gcl(s), G(s) = k01 b0 / (s (s^2 + b1 s + b0)) (eq. 5.5) and m, sigma, Fe
+(eq. 5.7): `hil/identification.py`. For each set point and load it keeps the G(s) whose
+closed loops fit every window of that point best (mean eq. 5.12), as the thesis does, and
+compares it with the emulator's linearisation (`plant_emulator.calibration`) and Table A.3.
+
+Deviations: levels are held 0.3-0.6 s, not 1-6 s (only the first 150 ms are used); the
+derivatives use a 50 Hz zero-phase filter, not 200 Hz (the loop samples at 500 Hz, not the
+DS1103's rate); PL comes from LEG_PRESSURE sent every SYNC for this experiment.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from firmware_py.config import load_config as load_controller_config
+from plant_emulator.calibration import LOADS_KG, linearise, moving_mass_kg, table_a3
+from plant_emulator.params import load_config as load_emulator_config
+from protocol.values import FLAG_LAST, FLAG_START, FLAG_STEP
+
+from .. import identification as ident
+from ..logdata import LogData
+from ..plotting import colour_for_load, plt, save
+from ..reference import rebuild
+from ..scenario import Analysis, Check, Figure, Scenario
+from .common import MM, load_at, move_stroke
+
+LEVELS_MM = (-10.0, -5.0, 0.0, 5.0, 10.0)
+HOLD_S = (0.3, 0.6)
+WINDOW_S = 0.15                     # chapter 5.4.1: 150 ms after each change
+PRE_S = 0.02                        # rest before the change (y0, and anchors Fe)
+MIN_STEP_MM = 3.0
+FILTER_HZ = 50.0
+FULL_SCALE_V = 10.0                 # 100 % spool setpoint = 10 V of the thesis's u
+SEED = 5
+# Asserted (the emulator is the truth here): the method's own accuracy, measured on it
+FIT_MIN = 0.85                      # thesis: its models fit between 85 % and 94 % (eq. 5.12)
+PLANT_TOLERANCE = {"b0": 0.25, "b1": 0.35, "k01": 0.15}
+MASS_TOLERANCE = 0.30
+# P-control steps of 20 mm ask up to ~1 m/s for a moment; the operator guard is 600 mm/s
+OVERRIDES = {"limits": {"velocity_max_mm_s": 2500.0, "tracking_error_max_mm": 40.0}}
+
+
+def prms(rng: np.random.Generator, n: int) -> list[tuple[float, float]]:
+    """n (level mm, hold s) pairs; consecutive levels 5-15 mm apart (a transient each, inside
+    the 20 mm step guard)."""
+    out, last = [], 0.0
+    for _ in range(n):
+        level = float(rng.choice([v for v in LEVELS_MM if 5.0 <= abs(v - last) <= 15.0]))
+        out.append((level, 2e-3 * round(float(rng.uniform(*HOLD_S)) / 2e-3)))   # whole ms, ta = hold / 2 too
+        last = level
+    return out
+
+
+class ShaIdentification(Scenario):
+    name = "sha-identification"
+    title = "closed-loop P-control PRMS experiment and identification of G(s), m, sigma, Fe"
+    chapter = "5.4.1, 5.2 (Table A.3)"
+    rig = "testbench"
+    controllers = ("pi",)
+    pacings = ("lockstep",)
+    controller_overrides = OVERRIDES
+    emulator_overrides = {"nodes": {"leg_pressure_divisor": 1}}
+    thesis = {"pole_region": "Re in [-65, -45] 1/s, Im in [75, 125] 1/s",
+              "fit_index": "0.85-0.94 (eq. 5.12)", "table": "A.3 (b0, b1, k01) and A.1 (m, sigma, Fe)"}
+
+    def plan(self, short: bool):
+        if short:
+            return (60.0, 210.0), (0.0, 6.0), (0.15, 0.25), 10
+        return (10.0, 30.0, 60.0, 90.0, 120.0, 150.0, 180.0, 210.0, 240.0, 270.0, 290.0), LOADS_KG, \
+            (0.1, 0.15, 0.2, 0.25, 0.3), 12
+
+    def script(self, run) -> None:
+        positions, loads, gains, changes = self.plan(run.short)
+        rng = np.random.default_rng(SEED)
+        here = 0.150
+        for gain in gains:
+            run.stop_controller()
+            run.start_controller("pi", {"pi": {"kp_v_mm": gain, "ki_v_mm_s": 0.0}})
+            for load in loads:
+                run.host.set_load(load)
+                for position in positions:
+                    move_stroke(run, position * MM, settle_s=0.5, from_m=here)
+                    here = position * MM
+                    total = 0.0
+                    for level, hold in prms(rng, changes):
+                        here = (position + level) * MM
+                        run.host.waypoint((0.0, 0.0, here), segment_time_s=hold, accel_time_s=hold / 2,
+                                          flags=FLAG_LAST | FLAG_START | FLAG_STEP)
+                        total += hold
+                    run.wait_s(total + 0.3)
+
+    # -- analysis ---------------------------------------------------------------------------
+    def windows(self, log: LogData, period: float) -> list[dict]:
+        """Every reference change of a PRMS sequence: its window's data and identification."""
+        ccfg = load_controller_config(None)
+        ref = rebuild(log, "testbench", period)
+        y = log.leg_positions(1)[:, 0]
+        u = log.get("VALVE_CMD_1").per_cycle(log.n_cycles, "SPOOL_SETPOINT") * FULL_SCALE_V
+        pressure = log.get("LEG_PRESSURE_1")
+        pl = pressure.per_cycle(log.n_cycles, "PA") - ccfg.area_ratio * pressure.per_cycle(log.n_cycles, "PB")
+        n, pre = int(round(WINDOW_S / period)), int(round(PRE_S / period))
+        sequence, previous_step, set_point_mm, out = -1, False, float("nan"), []
+        for motion in ref.motions:
+            if not motion.step:
+                previous_step = False
+                continue
+            k0 = motion.start
+            if not previous_step:             # a PRMS sequence starts at rest on its set point
+                sequence += 1
+                set_point_mm = float(np.round(ref.yr[k0 - 1, 0] / MM)) if k0 > 0 else float("nan")
+            previous_step = True
+            if k0 < pre or k0 + n >= log.n_cycles or motion.end_cycle - k0 < n:
+                continue
+            before, target = ref.yr[k0 - 1, 0], motion.trajectory.segments[0, 0, 0]
+            step = target - before
+            cycles = np.arange(k0, k0 + n + 1)
+            if abs(step) < MIN_STEP_MM * MM or not np.all(np.isfinite(y[k0 - pre:k0 + n + 1])):
+                continue
+            k, _ = ident.proportional_gain(u[cycles], ref.yr[cycles, 0] - y[cycles])
+            y0 = float(np.mean(y[k0 - pre:k0]))
+            t = (cycles - k0) * period
+            a3 = table_a3()
+            guess = a3[5, 1:4] * (1.0, 1.0, MM)                         # 150 mm, 0 kg: the start
+            gcl = ident.fit_closed_loop(t, y[cycles] - y0, step, period, k, tuple(guess))
+            plant = ident.open_loop_from_closed(gcl, k)
+            motion_fit = ident.motion_parameters(y[k0 - pre:k0 + n + 1], pl[k0 - pre:k0 + n + 1],
+                                                 ccfg.piston_area_m2, period, FILTER_HZ)
+            out.append({"sequence": sequence, "cycle": k0, "before_m": float(before), "step_m": float(step),
+                        "load_kg": load_at(log, k0), "k_v_m": k, "gcl": gcl, "plant": plant,
+                        "motion": motion_fit, "t": t, "dy": y[cycles] - y0, "set_point_mm": set_point_mm})
+        return out
+
+    def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
+        period = 1.0 / rate_hz
+        windows = self.windows(log, period)
+        ecfg = load_emulator_config()
+        a3 = table_a3()
+        points = sorted({(w["set_point_mm"], w["load_kg"]) for w in windows}, key=lambda p: (p[1], p[0]))
+        rows = []
+        for set_point, load in points:
+            mine = [w for w in windows if (w["set_point_mm"], w["load_kg"]) == (set_point, load)]
+            candidates = [w["plant"] for w in mine if w["plant"] is not None]
+            best, best_fit = None, -np.inf
+            for plant in candidates:          # thesis: the model that fits every register best
+                fits = [ident.fit_index(w["dy"], w["step_m"] * ident.closed_loop_step(
+                    *ident.closed_loop_of(plant, w["k_v_m"]), w["t"], period)) for w in mine]
+                if np.mean(fits) > best_fit:
+                    best, best_fit = plant, float(np.mean(fits))
+            motion = [w["motion"] for w in mine if w["motion"] is not None]
+            emu = linearise(ecfg, set_point, load or 0.0)
+            column = {0.0: 1, 3.0: 4, 6.0: 7}.get(load)
+            thesis = None if column is None else {
+                key: float(np.interp(set_point, a3[:, 0], a3[:, column + i])) for i, key in enumerate(("b0", "b1", "k01"))}
+            row = {"set_point_mm": set_point, "load_kg": load, "windows": len(mine),
+                   "gains_v_mm": sorted({round(w["k_v_m"] * MM, 3) for w in mine}),
+                   "window_fit_median": float(np.median([w["gcl"]["fit"] for w in mine])),
+                   "fit_best": best_fit,
+                   "identified": None if best is None else {"b0": best["b0"], "b1": best["b1"],
+                                                             "k01": best["k01"] / MM, "pole": best["pole"]},
+                   "emulator": {"b0": emu.b0, "b1": emu.b1, "k01": emu.k01, "m": moving_mass_kg(ecfg, load or 0.0)},
+                   "table_a3": thesis}
+            if motion:
+                row["motion"] = {"m_kg": float(np.median([m["m"] for m in motion])),
+                                 "sigma_ns_mm": float(np.median([m["sigma"] for m in motion])) * MM,
+                                 "fe_n": float(np.median([m["fe"] for m in motion]))}
+            rows.append(row)
+        checks = self._checks(rows)
+        metrics = {"points": rows, "windows": len(windows)}
+        figures = self._figures(windows, rows, out, period) if out is not None else []
+        return Analysis(metrics, self.thesis, checks, figures, [self._table(rows)])
+
+    def _checks(self, rows: list[dict]) -> list[Check]:
+        checks = [Check("identified points", len(rows) > 0 and all(r["identified"] for r in rows),
+                        f"{sum(1 for r in rows if r['identified'])} of {len(rows)}", "every (set point, load)")]
+        if not rows:
+            return checks
+        fits = [r["fit_best"] for r in rows]
+        checks.append(Check("fit index of the selected model (eq. 5.12), every point", min(fits) >= FIT_MIN,
+                            f"min {min(fits):.3f}", f">= {FIT_MIN} (thesis 0.85-0.94)"))
+        done = [r for r in rows if r["identified"]]
+        for key, tol in PLANT_TOLERANCE.items():
+            ratios = [r["identified"][key] / r["emulator"][key] for r in done]
+            checks.append(Check(f"{key} identified / emulator's linearisation", bool(ratios) and all(
+                abs(x - 1.0) <= tol for x in ratios), f"{min(ratios):.2f}-{max(ratios):.2f}" if ratios else "-",
+                f"1 +/- {tol:.2f}"))
+        with_mass = [r for r in rows if "motion" in r]
+        ratios = [r["motion"]["m_kg"] / r["emulator"]["m"] for r in with_mass]
+        checks.append(Check("m identified (eq. 5.7) / emulator's moving mass", bool(ratios) and all(
+            abs(x - 1.0) <= MASS_TOLERANCE for x in ratios), f"{min(ratios):.2f}-{max(ratios):.2f}" if ratios else "-",
+            f"1 +/- {MASS_TOLERANCE:.2f}"))
+        versus = [r for r in done if r["table_a3"]]
+        for key in ("b0", "b1", "k01"):
+            ratios = [r["identified"][key] / r["table_a3"][key] for r in versus]
+            checks.append(Check(f"{key} identified / Table A.3", bool(ratios) and all(
+                0.8 <= x <= 1.25 for x in ratios), f"{min(ratios):.2f}-{max(ratios):.2f}" if ratios else "-",
+                "0.8-1.25", required=False))
+        inside = [r for r in done if -65 * 1.1 <= r["identified"]["pole"][0] <= -45 * 0.9
+                  and 75 * 0.9 <= r["identified"]["pole"][1] <= 125 * 1.1]
+        checks.append(Check("complex pole pair in the thesis's region (+/-10 %)", len(inside) == len(done),
+                            f"{len(inside)} of {len(done)}", "Re [-65, -45], Im [75, 125] 1/s", required=False))
+        return checks
+
+    @staticmethod
+    def _table(rows: list[dict]) -> str:
+        lines = ["| Po mm | load kg | windows | K V/mm | fit | b0 id / emu / A.3 | b1 id / emu / A.3 | "
+                 "k01 (mm/s)/V id / emu / A.3 | m kg id / emu | sigma N s/mm | Fe N |", "|" + "---|" * 11]
+        for r in rows:
+            i, e, t = r["identified"] or {}, r["emulator"], r["table_a3"] or {}
+
+            def trio(key, fmt):
+                return " / ".join(format(v, fmt) if v is not None else "-" for v in (i.get(key), e[key], t.get(key)))
+            m = r.get("motion", {})
+            lines.append(f"| {r['set_point_mm']:.0f} | {r['load_kg']:g} | {r['windows']} | "
+                         f"{', '.join(str(g) for g in r['gains_v_mm'])} | {r['fit_best']:.3f} | {trio('b0', '.0f')} | "
+                         f"{trio('b1', '.1f')} | {trio('k01', '.1f')} | "
+                         f"{m.get('m_kg', float('nan')):.2f} / {e['m']:.2f} | {m.get('sigma_ns_mm', float('nan')):.3f} | "
+                         f"{m.get('fe_n', float('nan')):.1f} |")
+        return "\n".join(lines)
+
+    def _figures(self, windows, rows, out: Path, period: float) -> list[Figure]:
+        figures = []
+        if windows:
+            first = [w for w in windows if w["sequence"] == windows[0]["sequence"]]
+            fig, ax = plt.subplots(figsize=(8, 3.5))
+            for w in first:
+                t0 = w["cycle"] * period
+                ax.plot(t0 + w["t"], (w["before_m"] + w["step_m"]) * 1e3 + 0 * w["t"], color="tab:blue", lw=1)
+                ax.plot(t0 + w["t"], (w["dy"] + w["before_m"]) * 1e3, color="tab:red", lw=1)
+            ax.set_xlabel("t [s]")
+            ax.set_ylabel("y [mm]")
+            ax.set_title("PRMS windows: reference (blue), encoder (red)")
+            path = out / "sha_identification_prms.png"
+            save(fig, path)
+            figures.append(Figure(path.name, "the 150 ms windows of one PRMS sequence", "thesis Fig. 5.3"))
+        done = [r for r in rows if r["identified"]]
+        if done:
+            fig, axes = plt.subplots(1, 3, figsize=(12, 3.5))
+            for ax, key in zip(axes, ("b0", "b1", "k01")):
+                for load in sorted({r["load_kg"] for r in done}):
+                    mine = [r for r in done if r["load_kg"] == load]
+                    x = [r["set_point_mm"] for r in mine]
+                    c = colour_for_load(load)
+                    ax.plot(x, [r["identified"][key] for r in mine], "o", color=c, label=f"identified {load:g} kg")
+                    ax.plot(x, [r["emulator"][key] for r in mine], "-", color=c, label=f"emulator {load:g} kg")
+                    if all(r["table_a3"] for r in mine):
+                        ax.plot(x, [r["table_a3"][key] for r in mine], "--", color=c, label=f"Table A.3 {load:g} kg")
+                ax.set_xlabel("set point [mm]")
+                ax.set_title(key)
+            axes[0].legend(fontsize=6)
+            path = out / "sha_identification_plant.png"
+            save(fig, path)
+            figures.append(Figure(path.name, "b0, b1, k01: identified, emulator's linearisation, Table A.3",
+                                  "thesis Table A.3"))
+        return figures

@@ -1,0 +1,54 @@
+"""Chapter 5.2's identification steps (hil/identification.py) on synthetic data with a known
+answer: the gain of a P law, G(s) through Gcl and eq. 5.5, m/sigma/Fe by eq. 5.7."""
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from hil import identification as ident
+
+PERIOD_S = 0.002
+PLANT = {"b0": 11425.0, "b1": 106.0, "k01": 0.236}          # Table A.3, 150 mm, 0 kg (k01 in m/s/V)
+
+
+def test_proportional_gain_from_the_logged_valve_input():
+    rng = np.random.default_rng(1)
+    error = rng.uniform(-0.01, 0.01, 200)
+    u = 150.0 * error + 0.3 + rng.normal(0, 1e-3, 200)
+    k, u0 = ident.proportional_gain(u, error)
+    assert k == pytest.approx(150.0, rel=1e-3) and u0 == pytest.approx(0.3, abs=1e-3)
+
+
+@pytest.mark.parametrize("k_v_m", [150.0, 250.0])
+def test_closed_loop_fit_and_eq_5_5_recover_the_plant(k_v_m):
+    t = np.arange(76) * PERIOD_S
+    n0, a2, a1, a0 = ident.closed_loop_of(PLANT, k_v_m)
+    step = 0.01
+    dy = step * ident.closed_loop_step(n0, a2, a1, a0, t, PERIOD_S)
+    dy += np.random.default_rng(2).normal(0, 2e-5, len(t))
+    gcl = ident.fit_closed_loop(t, dy, step, PERIOD_S, k_v_m, (9000.0, 90.0, 0.2))
+    plant = ident.open_loop_from_closed(gcl, k_v_m)
+    assert gcl["fit"] > 0.99
+    for key in ("b0", "b1", "k01"):
+        assert plant[key] == pytest.approx(PLANT[key], rel=0.03), key
+
+
+def test_closed_loop_step_is_the_scipy_step_delayed():
+    t = np.arange(50) * PERIOD_S
+    y = ident.closed_loop_step(4e5, 106.0, 11425.0, 4e5, t, 2 * PERIOD_S)
+    _, reference = signal.step(signal.lti([4e5], [1.0, 106.0, 11425.0, 4e5]), T=t[:-2])
+    np.testing.assert_allclose(y[2:], reference, atol=1e-12)
+    assert y[0] == y[1] == 0.0
+
+
+def test_motion_parameters_from_eq_5_7():
+    t = np.arange(400) * PERIOD_S
+    y = 0.15 + 0.01 * np.sin(2 * np.pi * 3.0 * t) + 0.004 * np.sin(2 * np.pi * 7.0 * t)
+    v = np.gradient(y, PERIOD_S)
+    a = np.gradient(v, PERIOD_S)
+    m, sigma, fe, area = 2.3, 150.0, 22.0, 1.131e-4
+    pl = (m * a + sigma * v + fe) / area
+    result = ident.motion_parameters(y, pl, area, PERIOD_S, cutoff_hz=50.0)
+    assert result["m"] == pytest.approx(m, rel=0.05)
+    assert result["sigma"] == pytest.approx(sigma, rel=0.05)
+    assert result["fe"] == pytest.approx(fe, rel=0.02)
