@@ -106,7 +106,13 @@ SCENARIO_RUNS = {
     "sha-perturbation": ([], lambda m: all(len(r["load_changes"]) == 3 for r in m["runs"].values())
                          and set(m["runs"]) == {"pi", "adaptive"}),
     "pm-circle": ([], lambda m: set(m["controllers"]) == {"adaptive", "model-based"} and m["time_scale"] == 2.0),
+    "sha-identification": (["--short"], lambda m: {(r["set_point_mm"], r["load_kg"], tuple(r["gains_v_mm"]))
+                                                   for r in m["points"]} == {(p, load, (0.25, 0.3)) for p in (60.0, 210.0)
+                                                                             for load in (0.0, 6.0)}),
 }
+# the controller restarted this many times (a new process starts its E2E counters afresh:
+# each of its four cyclic messages may show one repeated/out-of-sequence frame, once)
+RESTARTS = {"sha-identification": 2}
 
 
 @pytest.mark.parametrize("scenario", list(SCENARIO_RUNS))
@@ -119,7 +125,8 @@ def test_scenario_runs_from_the_command_and_passes(scenario, tmp_path):
     assert doc["passed"] and doc["failure"] is None
     # sha-step asserts exactly 0; here a rare datagram the on-host multicast dropped under
     # load (seen once in a pm-circle run, 163k frames) must stay rare and be counted
-    assert doc["e2e_errors"] <= 1e-4 * doc["log"]["frames"], doc["e2e_errors"]
-    assert doc["log"]["lost_frames"] == 0
+    restarts = RESTARTS.get(scenario, 0)
+    assert doc["e2e_errors"] <= 1e-4 * doc["log"]["frames"] + 4 * restarts, doc["e2e_errors"]
+    assert doc["log"]["lost_frames"] <= restarts
     assert holds(doc["metrics"]), doc["metrics"]
     assert list(tmp_path.glob("*.png")) and "thesis" in (tmp_path / "report.md").read_text()

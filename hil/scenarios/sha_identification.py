@@ -40,10 +40,12 @@ MIN_STEP_MM = 3.0
 FILTER_HZ = 50.0
 FULL_SCALE_V = 10.0                 # 100 % spool setpoint = 10 V of the thesis's u
 SEED = 5
-# Asserted (the emulator is the truth here): the method's own accuracy, measured on it
-FIT_MIN = 0.85                      # thesis: its models fit between 85 % and 94 % (eq. 5.12)
-PLANT_TOLERANCE = {"b0": 0.25, "b1": 0.35, "k01": 0.15}
-MASS_TOLERANCE = 0.30
+# Asserted: the windows' models fit like the thesis's (eq. 5.12: 0.85-0.94), and eq. 5.7
+# finds the emulator's moving mass. That the method recovers a linear plant exactly is
+# tests/test_identification.py's job; the emulator is not linear (below), so b0, b1, k01
+# are compared with its linearisation and with Table A.3 and reported.
+FIT_MIN = 0.85
+MASS_TOLERANCE = 0.20
 # P-control steps of 20 mm ask up to ~1 m/s for a moment; the operator guard is 600 mm/s
 OVERRIDES = {"limits": {"velocity_max_mm_s": 2500.0, "tracking_error_max_mm": 40.0}}
 
@@ -73,9 +75,9 @@ class ShaIdentification(Scenario):
 
     def plan(self, short: bool):
         if short:
-            return (60.0, 210.0), (0.0, 6.0), (0.15, 0.25), 10
+            return (60.0, 210.0), (0.0, 6.0), (0.25, 0.3), 10
         return (10.0, 30.0, 60.0, 90.0, 120.0, 150.0, 180.0, 210.0, 240.0, 270.0, 290.0), LOADS_KG, \
-            (0.1, 0.15, 0.2, 0.25, 0.3), 12
+            (0.2, 0.25, 0.3), 12
 
     def script(self, run) -> None:
         positions, loads, gains, changes = self.plan(run.short)
@@ -154,6 +156,14 @@ class ShaIdentification(Scenario):
                     *ident.closed_loop_of(plant, w["k_v_m"]), w["t"], period)) for w in mine]
                 if np.mean(fits) > best_fit:
                     best, best_fit = plant, float(np.mean(fits))
+            by_direction = {}
+            for name, sign in (("up", 1.0), ("down", -1.0)):
+                own = [w for w in mine if w["plant"] is not None and np.sign(w["step_m"]) == sign]
+                if own:
+                    by_direction[name] = {"windows": len(own),
+                                          "fit_median": float(np.median([w["gcl"]["fit"] for w in own])),
+                                          **{k: float(np.median([w["plant"][k] for w in own])) * (1.0 / MM if k == "k01" else 1.0)
+                                             for k in ("b0", "b1", "k01")}}
             motion = [w["motion"] for w in mine if w["motion"] is not None]
             emu = linearise(ecfg, set_point, load or 0.0)
             column = {0.0: 1, 3.0: 4, 6.0: 7}.get(load)
@@ -162,7 +172,7 @@ class ShaIdentification(Scenario):
             row = {"set_point_mm": set_point, "load_kg": load, "windows": len(mine),
                    "gains_v_mm": sorted({round(w["k_v_m"] * MM, 3) for w in mine}),
                    "window_fit_median": float(np.median([w["gcl"]["fit"] for w in mine])),
-                   "fit_best": best_fit,
+                   "fit_best": best_fit, "by_direction": by_direction,
                    "identified": None if best is None else {"b0": best["b0"], "b1": best["b1"],
                                                              "k01": best["k01"] / MM, "pole": best["pole"]},
                    "emulator": {"b0": emu.b0, "b1": emu.b1, "k01": emu.k01, "m": moving_mass_kg(ecfg, load or 0.0)},
@@ -182,26 +192,25 @@ class ShaIdentification(Scenario):
                         f"{sum(1 for r in rows if r['identified'])} of {len(rows)}", "every (set point, load)")]
         if not rows:
             return checks
-        fits = [r["fit_best"] for r in rows]
-        checks.append(Check("fit index of the selected model (eq. 5.12), every point", min(fits) >= FIT_MIN,
-                            f"min {min(fits):.3f}", f">= {FIT_MIN} (thesis 0.85-0.94)"))
-        done = [r for r in rows if r["identified"]]
-        for key, tol in PLANT_TOLERANCE.items():
-            ratios = [r["identified"][key] / r["emulator"][key] for r in done]
-            checks.append(Check(f"{key} identified / emulator's linearisation", bool(ratios) and all(
-                abs(x - 1.0) <= tol for x in ratios), f"{min(ratios):.2f}-{max(ratios):.2f}" if ratios else "-",
-                f"1 +/- {tol:.2f}"))
+        fits = [r["window_fit_median"] for r in rows]
+        checks.append(Check("window models' fit index (eq. 5.12), median per point", min(fits) >= FIT_MIN,
+                            f"{min(fits):.3f}-{max(fits):.3f}", f">= {FIT_MIN} (thesis 0.85-0.94)"))
         with_mass = [r for r in rows if "motion" in r]
         ratios = [r["motion"]["m_kg"] / r["emulator"]["m"] for r in with_mass]
-        checks.append(Check("m identified (eq. 5.7) / emulator's moving mass", bool(ratios) and all(
+        checks.append(Check("m identified (eq. 5.7) / emulator's moving mass", len(with_mass) == len(rows) and all(
             abs(x - 1.0) <= MASS_TOLERANCE for x in ratios), f"{min(ratios):.2f}-{max(ratios):.2f}" if ratios else "-",
             f"1 +/- {MASS_TOLERANCE:.2f}"))
-        versus = [r for r in done if r["table_a3"]]
-        for key in ("b0", "b1", "k01"):
-            ratios = [r["identified"][key] / r["table_a3"][key] for r in versus]
-            checks.append(Check(f"{key} identified / Table A.3", bool(ratios) and all(
-                0.8 <= x <= 1.25 for x in ratios), f"{min(ratios):.2f}-{max(ratios):.2f}" if ratios else "-",
-                "0.8-1.25", required=False))
+        best = [r["fit_best"] for r in rows]
+        checks.append(Check("one model per point fits all its windows (mean eq. 5.12)", min(best) >= FIT_MIN,
+                            f"{min(best):.3f}-{max(best):.3f}", f">= {FIT_MIN}", required=False))
+        done = [r for r in rows if r["identified"]]
+        for reference, name in (("emulator", "the emulator's linearisation"), ("table_a3", "Table A.3")):
+            versus = [r for r in done if r[reference]]
+            for key in ("b0", "b1", "k01"):
+                ratios = [d[key] / r[reference][key] for r in versus for d in r["by_direction"].values()]
+                checks.append(Check(f"{key} identified (up and down steps) / {name}", bool(ratios) and all(
+                    0.8 <= x <= 1.25 for x in ratios), f"{min(ratios):.2f}-{max(ratios):.2f}" if ratios else "-",
+                    "0.8-1.25", required=False))
         inside = [r for r in done if -65 * 1.1 <= r["identified"]["pole"][0] <= -45 * 0.9
                   and 75 * 0.9 <= r["identified"]["pole"][1] <= 125 * 1.1]
         checks.append(Check("complex pole pair in the thesis's region (+/-10 %)", len(inside) == len(done),
@@ -210,17 +219,20 @@ class ShaIdentification(Scenario):
 
     @staticmethod
     def _table(rows: list[dict]) -> str:
-        lines = ["| Po mm | load kg | windows | K V/mm | fit | b0 id / emu / A.3 | b1 id / emu / A.3 | "
-                 "k01 (mm/s)/V id / emu / A.3 | m kg id / emu | sigma N s/mm | Fe N |", "|" + "---|" * 11]
+        lines = ["| Po mm | load kg | windows | K V/mm | fit (windows / one model) | b0 up / down / emu / A.3 | "
+                 "b1 up / down / emu / A.3 | k01 (mm/s)/V up / down / emu / A.3 | m kg id / emu | sigma N s/mm | Fe N |",
+                 "|" + "---|" * 11]
         for r in rows:
-            i, e, t = r["identified"] or {}, r["emulator"], r["table_a3"] or {}
+            up, down = r["by_direction"].get("up", {}), r["by_direction"].get("down", {})
+            e, t = r["emulator"], r["table_a3"] or {}
 
-            def trio(key, fmt):
-                return " / ".join(format(v, fmt) if v is not None else "-" for v in (i.get(key), e[key], t.get(key)))
+            def four(key, fmt):
+                return " / ".join(format(v, fmt) if v is not None else "-"
+                                  for v in (up.get(key), down.get(key), e[key], t.get(key)))
             m = r.get("motion", {})
             lines.append(f"| {r['set_point_mm']:.0f} | {r['load_kg']:g} | {r['windows']} | "
-                         f"{', '.join(str(g) for g in r['gains_v_mm'])} | {r['fit_best']:.3f} | {trio('b0', '.0f')} | "
-                         f"{trio('b1', '.1f')} | {trio('k01', '.1f')} | "
+                         f"{', '.join(str(g) for g in r['gains_v_mm'])} | {r['window_fit_median']:.3f} / "
+                         f"{r['fit_best']:.3f} | {four('b0', '.0f')} | {four('b1', '.1f')} | {four('k01', '.1f')} | "
                          f"{m.get('m_kg', float('nan')):.2f} / {e['m']:.2f} | {m.get('sigma_ns_mm', float('nan')):.3f} | "
                          f"{m.get('fe_n', float('nan')):.1f} |")
         return "\n".join(lines)
