@@ -10,7 +10,7 @@ PACING ?= realtime
 demo: $(STAMP)
 	$(VENV)/bin/hydrapod hil run pm-circle --pacing $(PACING) --bus default --out hil-out
 
-.PHONY: demo test venv bus-load socketcan-check clean
+.PHONY: demo test venv vm-deps bus-load socketcan-check clean
 
 venv: $(STAMP)
 
@@ -22,7 +22,15 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -e '.[test]'
 	touch $(STAMP)
 
-test: $(STAMP)
+# The SocketCAN test (tests/test_socketcan_vm.py) boots a Debian kernel in qemu: install
+# what it needs when missing (root, or sudo).
+VM_DEBS  = qemu-system-x86 linux-image-amd64 busybox-static
+SUDO    := $(shell test "$$(id -u)" = 0 || echo sudo)
+vm-deps:
+	@dpkg -s $(VM_DEBS) >/dev/null 2>&1 || { $(SUDO) apt-get update && \
+	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y --no-install-recommends $(VM_DEBS); }
+
+test: $(STAMP) vm-deps
 	$(PY) -m pytest
 
 bus-load: $(STAMP)

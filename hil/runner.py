@@ -29,6 +29,11 @@ from .scenario import Scenario
 
 LOG_NAME = "run.blf"
 LOCKSTEP_EMULATOR_SYNC_TIMEOUT_PERIODS = 5000      # wall clock: > the controller's 50 ms lockstep wait
+# Lockstep runs in bus time, as fast as the machine goes; the nodes' heartbeats still come
+# every 100 ms of wall clock. On a slow machine (the SocketCAN VM without KVM) a busy
+# emulator sent one 0.35 s late and the controller faulted HEARTBEAT_LOST. A dead node is
+# still found, in 10 s.
+LOCKSTEP_HEARTBEAT_TIMEOUT_MS = 10000.0
 # Realtime on a shared, non-RT host: one vCPU alone stalls 4-27 ms a few times a minute
 # (measured with a SCHED_FIFO 2 ms sleeper on each CPU). The valves' own 3-period watchdog
 # then trips on the machine, not on the controller. HIL runs widen it; the realtime
@@ -118,6 +123,8 @@ class Run:
         merged = {section: dict(values) for section, values in self.scenario.controller_overrides.items()}
         for section, values in (overrides or {}).items():
             merged.setdefault(section, {}).update(values)
+        if self.pacing == "lockstep":
+            merged.setdefault("timing", {}).setdefault("heartbeat_timeout_ms", LOCKSTEP_HEARTBEAT_TIMEOUT_MS)
         name = "controller"
         config = self.out / f"{name}.toml"
         config.write_text(_toml(merged))
