@@ -19,6 +19,9 @@ from protocol.outbox import Outbox
 from protocol.values import EMU_SET_LOAD, KIND_HOST_CMD, KIND_WAYPOINT
 
 
+CONTROLLER_MESSAGES = ["SYNC", "CTRL_STATUS", "CTRL_ACK"]    # what the host reads: all the controller's
+
+
 class HostError(RuntimeError):
     """The run cannot go on: no bus traffic, a refused command, a state never reached."""
 
@@ -30,7 +33,7 @@ class Host:
         self.writer = can.Logger(log_path)
         self.watch = watch                      # raises when a child died (called every ~0.2 s)
         self.stall_timeout_s = stall_timeout_s
-        self.decoder = FrameDecoder(["SYNC", "CTRL_STATUS", "CTRL_ACK"])
+        self.decoder = FrameDecoder(CONTROLLER_MESSAGES)
         self.syncs = 0
         self.state: State | None = None
         self.fault_code = 0
@@ -48,6 +51,12 @@ class Host:
         self._last_watch = 0.0
         self._status = CODECS["CTRL_STATUS"].index
         self._ack = CODECS["CTRL_ACK"].index
+
+    def new_controller(self) -> None:
+        """A new controller process: its E2E counters start afresh, so the checks of the old
+        one's must not reject its first frames (its first CTRL_ACK was lost that way)."""
+        self.decoder = FrameDecoder(CONTROLLER_MESSAGES)
+        self.state = None
 
     # -- receive ---------------------------------------------------------------------------
     def pump(self, timeout_s: float) -> can.Message | None:

@@ -135,7 +135,7 @@ class Run:
         child.start()
         self.children.append(child)
         self.controller = child
-        self.host.state = None
+        self.host.new_controller()
         # FAULT ends the wait too: a controller that faults while starting never gets READY
         self.host.wait_state(State.READY, State.FAULT, max_cycles=10**9, wall_timeout_s=self.options.start_timeout_s)
         if self.host.state is State.FAULT:

@@ -37,6 +37,7 @@ HOLD_S = (0.3, 0.6)
 WINDOW_S = 0.15                     # chapter 5.4.1: 150 ms after each change
 PRE_S = 0.02                        # rest before the change (y0, and anchors Fe)
 MIN_STEP_MM = 3.0
+END_MARGIN_MM = 5.0                 # levels stay this far inside the stroke (the controller's guard is 1 mm)
 FILTER_HZ = 50.0
 FULL_SCALE_V = 10.0                 # 100 % spool setpoint = 10 V of the thesis's u
 SEED = 5
@@ -50,12 +51,12 @@ MASS_TOLERANCE = 0.20
 OVERRIDES = {"limits": {"velocity_max_mm_s": 2500.0, "tracking_error_max_mm": 40.0}}
 
 
-def prms(rng: np.random.Generator, n: int) -> list[tuple[float, float]]:
+def prms(rng: np.random.Generator, n: int, levels=LEVELS_MM) -> list[tuple[float, float]]:
     """n (level mm, hold s) pairs; consecutive levels 5-15 mm apart (a transient each, inside
     the 20 mm step guard)."""
     out, last = [], 0.0
     for _ in range(n):
-        level = float(rng.choice([v for v in LEVELS_MM if 5.0 <= abs(v - last) <= 15.0]))
+        level = float(rng.choice([v for v in levels if 5.0 <= abs(v - last) <= 15.0]))
         out.append((level, 2e-3 * round(float(rng.uniform(*HOLD_S)) / 2e-3)))   # whole ms, ta = hold / 2 too
         last = level
     return out
@@ -82,6 +83,7 @@ class ShaIdentification(Scenario):
     def script(self, run) -> None:
         positions, loads, gains, changes = self.plan(run.short)
         rng = np.random.default_rng(SEED)
+        stroke_mm = load_controller_config(None).stroke_m / MM
         here = 0.150
         for gain in gains:
             run.stop_controller()
@@ -92,7 +94,9 @@ class ShaIdentification(Scenario):
                     move_stroke(run, position * MM, settle_s=0.5, from_m=here)
                     here = position * MM
                     total = 0.0
-                    for level, hold in prms(rng, changes):
+                    # the thesis's 10 and 290 mm points reach its end stops; ours stay END_MARGIN_MM inside
+                    levels = [v for v in LEVELS_MM if END_MARGIN_MM <= position + v <= stroke_mm - END_MARGIN_MM]
+                    for level, hold in prms(rng, changes, levels):
                         here = (position + level) * MM
                         run.host.waypoint((0.0, 0.0, here), segment_time_s=hold, accel_time_s=hold / 2,
                                           flags=FLAG_LAST | FLAG_START | FLAG_STEP)
@@ -127,6 +131,8 @@ class ShaIdentification(Scenario):
             if abs(step) < MIN_STEP_MM * MM or not np.all(np.isfinite(y[k0 - pre:k0 + n + 1])):
                 continue
             k, _ = ident.proportional_gain(u[cycles], ref.yr[cycles, 0] - y[cycles])
+            if not (np.isfinite(k) and k > 0.0):
+                continue                      # not a P loop here (valves held, saturated, faulted)
             y0 = float(np.mean(y[k0 - pre:k0]))
             t = (cycles - k0) * period
             a3 = table_a3()
