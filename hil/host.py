@@ -55,7 +55,7 @@ class Host:
     def new_controller(self) -> None:
         """A new controller process: its E2E counters start afresh, so the checks of the old
         one's must not reject its first frames (its first CTRL_ACK was lost that way)."""
-        self.decoder = FrameDecoder(CONTROLLER_MESSAGES)
+        self.decoder.restart_sender(CODECS["NMT"].schedule.sender)
         self.state = None
 
     # -- receive ---------------------------------------------------------------------------

@@ -21,6 +21,7 @@ from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.errors import UserInputError
 
 LOG_SUFFIXES = (".blf", ".asc")
+NMT_START = 1
 
 
 @dataclass
@@ -125,7 +126,7 @@ def _assign_cycles(frames: list[tuple]) -> np.ndarray:
     controller's frames follow their SYNC; the emulator's cyclic frames belong to the cycle
     of the EMU_TRUTH that closes them (it carries the SYNC counter's low 4 bits).
     """
-    sync_id = CODECS["SYNC"].frame_id
+    sync_id, nmt_id = CODECS["SYNC"].frame_id, CODECS["NMT"].frame_id
     truth_id = CODECS["EMU_TRUTH"].frame_id
     overflow = sync_counter_overflow()
     n = len(frames)
@@ -175,7 +176,7 @@ def read_log(path: str | Path) -> LogData:
     rows: dict[str, list] = {name: [] for name in CODECS}
     events: list[Event] = []
     sync_times: list[tuple] = []
-    sync_id = CODECS["SYNC"].frame_id
+    sync_id, nmt_id = CODECS["SYNC"].frame_id, CODECS["NMT"].frame_id
     event_ids = {CODECS[n].frame_id for n in EVENT_MESSAGES}
     name_of_id = {codec.frame_id: name for name, codec in CODECS.items()}
     cycle = -1
@@ -187,6 +188,8 @@ def read_log(path: str | Path) -> LogData:
         if status is not RxStatus.OK:
             continue
         cycle = int(cycles[i])
+        if frame_id == nmt_id and decoder.values["NMT"][0] == NMT_START:
+            decoder.restart_sender(CODECS["NMT"].schedule.sender)     # a (re)started controller
         if frame_id == sync_id:
             sync_times.append((cycle, timestamp))
         name = name_of_id[frame_id]

@@ -274,6 +274,14 @@ class FrameDecoder:
         self.last_status[slot] = status
         return status
 
+    def restart_sender(self, sender: str) -> None:
+        """A node restarted (a new process, a power cycle): its alive counters start afresh,
+        so the next frame of each of its messages is taken as the first, not as out of
+        sequence. The NMT master restarting shows as an NMT start on the bus."""
+        for slot, codec in enumerate(self.codecs):
+            if codec.schedule.sender == sender:
+                self._last_counter[slot] = -1
+
     def receive_message(self, msg) -> RxStatus:
         """`receive` for a `can.Message`; extended, remote, error and FD frames are not ours."""
         if msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame or msg.is_fd:

@@ -243,3 +243,25 @@ def test_missing_frames_become_no_new_data():
     slots = [decoder.slot[n] for n in names]
     assert decoder.counts[slots, RxStatus.NO_NEW_DATA].tolist() == [0, 0, 0, 0, 1, 2]
     assert decoder.last_status[slots[-1]] == RxStatus.NO_NEW_DATA
+
+
+@given(sent_before=st.integers(1, 40), sent_after=st.integers(1, 3))
+@settings(max_examples=60, deadline=None)
+def test_a_restarted_sender_is_taken_afresh_and_only_its_messages(sent_before, sent_after):
+    """After `restart_sender`, the new process's first frame (counter from 1 again) is OK,
+    whatever the old one had reached; another node's counters are still checked."""
+    ack, leg = CODECS["CTRL_ACK"], CODECS["LEG_STATE_1"]
+    decoder = FrameDecoder(["CTRL_ACK", "LEG_STATE_1"])
+    old, leg_buf = ack.new_buffer(), leg.new_buffer()
+    ack_values, leg_values = ack.new_values(), leg.new_values()
+    for _ in range(sent_before):
+        ack.encode_into(ack_values, old)
+        assert decoder.receive(ack.frame_id, old) is RxStatus.OK
+    leg.encode_into(leg_values, leg_buf)
+    assert decoder.receive(leg.frame_id, leg_buf) is RxStatus.OK
+    decoder.restart_sender(ack.schedule.sender)
+    new = ack.new_buffer()                                  # the restarted process's own buffer
+    for _ in range(sent_after):
+        ack.encode_into(ack_values, new)
+    assert decoder.receive(ack.frame_id, new) is RxStatus.OK
+    assert decoder.receive(leg.frame_id, leg_buf) is RxStatus.REPEATED      # not the controller's

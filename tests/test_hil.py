@@ -110,9 +110,6 @@ SCENARIO_RUNS = {
                                                    for r in m["points"]} == {(p, load, (0.25, 0.3)) for p in (60.0, 210.0)
                                                                              for load in (0.0, 6.0)}),
 }
-# the controller restarted this many times (a new process starts its E2E counters afresh:
-# each of its four cyclic messages may show one repeated/out-of-sequence frame, once)
-RESTARTS = {"sha-identification": 2}
 
 
 @pytest.mark.parametrize("scenario", list(SCENARIO_RUNS))
@@ -125,8 +122,9 @@ def test_scenario_runs_from_the_command_and_passes(scenario, tmp_path):
     assert doc["passed"] and doc["failure"] is None
     # sha-step asserts exactly 0; here a rare datagram the on-host multicast dropped under
     # load (seen once in a pm-circle run, 163k frames) must stay rare and be counted
-    restarts = RESTARTS.get(scenario, 0)
-    assert doc["e2e_errors"] <= 1e-4 * doc["log"]["frames"] + 4 * restarts, doc["e2e_errors"]
-    assert doc["log"]["lost_frames"] <= restarts
+    # (sha-identification restarts the controller per gain: the log reader takes a new
+    # controller's counters afresh at its NMT start, so that adds no error either)
+    assert doc["e2e_errors"] <= 1e-4 * doc["log"]["frames"], doc["e2e_errors"]
+    assert doc["log"]["lost_frames"] == 0
     assert holds(doc["metrics"]), doc["metrics"]
     assert list(tmp_path.glob("*.png")) and "thesis" in (tmp_path / "report.md").read_text()
