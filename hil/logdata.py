@@ -126,7 +126,7 @@ def _assign_cycles(frames: list[tuple]) -> np.ndarray:
     controller's frames follow their SYNC; the emulator's cyclic frames belong to the cycle
     of the EMU_TRUTH that closes them (it carries the SYNC counter's low 4 bits).
     """
-    sync_id, nmt_id = CODECS["SYNC"].frame_id, CODECS["NMT"].frame_id
+    sync_id = CODECS["SYNC"].frame_id
     truth_id = CODECS["EMU_TRUTH"].frame_id
     overflow = sync_counter_overflow()
     n = len(frames)

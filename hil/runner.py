@@ -34,10 +34,10 @@ LOCKSTEP_EMULATOR_SYNC_TIMEOUT_PERIODS = 5000      # wall clock: > the controlle
 # emulator sent one 0.35 s late and the controller faulted HEARTBEAT_LOST. A dead node is
 # still found, in 10 s.
 LOCKSTEP_HEARTBEAT_TIMEOUT_MS = 10000.0
-# Realtime on a shared, non-RT host: one vCPU alone stalls 4-27 ms a few times a minute
-# (measured with a SCHED_FIFO 2 ms sleeper on each CPU). The valves' own 3-period watchdog
-# then trips on the machine, not on the controller. HIL runs widen it; the realtime
-# scenarios report every SYNC gap the 3-period watchdog would have tripped on.
+# Realtime on a shared, non-RT host: a SCHED_FIFO 2 ms sleeper here wakes 4-27 ms late a few
+# times a minute, mostly on both CPUs at once, sometimes on one alone. The valves' own
+# 3-period watchdog then trips on the machine, not on the controller. HIL runs widen it;
+# the realtime scenarios report every SYNC gap the 3-period watchdog would have tripped on.
 REALTIME_EMULATOR_SYNC_TIMEOUT_PERIODS = 25.0
 START_TIMEOUT_S = 90.0                             # imports, kernels, MuJoCo, activation
 
@@ -139,8 +139,10 @@ class Run:
         # FAULT ends the wait too: a controller that faults while starting never gets READY
         self.host.wait_state(State.READY, State.FAULT, max_cycles=10**9, wall_timeout_s=self.options.start_timeout_s)
         if self.host.state is State.FAULT:
-            code = self.host.fault_code
-            name = Fault(code).name if code in Fault._value2member_map_ else f"code {code}"
+            try:
+                name = Fault(self.host.fault_code).name
+            except ValueError:
+                name = f"code {self.host.fault_code}"
             raise HostError(f"{controller}: the controller went to FAULT while starting ({name})")
 
     def stop_controller(self) -> None:

@@ -392,9 +392,10 @@ class Emulator:
         """The emulated nodes' timers stand still for `seconds` (this process was not running).
 
         A real valve's SYNC watchdog is a hardware timer; ours is this process's wall clock.
-        When the whole host stalls (measured here: 3-27 ms freezes of both CPUs at once, a few
-        per minute) the controller could not send SYNC and we could not watch for it either.
-        Without the pause, every such freeze read as a lost SYNC and faulted the valves.
+        When the whole host stalls (measured here with a SCHED_FIFO sleeper on each CPU: 3-10 ms
+        late wake-ups, mostly on both CPUs at once, a few per minute) the controller cannot send
+        SYNC and we cannot watch for it either; a freeze longer than the watchdog would read as
+        a lost SYNC and fault the valves. A controller that stalls alone still trips it.
         """
         self.counters.host_stalls += 1
         self.counters.host_stall_max_s = max(self.counters.host_stall_max_s, seconds)
