@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from firmware_py.supervisor import Fault
 from protocol.values import EMU_SET_LOAD, FLAG_LAST, FLAG_START
 
 from ..logdata import LogData
@@ -45,11 +46,20 @@ def sine_waypoints(run, w_rad_s: float, periods: int = 1) -> float:
     return tm * n
 
 
+def fault_name(code: int) -> str:
+    try:
+        return Fault(code).name
+    except ValueError:
+        return f"fault {code}"
+
+
 def sine_runs(log: LogData, period_s: float) -> list[dict]:
     """Each sine chunk in the log (>= POINTS_PER_PERIOD segments): controller, load, w and
     the per-cycle error y_r - y over it."""
     ref = rebuild(log, "testbench", period_s)
     y = log.leg_positions(1)[:, 0]
+    status = log.get("CTRL_STATUS")
+    faulted = status.cycle[status["FAULT_CODE"] != 0]
     runs = []
     for motion in ref.motions:
         segments = motion.trajectory.segments[:, 0]
@@ -57,12 +67,16 @@ def sine_runs(log: LogData, period_s: float) -> list[dict]:
             continue
         tm = float(np.median(segments[:, 6]))                   # segment times
         w = 2 * math.pi / (tm * POINTS_PER_PERIOD)
-        window = slice(motion.start, motion.end_cycle + 1)
+        # a sine cut short by a fault: its error up to the fault
+        fault = faulted[(faulted >= motion.start) & (faulted <= motion.end_cycle)]
+        end = int(fault[0]) if len(fault) else motion.end_cycle + 1
+        window = slice(motion.start, end)
         error = ref.yr[window, 0] - y[window]
         t = (np.arange(window.start, window.stop) - motion.start) * period_s
         ideal = (CENTRE_MM - AMPLITUDE_MM * np.cos(w * t)) * MM
         runs.append({"controller": controller_at(log, motion.start), "load_kg": load_at(log, motion.start),
                      "w_rad_s": round(w, 3), "start": motion.start, "_t": t, "_error": error,
+                     "fault": int(status["FAULT_CODE"][status.cycle == fault[0]][0]) if len(fault) else 0,
                      "_yr": ref.yr[window, 0], "_y": y[window],
                      "max_error_mm": float(np.nanmax(np.abs(error)) * 1e3),
                      "rms_error_mm": float(np.sqrt(np.nanmean(error ** 2)) * 1e3),
@@ -133,11 +147,16 @@ class ShaTracking(Scenario):
             ad_mean = float(np.mean([summary["adaptive"][w] for w in common]))
             checks.append(Check("adaptive better than PI (mean over w of the max |error|)", ad_mean < pi_mean,
                                 f"{ad_mean:.2f} vs {pi_mean:.2f} mm", "thesis: adaptive better", required=False))
+        cut = [f"{r['controller']} {r['load_kg']:g} kg w {r['w_rad_s']:g} ({fault_name(r['fault'])})"
+               for r in runs if r["fault"]]
+        checks.append(Check("no sine cut short by a fault", not cut, "; ".join(cut) or "none", "none",
+                            required=False))
         figures = [self._plot(runs, out)] if out is not None and runs else []
-        table = ["| controller | load kg | w rad/s | max error mm | rms error mm | reference vs sine mm |",
-                 "|---|---|---|---|---|---|"]
+        table = ["| controller | load kg | w rad/s | max error mm | rms error mm | reference vs sine mm | fault |",
+                 "|---|---|---|---|---|---|---|"]
         table += [f"| {r['controller']} | {r['load_kg']} | {r['w_rad_s']:g} | {r['max_error_mm']:.2f} | "
-                  f"{r['rms_error_mm']:.2f} | {r['reference_vs_sine_mm']:.2f} |" for r in runs]
+                  f"{r['rms_error_mm']:.2f} | {r['reference_vs_sine_mm']:.2f} | "
+                  f"{fault_name(r['fault']) if r['fault'] else ''} |" for r in runs]
         metrics = {"runs": [{k: v for k, v in r.items() if not k.startswith("_")} for r in runs],
                    "max_error_mm_by_w": summary}
         return Analysis(metrics, self.thesis, checks, figures, ["\n".join(table)])
