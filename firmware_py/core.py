@@ -30,6 +30,9 @@ from .trajectory import JointTrajectory, hold_at, sls_coefficients, through_poin
 RIGS = ("testbench", "hexapod")
 VALVE_FAULT_STATES = (4, 5)            # CiA 408 FAULT_HOLD, FAULT_DISABLED
 RESET_GRACE_CYCLES = 4                 # valves need a SYNC or two to leave FAULT after R
+RECOVERY_INSET_M = 2e-3                # enabled inside the end-stop guard: held this far inside it
+RECOVERY_CYCLES = 500                  # ... and back inside the guard within 1 s (500 Hz)
+RECOVERY_SLACK_M = 0.5e-3              # ... never more than this further out (encoder steps, noise)
 
 
 class ControllerCore:
@@ -82,6 +85,11 @@ class ControllerCore:
         self.vr = np.zeros(n)
         self.ar = np.zeros(n)
         self.hold_position = np.zeros(n)
+        # enabled with a leg inside the end-stop guard (after a POSITION_LIMIT fault): it is
+        # held just inside the guard and may come back, but never go further out
+        self.recovering = np.zeros(n, dtype=bool)
+        self.recovery_from = np.zeros(n)
+        self.recovery_cycles = 0
         self.trajectory: JointTrajectory | None = None
         self.trajectory_start_cycle = 0        # the trajectory's clock: t = (cycles - this) * period
         self.trajectory_seqs: list[int] = []
@@ -133,6 +141,17 @@ class ControllerCore:
         self.hold_position[:] = position
         self.trajectory = None
 
+    def _inside_guard(self, position: np.ndarray) -> np.ndarray:
+        """`position` moved RECOVERY_INSET inside the end-stop guard where it is not; those legs
+        are marked recovering (the POSITION_LIMIT check lets them come back for a while)."""
+        low = self.cfg.stroke_margin_m + RECOVERY_INSET_M
+        high = self.stroke_m - low
+        target = np.clip(position, low, high)
+        np.not_equal(target, position, out=self.recovering)
+        self.recovery_from[:] = position
+        self.recovery_cycles = RECOVERY_CYCLES if self.recovering.any() else 0
+        return target
+
     def _move(self, target, speed_m_s: float, accel_time_s: float) -> None:
         """Point-to-point SLS from the current reference to `target` (joint space)."""
         start = self.yr.copy() if self.initialised else self.meas_y.copy()
@@ -165,7 +184,7 @@ class ControllerCore:
         action, self.sup.action = self.sup.action, Action.NONE
         cfg = self.cfg
         if action is Action.ENABLE:
-            self._start_hold(self.meas_y)
+            self._start_hold(self._inside_guard(self.meas_y))
             self.joint.st[:, ST_INTEGRAL] = 0.0
         elif action in (Action.HOME, Action.PARK):
             target = self.park_strokes if action is Action.PARK else self.home_strokes
@@ -430,6 +449,21 @@ class ControllerCore:
         self._limits(active)
         self._write_outputs()
 
+    def _position_limit(self, margin: float) -> None:
+        """A leg inside the end-stop guard faults, unless it is coming back from where it was
+        enabled (within RECOVERY_CYCLES and never further out)."""
+        for leg in range(self.n):
+            y = self.meas_y[leg]
+            if margin <= y <= self.stroke_m - margin:
+                self.recovering[leg] = False
+                continue
+            edge = margin if y < margin else self.stroke_m - margin
+            coming_back = (self.recovering[leg] and self.recovery_cycles > 0
+                           and abs(y - edge) <= abs(self.recovery_from[leg] - edge) + RECOVERY_SLACK_M)
+            if not coming_back:
+                self.sup.fault(Fault.POSITION_LIMIT)
+                return
+
     def _limits(self, active: bool) -> None:
         cfg, sup, joint = self.cfg, self.sup, self.joint
         u = joint.st[:, ST_U]
@@ -444,8 +478,13 @@ class ControllerCore:
         if not active:
             return
         margin = cfg.stroke_margin_m
+        if self.recovery_cycles > 0:
+            self.recovery_cycles -= 1
         if self.meas_y.min() < margin or self.meas_y.max() > self.stroke_m - margin:
-            sup.fault(Fault.POSITION_LIMIT)
+            self._position_limit(margin)
+        elif self.recovery_cycles > 0:
+            self.recovering[:] = False
+            self.recovery_cycles = 0
         np.abs(joint.kalman_x[:, 1], out=self._abs)
         if self._abs.max() > cfg.velocity_max_m_s:
             sup.fault(Fault.VELOCITY_LIMIT)

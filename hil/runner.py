@@ -199,6 +199,16 @@ class Run:
         self.host.wait_until(lambda: self.host.controller == CONTROLLER_NAMES[controller], 200,
                              what=f"controller {controller} in CTRL_STATUS")
 
+    def recover_from_fault(self) -> None:
+        """After a FAULT: RESET (valves hold), drop what was queued, ENABLE (a leg left on an
+        end stop is brought back inside the guard); READY again."""
+        self.host.command(Command.RESET)
+        self.host.wait_state(State.IDLE, max_cycles=self.cycles(2.0))
+        self.host.command(Command.CLEAR_WAYPOINTS)
+        self.host.command(Command.ENABLE)
+        self.host.wait_state(State.READY, max_cycles=self.cycles(2.0))
+        self.wait_s(1.0)
+
     def wait_motion_done(self, max_s: float) -> None:
         """Until the controller is back in READY after a motion (CTRL_STATUS every 16 SYNC)."""
         self.host.wait_until(lambda: self.host.state is State.RUNNING or self.host.state is State.HOMING,

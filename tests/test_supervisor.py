@@ -235,3 +235,33 @@ def test_waypoint_commits_wait_for_the_host_work_slot_and_estop_does_not():
     assert [a[:2] for a in loop.acks] == [(KIND_WAYPOINT, 0), (KIND_HOST_CMD, 2), (KIND_WAYPOINT, 1),
                                           (KIND_HOST_CMD, 1)]
     assert loop.acks[2][2] == int(Ack.BAD_STATE) and not loop.host_work    # after the E-stop
+
+
+def test_reset_and_enable_at_the_end_stop_comes_back_inside_the_guard():
+    """After a POSITION_LIMIT at the end stop, RESET + ENABLE holds just inside the guard and
+    brings the leg back; it does not re-fault at once (the only way off the stop)."""
+    loop, core, bus = make_loop("testbench", "pi")
+    cycles(loop, 20)
+    bus.y[0] = core.stroke_m - 0.4e-3                      # the piston rests on its top stop
+    cycles(loop, 3)
+    assert core.sup.fault_code is Fault.POSITION_LIMIT
+    assert core.host_command(Command.RESET, 0) is Ack.ACCEPTED
+    cycles(loop, 5)
+    assert core.host_command(Command.ENABLE, 0) is Ack.ACCEPTED
+    assert core.recovering[0] and core.hold_position[0] < core.stroke_m - core.cfg.stroke_margin_m
+    cycles(loop, 400)
+    assert core.state is State.READY and core.sup.fault_code is Fault.NONE
+    assert bus.y[0] < core.stroke_m - core.cfg.stroke_margin_m and not core.recovering[0]
+
+
+def test_a_recovering_leg_that_goes_further_out_faults():
+    loop, core, bus = make_loop("testbench", "pi")
+    cycles(loop, 20)
+    bus.y[0] = core.stroke_m - 0.6e-3
+    cycles(loop, 3)
+    core.host_command(Command.RESET, 0)
+    cycles(loop, 5)
+    core.host_command(Command.ENABLE, 0)
+    bus.y[0] = core.stroke_m - 0.05e-3                     # pushed on, past the slack
+    cycles(loop, 2)
+    assert core.sup.fault_code is Fault.POSITION_LIMIT
