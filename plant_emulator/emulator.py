@@ -234,6 +234,8 @@ class Emulator:
             self._emu_ctrl(*(self.decoder.values["EMU_CTRL"][2:]))
 
     def _nmt(self, command: int, node: int) -> None:
+        if command == NMT_START:      # the NMT master (re)started: its alive counters start afresh
+            self.decoder.restart_sender(CODECS["NMT"].schedule.sender)
         targets = self.nodes if node == 0 else [node] if node in self.nmt else []
         for n in targets:
             if command == NMT_START:

@@ -96,3 +96,31 @@ def test_a_silent_controller_still_trips_the_watchdog(cfg):
     assert emulator.sync_lost_reported
     watchdog_s = cfg.sync_timeout_periods * PERIOD_S
     assert watchdog_s < emulator.clock() - emulator.last_sync_time <= watchdog_s + PERIOD_S
+
+
+def valve_command_frames(box, n):
+    """n VALVE_CMD_1 frames from one sender (its alive counter running)."""
+    frames = []
+    for _ in range(n):
+        assert box.encode()
+        frames.append(("frame", copy.deepcopy(box.message)))
+    return frames
+
+
+def nmt_start_frame():
+    box = Outbox("NMT")
+    box.values[:] = (1, 0)                                   # start, all nodes
+    assert box.encode()
+    return ("frame", copy.deepcopy(box.message))
+
+
+def test_a_restarted_controller_is_not_an_e2e_error_for_the_valves(cfg):
+    first, second = Outbox("VALVE_CMD_1"), Outbox("VALVE_CMD_1")    # two controller processes
+    script = ([nmt_start_frame()] + valve_command_frames(first, 7)
+              + [nmt_start_frame()] + valve_command_frames(second, 3) + [("quiet",)])
+    emulator = run_script(cfg, script)
+    assert emulator.counters.e2e_errors == 0
+    # without the NMT start in between, the same restart is caught
+    emulator = run_script(cfg, [nmt_start_frame()] + valve_command_frames(Outbox("VALVE_CMD_1"), 7)
+                          + valve_command_frames(Outbox("VALVE_CMD_1"), 3) + [("quiet",)])
+    assert emulator.counters.e2e_errors >= 1
