@@ -111,6 +111,7 @@ class ShaIdentification(Scenario):
     def windows(self, log: LogData, period: float) -> list[dict]:
         """Every reference change of a PRMS sequence: its window's data and identification."""
         ccfg = load_controller_config(None)
+        guess = tuple(table_a3()[5, 1:4] * (1.0, 1.0, MM))               # 150 mm, 0 kg: the fits' start
         ref = rebuild(log, "testbench", period)
         y = log.leg_positions(1)[:, 0]
         u = log.get("VALVE_CMD_1").per_cycle(log.n_cycles, "SPOOL_SETPOINT") * FULL_SCALE_V
@@ -139,9 +140,7 @@ class ShaIdentification(Scenario):
                 continue                      # not a P loop here (valves held, saturated, faulted)
             y0 = float(np.mean(y[k0 - pre:k0]))
             t = (cycles - k0) * period
-            a3 = table_a3()
-            guess = a3[5, 1:4] * (1.0, 1.0, MM)                         # 150 mm, 0 kg: the start
-            gcl = ident.fit_closed_loop(t, y[cycles] - y0, step, DELAY_PERIODS * period, k, tuple(guess))
+            gcl = ident.fit_closed_loop(t, y[cycles] - y0, step, DELAY_PERIODS * period, k, guess)
             plant = ident.open_loop_from_closed(gcl, k)
             motion_fit = ident.motion_parameters(y[k0 - pre:k0 + n + 1], pl[k0 - pre:k0 + n + 1],
                                                  ccfg.piston_area_m2, period, FILTER_HZ)

@@ -53,10 +53,9 @@ def sine_waypoints(run, w_rad_s: float, periods: int = 1) -> float:
     return tm * n
 
 
-def thesis_pi_error_mm(w_rad_s: float, load_kg: float) -> float:
+def thesis_pi_error_mm(w_rad_s: float, load_kg: float, row: np.ndarray) -> float:
     """|S(jw)| A with S = 1 / (1 + C G), C = Kp + Ki / s (eq. 7.13) and G = k01 b0 / (s (s^2 +
-    b1 s + b0)) from Table A.3 at 150 mm for this load (mm/V)."""
-    row = table_a3()[5]                                   # Po = 150 mm
+    b1 s + b0)) from `row` of Table A.3 (the sine's centre, 150 mm) for this load (mm/V)."""
     column = 1 + 3 * int(round(load_kg / 3.0))
     b0, b1, k01 = row[column:column + 3]
     s = 1j * w_rad_s
@@ -173,14 +172,16 @@ class ShaTracking(Scenario):
             ad_mean = float(np.mean([summary["adaptive"][w] for w in common]))
             checks.append(Check("adaptive better than PI (mean over w of the max |error|)", ad_mean < pi_mean,
                                 f"{ad_mean:.2f} vs {pi_mean:.2f} mm", "thesis: adaptive better", required=False))
-        pairs = [(r["load_kg"] or 0.0, r["w_rad_s"], r["max_error_mm"], thesis_pi_error_mm(r["w_rad_s"], r["load_kg"] or 0.0))
+        centre = table_a3()[5]                                              # Po = 150 mm
+        pairs = [(r["load_kg"] or 0.0, r["w_rad_s"], r["max_error_mm"],
+                  thesis_pi_error_mm(r["w_rad_s"], r["load_kg"] or 0.0, centre))
                  for r in runs if r["controller"] == "pi" and not r["fault"] and r["w_rad_s"] >= LINEAR_FROM_W]
         if pairs:
             checks.append(Check("PI: max |error| / the thesis's own loop |S(jw)| 125 mm (eq. 7.13, Table A.3)",
                                 all(0.7 <= e / n <= 1.4 for *_, e, n in pairs),
                                 ", ".join(f"{m:g} kg w {w:.3g}: {e:.1f} / {n:.1f}" for m, w, e, n in pairs),
                                 "0.7-1.4; at w = 10, 0 kg that loop gives "
-                                f"{thesis_pi_error_mm(10.0, 0.0):.0f} mm, Fig. 7.19 shows <= 30", required=False))
+                                f"{thesis_pi_error_mm(10.0, 0.0, centre):.0f} mm, Fig. 7.19 shows <= 30", required=False))
         cut = [f"{r['controller']} {r['load_kg']:g} kg w {r['w_rad_s']:g} ({fault_name(r['fault'])})"
                for r in runs if r["fault"]]
         checks.append(Check("no sine cut short by a fault", not cut, "; ".join(cut) or "none", "none",
