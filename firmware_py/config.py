@@ -32,7 +32,7 @@ RANGES: dict[str, dict[str, object]] = {
         "moving_mass_kg": (0.0, 50.0), "valve_full_scale_v": (0.01, 24.0), "encoder_resolution_mm": (1e-4, 10.0),
     },
     "testbench": {"slide_mass_kg": (0.0, 100.0), "home_mm": (0.0, 2000.0), "park_mm": (0.0, 2000.0)},
-    "hexapod": {"park_stroke_mm": (0.0, 2000.0), "ki_factor": (0.0, 10.0)},
+    "hexapod": {"park_stroke_mm": (0.0, 2000.0), "kp_factor": (0.01, 10.0), "ki_factor": (0.0, 10.0)},
     "friction": {
         "alpha0_pos_n": (-1000.0, 1000.0), "alpha1_pos_n": (-1000.0, 1000.0), "vs_pos_mm_s": (0.01, 1e4),
         "sigma2_pos_ns_mm": (0.0, 100.0), "alpha0_neg_n": (-1000.0, 1000.0), "alpha1_neg_n": (-1000.0, 1000.0),
@@ -104,7 +104,8 @@ class ControllerConfig:
     testbench_home_m: float
     testbench_park_m: float
     hexapod_park_stroke_m: float
-    hexapod_ki_factor: float          # every controller's Ki on the hexapod (see controller.toml)
+    hexapod_kp_factor: float          # every controller's Kp on the hexapod (see controller.toml)
+    hexapod_ki_factor: float          # every controller's Ki on the hexapod
     # estimation
     friction: np.ndarray              # LuGre observer vector, see estimation.FP_*
     jerk_psd: float                   # m^2/s^5
@@ -204,7 +205,8 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         piston_area_m2=area, area_ratio=ratio, stroke_m=a["stroke_mm"] * MM, moving_mass_kg=a["moving_mass_kg"],
         valve_full_scale_v=a["valve_full_scale_v"], encoder_resolution_m=a["encoder_resolution_mm"] * MM,
         slide_mass_kg=tb["slide_mass_kg"], testbench_home_m=tb["home_mm"] * MM, testbench_park_m=tb["park_mm"] * MM,
-        hexapod_park_stroke_m=raw["hexapod"]["park_stroke_mm"] * MM, hexapod_ki_factor=raw["hexapod"]["ki_factor"],
+        hexapod_park_stroke_m=raw["hexapod"]["park_stroke_mm"] * MM, hexapod_kp_factor=raw["hexapod"]["kp_factor"],
+        hexapod_ki_factor=raw["hexapod"]["ki_factor"],
         friction=friction, jerk_psd=k["jerk_psd_mm2_s5"] * MM ** 2, kalman_adaptive_gain=k["adaptive_gain"],
         kalman_velocity_ref_m_s=k["adaptive_velocity_ref_mm_s"] * MM,
         rls_forgetting=m["forgetting"], rls_filter_hz=m["filter_hz"], rls_filter_zeta=m["filter_zeta"],

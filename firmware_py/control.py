@@ -86,7 +86,7 @@ def pi_antiwindup(error, integral, leg, kp, ki, extra, period_s, u_max):
 # parameter vector
 (JP_T, JP_R_BASE, JP_R_GAIN, JP_V_REF, JP_LAMBDA, JP_P_MAX, JP_M_MAX, JP_RLS_WN, JP_RLS_ZETA,
  JP_D_WN, JP_D_ZETA, JP_KI_SCALE, JP_MASS_OFFSET, JP_PI_KP, JP_PI_KI, JP_KPL, JP_U_MAX,
- JP_MOVING_MASS, JP_AREA, JP_FF_SCALE, JP_SIZE) = range(21)
+ JP_MOVING_MASS, JP_AREA, JP_FF_SCALE, JP_KP_SCALE, JP_SIZE) = range(22)
 # inputs per leg
 (IN_Y, IN_FRESH, IN_FORCE, IN_YR, IN_VR, IN_AR, IN_G_AX, IN_TAU, IN_ACTIVE, IN_SIZE) = range(10)
 # state and outputs per leg
@@ -132,7 +132,7 @@ def legs_update(mode, jp, inputs, st, kx, kp_mat, a, q, xp, pp, fp, rls_ad, rls_
             kp, ki, extra = jp[JP_PI_KP], jp[JP_PI_KI], 0.0
         else:                                                                                   # eq. 7.29
             load = mass - jp[JP_MASS_OFFSET]
-            kp = schedule_eval(breaks, kp_coef, loads, y, load)
+            kp = jp[JP_KP_SCALE] * schedule_eval(breaks, kp_coef, loads, y, load)
             ki = jp[JP_KI_SCALE] * schedule_eval(breaks, ki_coef, loads, y, load)
             extra = jp[JP_KPL] * (plr - pl)
         if inputs[leg, IN_ACTIVE] > 0.5:
@@ -158,7 +158,8 @@ class JointController:
     """
 
     def __init__(self, cfg: ControllerConfig, n_legs: int, period_s: float, *, moving_mass_kg: float,
-                 mass_offset_kg: float, initial_position_m: float = 0.0, ki_factor: float = 1.0):
+                 mass_offset_kg: float, initial_position_m: float = 0.0, kp_factor: float = 1.0,
+                 ki_factor: float = 1.0):
         self.cfg, self.n_legs, self.period_s = cfg, n_legs, period_s
         self.mode = PI
         jp = np.zeros(JP_SIZE)
@@ -175,7 +176,8 @@ class JointController:
         jp[JP_D_ZETA] = cfg.differentiator_zeta
         jp[JP_KI_SCALE] = cfg.ki_scale * ki_factor
         jp[JP_MASS_OFFSET] = mass_offset_kg
-        jp[JP_PI_KP] = cfg.pi_kp
+        jp[JP_KP_SCALE] = kp_factor
+        jp[JP_PI_KP] = cfg.pi_kp * kp_factor
         jp[JP_PI_KI] = cfg.pi_ki * ki_factor
         jp[JP_KPL] = cfg.kpl_v_pa
         jp[JP_U_MAX] = cfg.saturation_v * cfg.spool_max

@@ -53,7 +53,7 @@ class ControllerCore:
             self.park_strokes = np.full(n, cfg.hexapod_park_stroke_m)
             moving_mass = self.geometry.rod.mass_kg
             mass_offset = 0.0
-            ki_factor = cfg.hexapod_ki_factor
+            kp_factor, ki_factor = cfg.hexapod_kp_factor, cfg.hexapod_ki_factor
         else:
             self.geometry = None
             self.platform = None
@@ -62,9 +62,9 @@ class ControllerCore:
             self.park_strokes = np.full(n, cfg.testbench_park_m)
             moving_mass = cfg.moving_mass_kg
             mass_offset = cfg.slide_mass_kg
-            ki_factor = 1.0
+            kp_factor, ki_factor = 1.0, 1.0
         self.joint = JointController(cfg, n, period_s, moving_mass_kg=moving_mass, mass_offset_kg=mass_offset,
-                                     ki_factor=ki_factor)
+                                     kp_factor=kp_factor, ki_factor=ki_factor)
         self.sup = Supervisor(controller)
         self.joint.set_mode(controller)
         # measurements (filled by the loop each cycle)

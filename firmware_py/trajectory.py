@@ -194,8 +194,12 @@ class Motion:
         return concatenate(pieces)
 
 
-DIAGONAL_CENTRE_M = np.array([0.0, 0.0, 0.675])
-DIAGONAL_HALF_SIDE_M = 0.12       # largest cube about the centre inside the usable workspace
+# Movement I's cube (the thesis gives it only in plots: Fig. 11.8 spans about +/-0.1 m in x and
+# y). Every vertex keeps >= 28 mm of stroke from both end stops; the largest cube inside the
+# workspace (half side 120 mm about z = 675 mm) left one leg 5.8 mm from its extended end,
+# where a 5 mm overshoot is a POSITION_LIMIT fault.
+DIAGONAL_CENTRE_M = np.array([0.0, 0.0, 0.66])
+DIAGONAL_HALF_SIDE_M = 0.1
 CIRCLE_PLANE_Z_M = 0.631
 CIRCLE_RADIUS_M = 0.2
 CIRCLE_POINTS = 12

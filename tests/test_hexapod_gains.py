@@ -1,12 +1,13 @@
 """The hexapod's joint-space loops with the emulator's hexapod, in process (no bus): the
-testbench's Ki diverges on the 190 kg horizontal joint-space inertia; `[hexapod] ki_factor`
-(default 0.25) holds it (README "Hexapod gains")."""
+testbench's gains diverge on the 190 kg horizontal joint-space inertia; `[hexapod] kp_factor`
+and `ki_factor` (defaults 2 and 0.1) hold it (README "Hexapod gains")."""
 
 import numpy as np
 import pytest
 
 from firmware_py.config import load_config
-from firmware_py.control import CONTROLLER_NAMES, JP_KI_SCALE, JP_PI_KI
+from firmware_py.control import (CONTROLLER_NAMES, IN_ACTIVE, IN_Y, JP_KI_SCALE, JP_KP_SCALE, JP_PI_KI,
+                                 JP_PI_KP, ST_KP)
 from firmware_py.core import ControllerCore
 from firmware_py.supervisor import State
 from plant_emulator.params import load_config as load_emulator_config
@@ -16,9 +17,10 @@ PERIOD_S = 0.002
 ENCODER_M = 0.125e-3
 
 
-def hold_after_kick(ki_factor: float, seconds: float = 4.0, kick_m: float = 0.005):
-    """Hold at home, leg 0's reference moved by `kick_m`; returns (final state, peak |xy| mm)."""
-    cfg = load_config(overrides={"hexapod": {"ki_factor": ki_factor}})
+def hold_after_kick(factors: dict, seconds: float = 4.0, kick_m: float = 0.005):
+    """Hold at home with the [hexapod] gain factors given, leg 0's reference moved by `kick_m`;
+    returns (final state, peak |xy| mm)."""
+    cfg = load_config(overrides={"hexapod": factors})
     rig = HexapodRig(load_emulator_config())
     core = ControllerCore(cfg, "hexapod", PERIOD_S, CONTROLLER_NAMES["adaptive"])
 
@@ -45,17 +47,32 @@ def hold_after_kick(ki_factor: float, seconds: float = 4.0, kick_m: float = 0.00
     return core.state, peak
 
 
-def test_ki_factor_scales_every_controllers_integral_gain_on_the_hexapod_only():
-    cfg = load_config(overrides={"hexapod": {"ki_factor": 0.25}})
+def test_gain_factors_scale_every_controllers_gains_on_the_hexapod_only():
+    cfg = load_config(overrides={"hexapod": {"kp_factor": 3.0, "ki_factor": 0.25}})
     hexapod = ControllerCore(cfg, "hexapod", PERIOD_S)
     bench = ControllerCore(cfg, "testbench", PERIOD_S)
+    assert hexapod.joint.jp[JP_PI_KP] == pytest.approx(3.0 * cfg.pi_kp)
+    assert hexapod.joint.jp[JP_KP_SCALE] == 3.0
     assert hexapod.joint.jp[JP_PI_KI] == pytest.approx(0.25 * cfg.pi_ki)
     assert hexapod.joint.jp[JP_KI_SCALE] == pytest.approx(0.25 * cfg.ki_scale)
+    assert bench.joint.jp[JP_PI_KP] == cfg.pi_kp and bench.joint.jp[JP_KP_SCALE] == 1.0
     assert bench.joint.jp[JP_PI_KI] == cfg.pi_ki and bench.joint.jp[JP_KI_SCALE] == cfg.ki_scale
 
 
-def test_testbench_integral_gain_diverges_on_the_hexapod_and_the_default_holds():
-    state, peak = hold_after_kick(1.0)
+def test_scheduled_kp_is_scaled_by_the_hexapod_kp_factor():
+    scaled = {}
+    for factor in (1.0, 2.0):
+        core = ControllerCore(load_config(overrides={"hexapod": {"kp_factor": factor}}), "hexapod", PERIOD_S,
+                              CONTROLLER_NAMES["adaptive"])
+        core.joint.inputs[:, IN_Y] = 0.1
+        core.joint.inputs[:, IN_ACTIVE] = 1.0
+        core.joint.update()
+        scaled[factor] = core.joint.st[:, ST_KP].copy()
+    assert np.all(scaled[1.0] > 0.0) and np.allclose(scaled[2.0], 2.0 * scaled[1.0])
+
+
+def test_testbench_gains_diverge_on_the_hexapod_and_the_defaults_hold():
+    state, peak = hold_after_kick({"kp_factor": 1.0, "ki_factor": 1.0})
     assert state is State.FAULT and peak > 100.0          # the oscillation grew to the error limit
-    state, peak = hold_after_kick(load_config().hexapod_ki_factor)
+    state, peak = hold_after_kick({})
     assert state is State.READY and peak < 50.0           # the kick's own offset is ~21 mm

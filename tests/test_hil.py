@@ -106,6 +106,8 @@ SCENARIO_RUNS = {
     "sha-perturbation": ([], lambda m: all(len(r["load_changes"]) == 3 for r in m["runs"].values())
                          and set(m["runs"]) == {"pi", "adaptive"}),
     "pm-circle": ([], lambda m: set(m["controllers"]) == {"adaptive", "model-based"} and m["time_scale"] == 2.0),
+    "pm-diagonal": ([], lambda m: set(m["controllers"]) == {"adaptive", "model-based"} and m["time_scale"] == 2.0
+                    and all(r["complete"] for r in m["controllers"].values())),
     "sha-identification": (["--short"], lambda m: {(r["set_point_mm"], r["load_kg"], tuple(r["gains_v_mm"]))
                                                    for r in m["points"]} == {(p, load, (0.25, 0.3)) for p in (60.0, 210.0)
                                                                              for load in (0.0, 6.0)}),

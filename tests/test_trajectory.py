@@ -64,6 +64,9 @@ def test_named_motions_stay_in_the_usable_workspace(name):
     t = np.arange(0.0, traj.duration_s, 0.005)
     lengths, vel, _ = traj.sample(t)
     assert np.all(lengths >= GEOMETRY.leg_min_m) and np.all(lengths <= GEOMETRY.leg_max_m)
+    # headroom for tracking errors: a leg 1 mm from an end stop while moving is a POSITION_LIMIT
+    # fault, and the joint errors on the hexapod reach 10-20 mm (README "Hexapod gains")
+    assert lengths.min() - GEOMETRY.leg_min_m >= 0.025 and GEOMETRY.leg_max_m - lengths.max() >= 0.025
     solver = DirectKinematics(GEOMETRY)
     poses = np.empty((len(t), 7))
     for k, row in enumerate(lengths):
