@@ -103,7 +103,7 @@ class GuideParams:
     damping_ratio: float
 
     def lugre_vector(self, load_kg: float) -> np.ndarray:
-        """eq. D.3 as LuGre parameters for an external mass (Fs, vs interpolated in Table D.1)."""
+        """eq. D.3 as LuGre parameters for an external mass (Fs, vs interpolated in [guide]'s table)."""
         fs = float(np.interp(load_kg, self.table_mass_kg, self.table_static_n))
         vs = float(np.interp(load_kg, self.table_mass_kg, self.table_stribeck_m_s))
         mass = self.slide_mass_kg + load_kg

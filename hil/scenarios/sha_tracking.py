@@ -111,8 +111,8 @@ class ShaTracking(Scenario):
               "claim": "max |error| <= 1 mm at low w; the adaptive controller better than PI"}
     # Asserted at the lowest w without load: the rms error within the thesis's 1 mm, and the
     # error growing with w. Reported, not reached: max |error| <= 1 mm at every load (the
-    # emulator gives 2-6 mm, peaking at the reversals, worst with 6 kg: the stick-slip the
-    # thesis also sees in Figs. 7.17-7.18, larger here) and "adaptive better than PI".
+    # emulator gives 0.8-1.3 mm at w = 0.1, peaking at the reversals, worst with 6 kg: the
+    # stick-slip the thesis also sees in Figs. 7.17-7.18) and "adaptive better than PI".
     LOW_W_RMS_ERROR_MM = 1.0
 
     def plan(self, short: bool):
