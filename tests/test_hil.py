@@ -33,8 +33,11 @@ def test_sha_step_short_passes_with_zero_e2e_errors(sha_step_run):
     assert doc["e2e_errors"] == 0 and doc["log"]["lost_frames"] == 0
     assert doc["failure"] is None
     steps = doc["metrics"]["steps"]
-    assert {s["controller"] for s in steps} == {"pi", "adaptive"} and len(steps) == 8
-    assert all(abs(s["step_mm"] - 10.0) < 0.01 for s in steps)
+    # 2 controllers x 2 loads x 2 positions, each a square wave +10, -10, +10 mm; the last is measured
+    assert {s["controller"] for s in steps} == {"pi", "adaptive"} and len(steps) == 24
+    assert [round(s["step_mm"]) for s in steps] == [10, -10, 10] * 8
+    assert [s["measured"] for s in steps] == [False, False, True] * 8
+    assert all(doc["metrics"]["summary"][c]["steps"] == 4 for c in ("pi", "adaptive"))
     for name in ("emulator", "controller"):
         assert doc["children"][name]["exit_status"] == 0
     assert (out / "report.md").read_text().count("thesis") >= 3
