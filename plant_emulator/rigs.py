@@ -7,7 +7,8 @@ input, written by the valve nodes), `jammed` (per-leg spool frozen), `supply_pre
 cells measure) and `set_load(kg)`.
 
 - `TestbenchRig` (chapters 5-7): one vertical actuator lifting the 1.35 kg slide of a linear
-  guide plus an external mass; guide friction eq. D.3 (default: eq. D.4, see emulator.toml); seal friction LuGre.
+  guide plus an external mass; guide friction eq. D.3 (default: eq. D.4, see emulator.toml);
+  seal friction LuGre.
   One degree of freedom, integrated by our own numba kernel (semi-implicit velocity, exact
   LuGre bristles, implicit chambers), hard end stops.
 - `HexapodRig`: six actuators driving the MuJoCo 6-UPS (`mechanism.Mechanism`). Per MuJoCo
