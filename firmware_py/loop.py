@@ -34,12 +34,11 @@ from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.outbox import Outbox
-from protocol.values import KIND_HOST_CMD, KIND_WAYPOINT
+from protocol.values import KIND_HOST_CMD, KIND_WAYPOINT, NMT_OPERATIONAL, NMT_START
 
 from .core import RESET_GRACE_CYCLES, ControllerCore
 from .supervisor import Command, Fault, State
 
-NMT_START, NMT_OPERATIONAL = 1, 5
 CONTROLLER_NODE, IMU_NODE = 16, 7
 PACINGS = ("realtime", "lockstep")
 IMMEDIATE_COMMANDS = (int(Command.ESTOP), int(Command.DISABLE))   # never queued behind host work

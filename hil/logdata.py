@@ -19,9 +19,9 @@ from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.errors import UserInputError
+from protocol.values import NMT_START
 
 LOG_SUFFIXES = (".blf", ".asc")
-NMT_START = 1
 
 
 @dataclass

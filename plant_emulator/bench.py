@@ -12,7 +12,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from .emulator import NMT_OPERATIONAL, Emulator
+from protocol.values import NMT_OPERATIONAL
+
+from .emulator import Emulator
 from .params import EmulatorConfig
 from .rigs import make_rig
 

@@ -26,14 +26,26 @@ from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.outbox import Outbox
-from protocol.values import EMU_CLEAR, EMU_CLEAR_ALL, EMU_INJECT, EMU_SET_LOAD
+from protocol.values import (
+    EMU_CLEAR,
+    EMU_CLEAR_ALL,
+    EMU_INJECT,
+    EMU_SET_LOAD,
+    NMT_BOOTUP,
+    NMT_ENTER_PREOP,
+    NMT_OPERATIONAL,
+    NMT_PRE_OPERATIONAL,
+    NMT_RESET_COMM,
+    NMT_RESET_NODE,
+    NMT_START,
+    NMT_STOP,
+    NMT_STOPPED,
+)
 
 from . import hydraulics as hy
 from .params import EmulatorConfig
 from .valve_node import Emergency, ValveDriver, ValveState
 
-NMT_BOOTUP, NMT_STOPPED, NMT_OPERATIONAL, NMT_PRE_OPERATIONAL = 0, 4, 5, 127
-NMT_START, NMT_STOP, NMT_ENTER_PREOP, NMT_RESET_NODE, NMT_RESET_COMM = 1, 2, 128, 129, 130
 IMU_NODE = 7
 BABBLE_ID = 0x601                    # not in the DBC (an SDO request id of node 1)
 FAULT_NAMES = {1: "DROP", 2: "DELAY", 3: "DUPLICATE", 4: "CORRUPT", 5: "STUCK", 6: "OUT_OF_RANGE",
