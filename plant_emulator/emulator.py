@@ -10,6 +10,10 @@ Per SYNC k (DESIGN.md "Timing model"):
 3. the rig integrates exactly one SYNC period with the applied spool setpoints.
 So the emulator follows whoever produces SYNC, in realtime and lockstep pacing alike.
 Heartbeats and the SYNC-loss watchdog run on the wall clock, like a real node's timers.
+When the watchdog trips (the controller died or stalled), the plant does not stop with the
+bus: the physics catches up to the trip with the valves as they were, then runs on the
+wall clock with the valves in FAULT_HOLD, and EMU_TRUTH reports where the mechanism went
+(what a fault test measures), until SYNC returns.
 """
 
 from __future__ import annotations
@@ -48,8 +52,12 @@ from .valve_node import Emergency, ValveDriver, ValveState
 
 IMU_NODE = 7
 BABBLE_ID = 0x601                    # not in the DBC (an SDO request id of node 1)
+# EMU_CTRL.FAULT (DBC value table). REPEAT: the node re-sends its previous frame (a frozen
+# alive counter); LEG_JAM: the cylinder's rod seized (mechanical; the valve still works).
 FAULT_NAMES = {1: "DROP", 2: "DELAY", 3: "DUPLICATE", 4: "CORRUPT", 5: "STUCK", 6: "OUT_OF_RANGE",
-               7: "SILENT", 8: "VALVE_JAM", 9: "SUPPLY_LOSS", 10: "REORDER", 11: "BABBLE"}
+               7: "SILENT", 8: "VALVE_JAM", 9: "SUPPLY_LOSS", 10: "REORDER", 11: "BABBLE", 12: "REPEAT",
+               13: "LEG_JAM"}
+FREE_RUN_CATCH_UP_STEPS = 25         # free run: periods of physics per poll at most (a late wake-up)
 FAULT_CODES = {name: code for code, name in FAULT_NAMES.items()}
 CONTROLLER_TARGET = 16
 
@@ -66,12 +74,13 @@ class Counters:
     unknown_frames: int = 0
     host_stalls: int = 0              # this process not scheduled for > 1 SYNC period (node clocks paused)
     host_stall_max_s: float = 0.0
+    free_run_steps: int = 0           # periods of physics run on the wall clock after a lost SYNC
     injected: dict = field(default_factory=dict)
 
     def as_dict(self) -> dict:
         return {k: getattr(self, k) for k in ("syncs", "frames_in", "frames_out", "e2e_errors",
                                               "sync_sequence_errors", "valve_faults", "emergencies",
-                                              "unknown_frames", "host_stalls")} | {
+                                              "unknown_frames", "host_stalls", "free_run_steps")} | {
             "host_stall_max_ms": round(self.host_stall_max_s * 1e3, 3), "injected": dict(self.injected)}
 
 
@@ -100,6 +109,8 @@ class Emulator:
         self.next_heartbeat = 0.0
         self.faults: dict[tuple[int, int], list] = {}     # (target, kind) -> [remaining cycles or -1, param]
         self._held: dict[str, bytes] = {}                  # REORDER: frame held back per message
+        self._last_sent: dict[str, bytes] = {}             # REPEAT: the frame sent before the fault
+        self._free_run_next: float | None = None           # wall time of the next free-run step
         self._delayed: list[can.Message] = []              # DELAY: frames sent at the next SYNC
         self._stuck: dict[int, tuple] = {}
         self._ignore_commands = 0
@@ -142,6 +153,12 @@ class Emulator:
         if self._fault(node, "SILENT") or self._fault(node, "DROP"):
             return
         message = box.message
+        if self._fault(node, "REPEAT"):
+            last = self._last_sent.get(name)
+            if last is not None:               # the frame before the fault again, counter and all
+                message = can.Message(arbitration_id=message.arbitration_id, data=last, is_extended_id=False)
+        else:
+            self._last_sent[name] = bytes(message.data)
         if self._fault(node, "CORRUPT"):
             message = can.Message(arbitration_id=message.arbitration_id, data=bytearray(message.data),
                                   is_extended_id=False)
@@ -200,17 +217,37 @@ class Emulator:
         if now >= self.next_heartbeat:
             self._heartbeats()
             self.next_heartbeat = now + self.cfg.heartbeat_s
-        limit = self.cfg.sync_timeout_periods * self.cfg.sync_period_s
+        period = self.cfg.sync_period_s
+        limit = self.cfg.sync_timeout_periods * period
         if self.last_sync_time is not None and not self.sync_lost_reported and now - self.last_sync_time > limit:
             self.sync_lost_reported = True
+            # the last SYNC integrated one period; the valves kept their setpoints until now
+            self._free_run(int((now - self.last_sync_time) / period) - 1)
             for n, valve in self.valves.items():
-                emergency = valve.sync_lost((now - self.last_sync_time) / self.cfg.sync_period_s)
+                emergency = valve.sync_lost((now - self.last_sync_time) / period)
                 if emergency is not None:
                     self._emergency(n, emergency)
+            self._free_run_next = now + period
+        elif self.sync_lost_reported and self._free_run_next is not None and now >= self._free_run_next:
+            steps = int((now - self._free_run_next) / period) + 1
+            self._free_run(min(steps, FREE_RUN_CATCH_UP_STEPS))
+            self._free_run_next += steps * period
         wait = self.next_heartbeat - now
         if self.last_sync_time is not None and not self.sync_lost_reported:
             wait = min(wait, self.last_sync_time + limit - now)
+        elif self._free_run_next is not None:
+            wait = min(wait, self._free_run_next - now)
         return max(wait, 0.0)
+
+    def _free_run(self, steps: int) -> None:
+        """`steps` periods of physics without SYNC, the valves' spools as they are now; the
+        truth after each (the sensor nodes stay quiet: they sample on SYNC)."""
+        for _ in range(max(steps, 0)):
+            for n, valve in self.valves.items():
+                self.rig.command[n - 1] = valve.spool_command
+            self.rig.advance(self.cfg.sync_period_s)
+            self.counters.free_run_steps += 1
+            self._send_truth(self.sync_counter)
 
     # -- receive ------------------------------------------------------------------------------
     def handle(self, msg: can.Message) -> None:
@@ -285,6 +322,10 @@ class Emulator:
         name = FAULT_NAMES[kind]
         if name == "VALVE_JAM" and 1 <= target <= self.rig.n_legs:
             self.rig.jammed[target - 1] = on
+        elif name == "LEG_JAM" and 1 <= target <= self.rig.n_legs:
+            self.rig.set_rod_seized(target - 1, on)
+        elif name == "REPEAT" and not on:
+            self._last_sent.clear()
         elif name == "SUPPLY_LOSS":
             self.rig.set_supply_lost(on)
         elif name == "STUCK" and not on:
@@ -308,6 +349,7 @@ class Emulator:
         self.sync_counter = counter
         self.last_sync_time = now
         self.sync_lost_reported = False
+        self._free_run_next = None
         self._flush_delayed()
         for n, valve in self.valves.items():
             if self.nmt[n] != NMT_OPERATIONAL:
@@ -415,6 +457,8 @@ class Emulator:
         self.counters.host_stall_max_s = max(self.counters.host_stall_max_s, seconds)
         if self.last_sync_time is not None:
             self.last_sync_time += seconds
+        if self._free_run_next is not None:
+            self._free_run_next += seconds
         self.next_heartbeat += seconds
 
     def run(self, should_stop) -> None:

@@ -2,7 +2,8 @@
 
 Both expose the same surface to the node layer: `n_legs`, `state` (n_legs x S_SIZE, the
 actuator states of hydraulics.py), `command` (valve input per leg, fraction of full
-input, written by the valve nodes), `jammed` (per-leg spool frozen), `supply_pressure_pa`,
+input, written by the valve nodes), `jammed` (per-leg spool frozen), `seized` (per-leg rod
+stuck mechanically: `set_rod_seized`), `supply_pressure_pa`,
 `advance(period_s)` (integrate exactly that much physics), `rod_force_n` (what the load
 cells measure) and `set_load(kg)`.
 
@@ -37,10 +38,13 @@ from .mechanism import Mechanism
 from .params import GRAVITY_M_S2, EmulatorConfig
 
 SUPPLY_LOSS_TIME_CONSTANT_S = 0.05    # supply pressure decay when the power unit is lost
+SEIZED_FRICTION_N = 1e5               # LEG_JAM on the hexapod: dry friction of a seized slide,
+SEIZED_SOLREF = (0.001, 1.0)          # as stiff as the solver allows at the 0.5 ms step
+SEIZED_SOLIMP = (0.9999, 0.9999, 0.0001, 0.5, 2.0)
 
 
 @numba.njit(cache=True)
-def testbench_advance(st: np.ndarray, command: float, jammed: bool, n: int, h: float, ps: float,
+def testbench_advance(st: np.ndarray, command: float, jammed: bool, seized: bool, n: int, h: float, ps: float,
                       hp: np.ndarray, fp: np.ndarray, gp: np.ndarray, rod_mass: float, load_mass: float,
                       out: np.ndarray) -> None:
     """n sub-steps of h of the test bench; out = [acceleration, seal friction, guide friction]."""
@@ -58,6 +62,8 @@ def testbench_advance(st: np.ndarray, command: float, jammed: bool, n: int, h: f
         guide_z, guide_c = lugre_split(st[hy.S_ZG], v, gp)               # eq. D.3
         # m dv/dt = drive - F_seal - F_guide - m g, the friction's v-slope implicit
         v_new = (mass * v + h * (drive - seal_z - guide_z - mass * 9.81)) / (mass + h * (seal_c + guide_c))
+        if seized:                                                       # the rod does not move
+            v_new = 0.0
         y_new = y + h * v_new
         if y_new <= 0.0:                                                 # end stops: inelastic
             y_new = 0.0
@@ -116,6 +122,7 @@ class _RigBase:
         self.state = np.zeros((self.n_legs, hy.S_SIZE))
         self.command = np.zeros(self.n_legs)
         self.jammed = np.zeros(self.n_legs, dtype=bool)
+        self.seized = np.zeros(self.n_legs, dtype=bool)
         self.rod_force_n = np.zeros(self.n_legs)
         self.supply_pressure_pa = cfg.supply_pressure_pa
         self.supply_lost = False
@@ -127,6 +134,9 @@ class _RigBase:
             self.supply_pressure_pa = tank + (self.supply_pressure_pa - tank) * math.exp(
                 -period_s / SUPPLY_LOSS_TIME_CONSTANT_S)
         return self.supply_pressure_pa
+
+    def set_rod_seized(self, leg: int, seized: bool) -> None:
+        self.seized[leg] = seized
 
     def set_supply_lost(self, lost: bool) -> None:
         self.supply_lost = lost
@@ -162,7 +172,8 @@ class TestbenchRig(_RigBase):
     def advance(self, period_s: float) -> None:
         n = max(1, round(period_s / self.cfg.substep_s))
         ps = self._supply_for(period_s)
-        testbench_advance(self.state[0], float(self.command[0]), bool(self.jammed[0]), n, period_s / n, ps,
+        testbench_advance(self.state[0], float(self.command[0]), bool(self.jammed[0]), bool(self.seized[0]), n,
+                          period_s / n, ps,
                           self.cfg.hp, self.cfg.friction, self.guide_friction, self.cfg.piston_rod_mass_kg,
                           self.load_mass_kg, self.out)
         # the rod carries the load's weight, inertia and guide friction
@@ -172,7 +183,7 @@ class TestbenchRig(_RigBase):
     def warm_up(self) -> None:
         """Load the compiled kernels now: their first call costs 0.2-0.25 s (numba's cache),
         which in the first SYNC made the nodes miss ~45 realtime cycles. Scratch copies only."""
-        testbench_advance(self.state[0].copy(), 0.0, False, 1, self.cfg.substep_s, self.cfg.supply_pressure_pa,
+        testbench_advance(self.state[0].copy(), 0.0, False, False, 1, self.cfg.substep_s, self.cfg.supply_pressure_pa,
                           self.cfg.hp, self.cfg.friction, self.guide_friction, self.cfg.piston_rod_mass_kg,
                           self.load_mass_kg, np.zeros(3))
 
@@ -199,6 +210,8 @@ class HexapodRig(_RigBase):
         self._home_length = np.array([leg.length_m for leg in mech.legs_home])
         self._cylinder_body = model.body_parentid[model.site_bodyid[mech.rod_site]]
         self._platform_mass0 = float(model.body_mass[mech.platform_body])
+        self._solref_default = model.dof_solref[mech.slide_dof].copy()
+        self._solimp_default = model.dof_solimp[mech.slide_dof].copy()
         self.set_load(cfg.payload_kg)
         self._force = np.zeros(6)
         self._damping = np.zeros(6)
@@ -216,6 +229,17 @@ class HexapodRig(_RigBase):
         """A payload at the platform's centre of mass (a point mass there adds no inertia about it)."""
         self.load_kg = float(load_kg)
         self.mechanism.model.body_mass[self.mechanism.platform_body] = self._platform_mass0 + self.load_kg
+
+    def set_rod_seized(self, leg: int, seized: bool) -> None:
+        """A seized rod: MuJoCo's dry friction on the slide, far above any hydraulic force
+        (113 mm2 x 100 bar ~ 1.1 kN), with a stiff constraint (the default soft one lets the
+        rod slide 150 mm in 0.5 s at 30 % valve input; this one 0.3 mm)."""
+        super().set_rod_seized(leg, seized)
+        model = self.mechanism.model
+        dof = self.mechanism.slide_dof[leg]
+        model.dof_frictionloss[dof] = SEIZED_FRICTION_N if seized else 0.0
+        model.dof_solref[dof] = SEIZED_SOLREF if seized else self._solref_default[leg]
+        model.dof_solimp[dof] = SEIZED_SOLIMP if seized else self._solimp_default[leg]
 
     def _read_legs(self) -> None:
         mech = self.mechanism

@@ -124,3 +124,46 @@ def test_a_restarted_controller_is_not_an_e2e_error_for_the_valves(cfg):
     emulator = run_script(cfg, [nmt_start_frame()] + valve_command_frames(Outbox("VALVE_CMD_1"), 7)
                           + valve_command_frames(Outbox("VALVE_CMD_1"), 3) + [("quiet",)])
     assert emulator.counters.e2e_errors >= 1
+
+
+def test_the_plant_runs_on_after_the_sync_is_lost(cfg):
+    """A dead controller does not freeze the mechanism: after the watchdog, physics runs on
+    the wall clock with the valves in FAULT_HOLD (what the fault matrix measures)."""
+    quiet = 100                                               # 0.5 ms polls: 50 ms without SYNC
+    bus = ScriptedBus([nmt_start_frame(), ("frame", sync_frame(1))] + [("quiet",)] * quiet)
+    sent = []
+    bus.send = sent.append
+    emulator = Emulator(bus, make_rig("testbench", cfg), cfg, clock=bus.clock)
+    emulator.run(lambda: not bus.script)
+    assert emulator.sync_lost_reported
+    elapsed = emulator.clock() - emulator.last_sync_time
+    # one period at the SYNC, then every period up to now (within one period of polling)
+    assert abs(emulator.rig.time_s - elapsed) <= 2 * PERIOD_S
+    assert emulator.counters.free_run_steps >= int(elapsed / PERIOD_S) - 2
+    truth = [m for m in sent if m.arbitration_id == Outbox("EMU_TRUTH").codec.frame_id]
+    assert len(truth) == 1 + emulator.counters.free_run_steps
+    assert emulator.rig.command[0] == 0.0                     # no valve left open
+
+
+def test_repeat_resends_the_previous_frame_and_leg_jam_seizes_the_rod(cfg):
+    bus = ScriptedBus([])
+    sent = []
+    bus.send = sent.append
+    emulator = Emulator(bus, make_rig("testbench", cfg), cfg, clock=bus.clock)
+    emulator.nmt[1] = 5
+    leg_state = Outbox("LEG_STATE_1").codec.frame_id
+    frames = lambda: [bytes(m.data) for m in sent if m.arbitration_id == leg_state]  # noqa: E731
+    emulator.on_sync(1)
+    before = frames()[-1]
+    emulator._emu_ctrl(2, 1, 12, 0.0, 0)                      # INJECT REPEAT on leg 1
+    emulator.on_sync(2)
+    emulator.on_sync(3)
+    assert frames()[-2:] == [before, before]                  # the same counter and CRC again
+    emulator._emu_ctrl(3, 1, 12, 0.0, 0)                      # CLEAR
+    emulator.on_sync(4)
+    assert frames()[-1] != before
+    emulator._emu_ctrl(2, 1, 13, 0.0, 0)                      # INJECT LEG_JAM
+    y0 = emulator.rig.stroke_m[0]
+    emulator.rig.command[0] = 0.3
+    emulator.rig.advance(0.2)
+    assert emulator.rig.stroke_m[0] == y0
