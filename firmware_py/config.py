@@ -25,7 +25,7 @@ RANGES: dict[str, dict[str, object]] = {
         "activation_timeout_s": (0.1, 600.0), "hold_cycles": (1, 10000), "shutdown_hold_cycles": (1, 10000),
         "shutdown_disable_cycles": (1, 10000), "heartbeat_ms": (10.0, 10000.0),
         "heartbeat_timeout_ms": (10.0, 60000.0), "realtime_priority": (1, 99),
-        "cpu": (-1, 1023),
+        "cpu": (-1, 1023), "stall_fault_periods": (1.0, 10000.0),
     },
     "actuator": {
         "bore_radius_mm": (0.5, 100.0), "rod_radius_mm": (0.1, 99.0), "stroke_mm": (10.0, 2000.0),
@@ -64,7 +64,8 @@ RANGES: dict[str, dict[str, object]] = {
         "singularity_ratio_min": (0.0, 1.0), "auto_enable": bool, "homing_speed_mm_s": (0.1, 1000.0),
         "homing_accel_time_s": (0.001, 10.0), "waypoint_queue": (1, 255),
         "waypoint_velocity_max_mm_s": (0.1, 1e4), "waypoint_step_max_mm": (0.0, 300.0), "waypoint_force_max_n": (1.0, 1e6),
-        "waypoint_path_samples": (2, 1000),
+        "waypoint_path_samples": (2, 1000), "plausibility_spool_pct": (1.0, 100.0),
+        "plausibility_cycles": (1, 100000), "plausibility_travel_mm": (0.0, 1000.0),
     },
 }
 SCHEDULE_LOADS = ("0kg", "3kg", "6kg")
@@ -152,6 +153,10 @@ class ControllerConfig:
     waypoint_step_max_m: float
     waypoint_force_max_n: float
     waypoint_path_samples: int
+    plausibility_spool: float         # fraction of full input
+    plausibility_cycles: int
+    plausibility_travel_m: float
+    stall_fault_periods: float        # realtime: a SYNC this many periods after the previous one -> OVERRUN
 
 
 def _schedule_tables(a: dict, source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -227,6 +232,9 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         waypoint_queue=sv["waypoint_queue"], waypoint_velocity_max_m_s=sv["waypoint_velocity_max_mm_s"] * MM,
         waypoint_step_max_m=sv["waypoint_step_max_mm"] * MM,
         waypoint_force_max_n=sv["waypoint_force_max_n"], waypoint_path_samples=sv["waypoint_path_samples"],
+        plausibility_spool=sv["plausibility_spool_pct"] / 100.0, plausibility_cycles=sv["plausibility_cycles"],
+        plausibility_travel_m=sv["plausibility_travel_mm"] * MM,
+        stall_fault_periods=t["stall_fault_periods"],
     )
 
 

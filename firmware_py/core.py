@@ -24,6 +24,7 @@ from .control import (IN_ACTIVE, IN_AR, IN_FORCE, IN_FRESH, IN_G_AX, IN_TAU, IN_
                       ST_INTEGRAL, ST_MASS, ST_U)
 from .control import MODEL_BASED, JointController
 from .geometry import GRAVITY_M_S2, Geometry, default_geometry
+from .plausibility import MotionPlausibility
 from .supervisor import ACTIVE, Ack, Action, Command, Fault, State, Supervisor
 from .trajectory import JointTrajectory, hold_at, sls_coefficients, through_points
 
@@ -103,6 +104,8 @@ class ControllerCore:
         self._mask = np.zeros(n, dtype=bool)
         self._mask3 = np.zeros((n, 3), dtype=bool)
         self._abs = np.zeros(n)
+        self.plausibility = MotionPlausibility(n, cfg.plausibility_spool, cfg.plausibility_cycles,
+                                               cfg.plausibility_travel_m)
         self.overruns_in_row = 0
         self.dk_failures = 0
         self.reset_cycles = 0
@@ -476,6 +479,7 @@ class ControllerCore:
         if self._abs.max() > cfg.force_max_n:
             sup.fault(Fault.FORCE_LIMIT)
         if not active:
+            self.plausibility.reset()
             return
         margin = cfg.stroke_margin_m
         if self.recovery_cycles > 0:
@@ -491,6 +495,9 @@ class ControllerCore:
         np.abs(joint.st[:, ST_ERROR], out=self._abs)
         if self._abs.max() > cfg.tracking_error_max_m:
             sup.fault(Fault.TRACKING_ERROR)
+        np.multiply(u, 1.0 / cfg.valve_full_scale_v, out=self._abs)
+        if self.plausibility.update(self._abs, self.meas_y):
+            sup.fault(Fault.MOTION_PLAUSIBILITY)
 
     def _write_outputs(self) -> None:
         """Control words and spool setpoints for the state the supervisor is in now."""

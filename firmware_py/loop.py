@@ -15,8 +15,13 @@ checked after the cycle's write, one per cycle; HOST_CMD frames are handled at o
 (E-stop and disable take effect in the cycle they arrive in) unless commits are still
 waiting, in which case the others keep their place behind them.
 pacing: `realtime` - absolute deadlines on the monotonic clock, sleep then spin, late
-cycles counted as overruns and skipped (never bursts); `lockstep` - SYNC k+1 as soon as
-cycle k's exchange is complete.
+cycles counted as overruns and skipped (never bursts); a stall (the clock `stall_fault_periods`
+past the last SYNC, seen after any wait) faults OVERRUN before anything received late is
+acted on: the valves' SYNC watchdog has tripped, and the loop must not carry on as if
+nothing happened. `lockstep` - SYNC k+1 as soon as cycle k's exchange is complete.
+nodes: a node that boots again (boot-up heartbeat: power cycle, reset) restarts its alive
+counters, and the NMT master starts it again on the host's RESET (CiA 302's boot-up of a
+slave), so RESET + ENABLE recovers from a plant that was restarted.
 shutdown: valves HOLD for `shutdown_hold_cycles`, DISABLED for `shutdown_disable_cycles`.
 """
 
@@ -34,10 +39,10 @@ from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.outbox import Outbox
-from protocol.values import KIND_HOST_CMD, KIND_WAYPOINT, NMT_OPERATIONAL, NMT_START
+from protocol.values import KIND_HOST_CMD, KIND_WAYPOINT, NMT_BOOTUP, NMT_OPERATIONAL, NMT_START
 
 from .core import RESET_GRACE_CYCLES, ControllerCore
-from .supervisor import Command, Fault, State
+from .supervisor import Ack, Command, Fault, State
 
 CONTROLLER_NODE, IMU_NODE = 16, 7
 PACINGS = ("realtime", "lockstep")
@@ -88,6 +93,7 @@ class ControllerLoop:
         self._i_valve, self._i_sensor = index["VALVE_STATE"], index["SENSOR_FAULT"]
         self._leg_of_id = {CODECS[f"LEG_STATE_{i}"].frame_id: i - 1 for i in self.legs}
         self._heartbeat_of_id = {CODECS[f"HEARTBEAT_{i}"].frame_id: i for i in self.nodes}
+        self._sender_of_node = {i: CODECS[f"HEARTBEAT_{i}"].schedule.sender for i in self.nodes}
         self._emcy_of_id = {CODECS[f"EMCY_{i}"].frame_id: i for i in self.nodes}
         self._ids = {name: CODECS[name].frame_id for name in ("HOST_CMD", "HOST_WAYPOINT_POS",
                                                                 "HOST_WAYPOINT_ROT", "HOST_WAYPOINT_TIME")}
@@ -115,6 +121,7 @@ class ControllerLoop:
         self._last_sync = math.nan
         self._next_heartbeat = 0.0
         self._overrun = False
+        self._stall_s = self.cfg.stall_fault_periods * self.period_s if pacing == "realtime" else math.inf
         self._forced: bool | None = None            # shutdown: True HOLD, False DISABLED
 
     # -- receive --------------------------------------------------------------------------
@@ -136,7 +143,10 @@ class ControllerLoop:
         node = self._heartbeat_of_id.get(frame_id)
         if node is not None:
             self.heartbeat_seen[node] = self.clock()
-            self.nmt_state[node] = int(self.decoder.values[f"HEARTBEAT_{node}"][0])
+            state = int(self.decoder.values[f"HEARTBEAT_{node}"][0])
+            if state == NMT_BOOTUP:                  # the node restarted: so did its alive counters
+                self.decoder.restart_sender(self._sender_of_node[node])
+            self.nmt_state[node] = state
             return
         node = self._emcy_of_id.get(frame_id)
         if node is not None:
@@ -164,7 +174,15 @@ class ControllerLoop:
 
     # -- host work (outside the sensor window) ----------------------------------------------
     def _host_command(self, command: int, argument: int, seq: int) -> None:
-        self.acks.append((KIND_HOST_CMD, seq, int(self.core.host_command(command, argument))))
+        result = self.core.host_command(command, argument)
+        self.acks.append((KIND_HOST_CMD, seq, int(result)))
+        if command == Command.RESET and result is Ack.ACCEPTED and any(
+                self.nmt_state[n] != NMT_OPERATIONAL for n in self.nodes):
+            self._nmt_start()                        # nodes that rebooted since activation
+
+    def _nmt_start(self) -> None:
+        self.out_nmt.values[:] = (NMT_START, 0)
+        self._send(self.out_nmt)
 
     def _stage(self, handler, values: tuple) -> None:
         """Waypoint halves: at once, unless commits wait (a reused TAG must not overtake them)."""
@@ -190,6 +208,7 @@ class ControllerLoop:
         while not self._all_fresh():
             remaining = deadline - self.clock()
             msg = self.bus.recv(timeout=max(remaining, 0.0))
+            self._check_stall()
             if msg is None:
                 if remaining <= 0.0:
                     return
@@ -211,10 +230,16 @@ class ControllerLoop:
             if remaining <= 0.0:
                 break
             msg = self.bus.recv(timeout=remaining)
+            self._check_stall()
             if msg is not None:
                 self.dispatch(msg)
         while self.clock() < deadline:
             pass
+
+    def _check_stall(self) -> None:
+        """Realtime: the process was not running for longer than the valves' watchdog."""
+        if self.clock() - self._last_sync > self._stall_s and self.core.state is not State.BOOT:
+            self.core.fault(Fault.OVERRUN)
 
     # -- read / write ---------------------------------------------------------------------
     def _read(self) -> None:
@@ -284,6 +309,7 @@ class ControllerLoop:
     def cycle(self) -> None:
         """SYNC, collect, read, update, write, then host work (pacing is `_run_cycles`'s)."""
         now = self.clock()
+        self._check_stall()
         k = self.stats.cycles % HISTORY
         if not math.isnan(self._last_sync):
             error = abs(now - self._last_sync - self.period_s)
@@ -325,8 +351,7 @@ class ControllerLoop:
                 raise ActivationError(f"no OPERATIONAL heartbeat from node(s) {missing} within "
                                       f"{cfg.activation_timeout_s:g} s")
             if now >= next_start:
-                self.out_nmt.values[:] = (NMT_START, 0)
-                self._send(self.out_nmt)
+                self._nmt_start()
                 next_start = now + 0.2
             msg = self.bus.recv(timeout=0.02)
             if msg is not None:

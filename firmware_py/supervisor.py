@@ -47,6 +47,7 @@ class Fault(IntEnum):          # CTRL_STATUS.FAULT_CODE (DBC value table)
     HEARTBEAT_LOST = 13
     SENSOR_FAULT = 14
     VELOCITY_LIMIT = 15
+    MOTION_PLAUSIBILITY = 16   # a valve driven hard that does not move its cylinder (plausibility.py)
 
 
 class Command(IntEnum):        # HOST_CMD.COMMAND

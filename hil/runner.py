@@ -99,15 +99,18 @@ class Run:
         for child in self.children:
             child.check_alive()
 
+    def valve_watchdog_periods(self) -> float:
+        return self.options.valve_watchdog_periods or REALTIME_EMULATOR_SYNC_TIMEOUT_PERIODS
+
     def start_emulator(self) -> None:
         overrides = {section: dict(values) for section, values in self.scenario.emulator_overrides.items()}
         nodes = overrides.setdefault("nodes", {})
         if self.pacing == "lockstep":
             nodes["sync_timeout_periods"] = LOCKSTEP_EMULATOR_SYNC_TIMEOUT_PERIODS
         else:
-            nodes["sync_timeout_periods"] = self.options.valve_watchdog_periods or REALTIME_EMULATOR_SYNC_TIMEOUT_PERIODS
-            self.notes.append(f"emulated valves' SYNC watchdog: {nodes['sync_timeout_periods']:g} periods "
-                              f"(--valve-watchdog-periods; README 'Timing')")
+            nodes["sync_timeout_periods"] = self.valve_watchdog_periods()
+            self.notes.append(f"emulated valves' SYNC watchdog and the controller's stall fault: "
+                              f"{nodes['sync_timeout_periods']:g} periods (--valve-watchdog-periods; README 'Timing')")
         config = self.out / "emulator.toml"
         config.write_text(_toml(overrides))
         child = Child("emulator", ["-m", "plant_emulator", "--bus", str(self.spec), "--rig", self.scenario.rig,
@@ -125,6 +128,8 @@ class Run:
             merged.setdefault(section, {}).update(values)
         if self.pacing == "lockstep":
             merged.setdefault("timing", {}).setdefault("heartbeat_timeout_ms", LOCKSTEP_HEARTBEAT_TIMEOUT_MS)
+        else:   # a stall the emulated valves ride out must not fault the controller either
+            merged.setdefault("timing", {}).setdefault("stall_fault_periods", self.valve_watchdog_periods())
         name = "controller"
         config = self.out / f"{name}.toml"
         config.write_text(_toml(merged))

@@ -40,6 +40,7 @@ class FakeBus:
         self._last_heartbeat = 0.0
         self.silent = set()           # legs whose LEG_STATE is not sent
         self.corrupt = set()          # legs whose LEG_STATE has a bad CRC
+        self.stuck = {}               # leg -> the encoder reading it is frozen at
         self.sent = collections.Counter()
         self._state = [(CODECS[f"LEG_STATE_{i}"], can.Message(arbitration_id=CODECS[f"LEG_STATE_{i}"].frame_id,
                                                                data=bytearray(6), is_extended_id=False),
@@ -103,7 +104,7 @@ class FakeBus:
             codec, msg, values = self._state[leg]
             values[2] = self.valve[leg]
             values[3] = 0.0
-            values[4] = round(self.y[leg] / self.res) * self.res
+            values[4] = self.stuck.get(leg, round(self.y[leg] / self.res) * self.res)
             values[5] = self.mass * (self.a[leg] + 9.81)
             codec.encode_into(values, msg.data)
             if leg in self.corrupt:

@@ -8,6 +8,7 @@ import time
 import numpy as np
 import pytest
 
+from firmware_py.control import ST_ERROR
 from firmware_py.kinematics import ik_batch
 from firmware_py.supervisor import Ack, Command, Fault, State, Supervisor
 from tests.test_controller_alloc import make_loop
@@ -272,3 +273,89 @@ def test_a_recovering_leg_that_goes_further_out_faults():
     bus.y[0] = core.stroke_m - 0.05e-3                     # pushed on, past the slack
     cycles(loop, 2)
     assert core.sup.fault_code is Fault.POSITION_LIMIT
+
+
+def test_plausibility_window_needs_motion_along_the_command():
+    from firmware_py.plausibility import MotionPlausibility
+    check = MotionPlausibility(2, spool_min=0.2, window=10, travel_min_m=1e-3)
+    spool, y = np.array([0.3, -0.3]), np.zeros(2)
+    for k in range(9):                                   # leg 1 follows, leg 2 does not
+        y[0] += 0.5e-3
+        assert not check.update(spool, y)
+    y[0] += 0.5e-3
+    assert check.update(spool, y)                        # the 10th cycle closes leg 2's window
+    check.reset()
+    for k in range(30):                                  # both move their way: never
+        y += np.array([0.2e-3, -0.2e-3])
+        assert not check.update(spool, y)
+    for k in range(30):                                  # a command that flips every 5 cycles
+        assert not check.update(spool * (1 if k // 5 % 2 else -1), y)
+    for k in range(30):                                  # below the threshold: not judged
+        assert not check.update(np.array([0.19, -0.19]), y)
+
+
+def test_a_stuck_encoder_during_a_move_faults_motion_plausibility():
+    loop, core, bus = make_loop("testbench", "pi")
+    cycles(loop, 20)
+    assert send_waypoint(core, 1, 0.0, 0.0, 0.20, segment=1.0, accel=0.2, flags=3) is Ack.ACCEPTED
+    cycles(loop, 200)
+    assert core.state is State.RUNNING
+    bus.stuck[0] = round(bus.y[0] / bus.res) * bus.res
+    for k in range(1000):
+        loop.cycle()
+        if core.state is State.FAULT:
+            break
+    assert core.sup.fault_code is Fault.MOTION_PLAUSIBILITY, core.sup.fault_code.name
+    # within 0.2 s of the freeze (measured: 75 cycles, the leg 26 mm further by then: the PI
+    # drives a leg it cannot see), long before the measured tracking error reaches its 25 mm
+    # limit (the reference moves at 50 mm/s: 0.5 s)
+    assert k < 100
+    assert abs(core.joint.st[0, ST_ERROR]) < 0.5 * core.cfg.tracking_error_max_m
+
+
+def test_a_stalled_realtime_loop_faults_overrun_and_stays_held_until_reset():
+    loop, core, bus = make_loop("testbench", "pi")
+    now = [0.0]
+    loop.clock = lambda: now[0]
+    loop._stall_s = core.cfg.stall_fault_periods * loop.period_s        # as in realtime pacing
+    for _ in range(20):
+        now[0] += loop.period_s
+        loop.cycle()
+    assert core.state is State.READY
+    now[0] += 0.050                                                     # SIGSTOP for 50 ms
+    loop.cycle()
+    assert core.state is State.FAULT and core.sup.fault_code is Fault.OVERRUN
+    for _ in range(100):
+        now[0] += loop.period_s
+        loop.cycle()
+        assert valve_words(bus, loop)[2] == 0                           # M = 0: held, no motion
+    assert core.state is State.FAULT
+    core.host_command(Command.RESET, 0)
+    core.host_command(Command.ENABLE, 0)
+    for _ in range(10):
+        now[0] += loop.period_s
+        loop.cycle()
+    assert core.state is State.READY
+
+
+def test_nodes_that_reboot_are_started_again_on_reset():
+    import can
+    loop, core, bus = make_loop("testbench", "pi")
+    cycles(loop, 20)
+    bus.silent.add(0)                                     # the node powers down ...
+    cycles(loop, core.cfg.missing_frames_fault)
+    assert core.sup.fault_code is Fault.SENSOR_TIMEOUT
+    bus.operational = False                               # ... and boots again, PRE-OPERATIONAL
+    bus.valve[0] = 1
+    bus.silent.clear()
+    for state in (0, 127):
+        bus.queue.append(can.Message(arbitration_id=0x701, data=bytearray([state]), is_extended_id=False))
+    cycles(loop, 3)
+    assert loop.nmt_state[1] == 127
+    starts = bus.sent[0x000]
+    loop._host_command(int(Command.RESET), 0, 1)
+    assert bus.sent[0x000] == starts + 1 and bus.operational     # NMT start sent with the RESET
+    cycles(loop, 10)
+    assert core.host_command(Command.ENABLE, 0) is Ack.ACCEPTED
+    cycles(loop, 10)
+    assert core.state is State.READY and bus.valve == [3]
