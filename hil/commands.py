@@ -45,6 +45,18 @@ def _run(args) -> int:
     return _finish(args, run_scenario(scenario, options))
 
 
+def _faults(args) -> int:
+    from .faults import format_terminal, run_matrix
+    out = Path(args.out) if args.out else Path("hil-out") / "faults"
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise UserInputError(f"--out {out}: cannot create the directory ({error.strerror})") from None
+    doc = run_matrix(out, short=args.short, bus=args.bus, start_timeout_s=args.start_timeout_s)
+    print(json.dumps(doc, indent=1, default=str) if args.json else format_terminal(doc))
+    return 0 if doc["passed"] else 1
+
+
 def _analyze(args) -> int:
     from .runner import analyze_log
     scenario = _scenario(args.scenario)
@@ -87,6 +99,15 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="how long the processes may take to come up (default 90; a VM without KVM needs more)")
     p.add_argument("--json", action="store_true", help="print metrics.json instead of the summary")
     p.set_defaults(handler=_run)
+    p = hil_sub.add_parser("faults", help="the fault-injection matrix: every case in its own emulator + "
+                                          "controller session, reaction times and excursions from the log")
+    p.add_argument("--out", metavar="DIR", help="output directory (default: hil-out/faults)")
+    p.add_argument("--short", action="store_true", help="every case on the hexapod, a subset on the test bench "
+                                                        "(what make test runs)")
+    p.add_argument("--bus", metavar="SPEC", help="as for run (default: a fresh on-host multicast group per session)")
+    p.add_argument("--start-timeout-s", type=number_in_range(float, 1.0, 3600.0), default=90.0)
+    p.add_argument("--json", action="store_true", help="print faults.json instead of the table")
+    p.set_defaults(handler=_faults)
     p = hil_sub.add_parser("analyze", help="the scenario's analysis on a recorded log (BLF or ASC), e.g. from the rig")
     p.add_argument("log", metavar="LOG")
     p.add_argument("--scenario", required=True)

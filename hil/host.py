@@ -20,6 +20,7 @@ from protocol.values import EMU_SET_LOAD, KIND_HOST_CMD, KIND_WAYPOINT
 
 
 CONTROLLER_MESSAGES = ["SYNC", "CTRL_STATUS", "CTRL_ACK"]    # what the host reads: all the controller's
+HEARTBEAT_IDS = (0x701, 0x70F)                                  # the nodes' (the controller's is 0x710)
 
 
 class HostError(RuntimeError):
@@ -41,6 +42,7 @@ class Host:
         self.acks: dict[tuple[int, int], int] = {}
         self.frames_sent = 0
         self.frames_received = 0
+        self.node_heartbeats = 0                # CANopen heartbeats of the nodes (ids 0x701-0x70F)
         self._cmd = Outbox("HOST_CMD")
         self._pos = Outbox("HOST_WAYPOINT_POS")
         self._rot = Outbox("HOST_WAYPOINT_ROT")
@@ -71,6 +73,8 @@ class Host:
         msg.channel = None                     # BLF/ASC channel numbers, not the bus's name
         self.writer.on_message_received(msg)
         self.frames_received += 1
+        if HEARTBEAT_IDS[0] <= msg.arbitration_id <= HEARTBEAT_IDS[1]:
+            self.node_heartbeats += 1
         status = self.decoder.receive_message(msg)
         if status is RxStatus.OK:
             if msg.arbitration_id == 0x080:

@@ -9,7 +9,7 @@ first; gaps in the SYNC counter count); a frame belongs to the cycle whose SYNC 
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import can
@@ -67,6 +67,7 @@ class LogData:
     rx_counts: dict[str, dict[str, int]]       # message -> status -> frames
     lost: dict[str, int]                       # message -> frames missing from the counter sequence
     unknown_frames: int
+    rejected: dict[str, np.ndarray] = field(default_factory=dict)   # message -> cycles of E2E-rejected frames
 
     @property
     def e2e_errors(self) -> int:
@@ -179,6 +180,7 @@ def read_log(path: str | Path) -> LogData:
     sync_id, nmt_id = CODECS["SYNC"].frame_id, CODECS["NMT"].frame_id
     event_ids = {CODECS[n].frame_id for n in EVENT_MESSAGES}
     name_of_id = {codec.frame_id: name for name, codec in CODECS.items()}
+    rejected: dict[str, list[int]] = {}
     cycle = -1
     for i in order:
         frame_id, data, timestamp = frames[i]
@@ -186,6 +188,8 @@ def read_log(path: str | Path) -> LogData:
             continue
         status = decoder.receive(frame_id, data)
         if status is not RxStatus.OK:
+            if status in E2E_REJECTED:
+                rejected.setdefault(name_of_id[frame_id], []).append(int(cycles[i]))
             continue
         cycle = int(cycles[i])
         if frame_id == nmt_id and decoder.values["NMT"][0] == NMT_START:
@@ -214,4 +218,4 @@ def read_log(path: str | Path) -> LogData:
     for k, t in sync_times:
         sync_time_s[k] = t
     return LogData(str(path), cycle + 1, sync_time_s, series, events, len(frames), rx_counts, lost,
-                   decoder.unknown_frames)
+                   decoder.unknown_frames, {name: np.array(c, dtype=np.int64) for name, c in rejected.items()})

@@ -111,16 +111,23 @@ class Run:
             nodes["sync_timeout_periods"] = self.valve_watchdog_periods()
             self.notes.append(f"emulated valves' SYNC watchdog and the controller's stall fault: "
                               f"{nodes['sync_timeout_periods']:g} periods (--valve-watchdog-periods; README 'Timing')")
-        config = self.out / "emulator.toml"
+        name = self._child_name("emulator")
+        config = self.out / f"{name}.toml"
         config.write_text(_toml(overrides))
-        child = Child("emulator", ["-m", "plant_emulator", "--bus", str(self.spec), "--rig", self.scenario.rig,
+        child = Child(name, ["-m", "plant_emulator", "--bus", str(self.spec), "--rig", self.scenario.rig,
                                    "--rate-hz", str(self.options.rate_hz), "--load-kg", str(self.scenario.load_kg),
-                                   "--config", str(config), "--summary", str(self.out / "emulator.json")], self.out)
+                                   "--config", str(config), "--summary", str(self.out / f"{name}.json")], self.out)
+        heartbeats = self.host.node_heartbeats
         self.notes += child.start(realtime_priority=70 if self.pacing == "realtime" else None)
         self.children.append(child)
         # its boot-up heartbeats: the controller's 5 s activation window starts only then
-        self.host.wait_until(lambda: self.host.frames_received > 0, 10**9, what="the emulator's first frame",
-                             wall_timeout_s=self.options.start_timeout_s)
+        self.host.wait_until(lambda: self.host.node_heartbeats > heartbeats, 10**9,
+                             what="the emulator's first heartbeat", wall_timeout_s=self.options.start_timeout_s)
+
+    def _child_name(self, base: str) -> str:
+        """"controller", then "controller-2" ... for a restarted one (its own logs and summary)."""
+        count = sum(1 for child in self.children if child.name.split("-")[0] == base)
+        return base if count == 0 else f"{base}-{count + 1}"
 
     def start_controller(self, controller: str, overrides: dict | None = None) -> None:
         merged = {section: dict(values) for section, values in self.scenario.controller_overrides.items()}
@@ -130,7 +137,7 @@ class Run:
             merged.setdefault("timing", {}).setdefault("heartbeat_timeout_ms", LOCKSTEP_HEARTBEAT_TIMEOUT_MS)
         else:   # a stall the emulated valves ride out must not fault the controller either
             merged.setdefault("timing", {}).setdefault("stall_fault_periods", self.valve_watchdog_periods())
-        name = "controller"
+        name = self._child_name("controller")
         config = self.out / f"{name}.toml"
         config.write_text(_toml(merged))
         child = Child(name, ["-m", "firmware_py", "--bus", str(self.spec), "--rig", self.scenario.rig,
@@ -239,6 +246,8 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
         raise UserInputError(f"--out {out}: cannot create the directory ({error.strerror})") from None
     for stale in ("metrics.json", "report.md", LOG_NAME):
         (out / stale).unlink(missing_ok=True)
+    for stale in out.glob("*-[0-9]*.*"):          # a restarted child's files from an earlier run
+        stale.unlink(missing_ok=True)
     run = Run(scenario, options, spec, out)
     bus = open_bus(spec)
     run.host = Host(bus, str(out / LOG_NAME), watch=run._watch)

@@ -84,7 +84,7 @@ class OperatingPoint:
 
 def _rhs(x: np.ndarray, u_v: float, y: float, mass: float, damping: float, cfg: EmulatorConfig) -> np.ndarray:
     v, pa, pb, spool = x
-    rate_a, rate_b, _, _ = hy.pressure_rates(y, v, pa, pb, spool, cfg.supply_pressure_pa, cfg.hp)
+    rate_a, rate_b, _, _ = hy.pressure_rates(y, v, pa, pb, spool, cfg.supply_pressure_pa, cfg.hp, 1.0)
     force = hy.piston_force(pa, pb, cfg.hp) - damping * v - mass * GRAVITY_M_S2
     return np.array([force / mass, rate_a, rate_b,
                      (u_v / cfg.valve_full_scale_v - spool) / cfg.hp[hy.HP_TAU_SPOOL]])
@@ -104,7 +104,7 @@ def linearise(cfg: EmulatorConfig, position_mm: float, load_kg: float) -> Operat
 
     def residual(q):
         pa, pb, spool = q[0] * 1e5, q[1] * 1e5, q[2] * 1e-3
-        rate_a, rate_b, _, _ = hy.pressure_rates(y, 0.0, pa, pb, spool, ps, cfg.hp)
+        rate_a, rate_b, _, _ = hy.pressure_rates(y, 0.0, pa, pb, spool, ps, cfg.hp, 1.0)
         va, vb = hy.chamber_volumes(y, cfg.hp)
         return [(pa - cfg.alpha * pb - hold) / 1e5,
                 rate_a * va / hy.bulk_modulus(pa, cfg.hp) * 1e6 / cfg.area_a_m2,

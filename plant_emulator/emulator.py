@@ -243,8 +243,7 @@ class Emulator:
         """`steps` periods of physics without SYNC, the valves' spools as they are now; the
         truth after each (the sensor nodes stay quiet: they sample on SYNC)."""
         for _ in range(max(steps, 0)):
-            for n, valve in self.valves.items():
-                self.rig.command[n - 1] = valve.spool_command
+            self._apply_valves()
             self.rig.advance(self.cfg.sync_period_s)
             self.counters.free_run_steps += 1
             self._send_truth(self.sync_counter)
@@ -360,10 +359,16 @@ class Emulator:
             if emergency is not None:
                 self._emergency(n, emergency)
         self._sample_and_send(counter)
-        for n, valve in self.valves.items():
-            self.rig.command[n - 1] = valve.spool_command
+        self._apply_valves()
         self.rig.advance(self.cfg.sync_period_s)
         self._count_down_faults()
+
+    def _apply_valves(self) -> None:
+        """Spool commands to the rig, and the load-holding valves open only while ACTIVE."""
+        blocks = self.cfg.hold_blocks_ports
+        for n, valve in self.valves.items():
+            self.rig.command[n - 1] = valve.spool_command
+            self.rig.ports_open[n - 1] = 0.0 if blocks and valve.state is not ValveState.ACTIVE else 1.0
 
     def _count_down_faults(self) -> None:
         for key, entry in list(self.faults.items()):

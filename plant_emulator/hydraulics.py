@@ -124,9 +124,12 @@ def piston_force(pa: float, pb: float, hp: np.ndarray) -> float:
 
 
 @numba.njit(cache=True)
-def pressure_rates(y: float, v: float, pa: float, pb: float, spool: float, ps: float, hp: np.ndarray):
-    """dPA/dt, dPB/dt (eq. 4.7-4.8, 4.13-4.14 with internal leakage) and their slopes."""
+def pressure_rates(y: float, v: float, pa: float, pb: float, spool: float, ps: float, hp: np.ndarray,
+                   ports: float):
+    """dPA/dt, dPB/dt (eq. 4.7-4.8, 4.13-4.14 with internal leakage) and their slopes;
+    `ports` 1 = the valve connected to the chambers, 0 = the load-holding valves closed."""
     qa, qb, dqa, dqb = valve_flows(spool, pa, pb, ps, hp)
+    qa, qb, dqa, dqb = qa * ports, qb * ports, dqa * ports, dqb * ports
     leak = hp[HP_LEAK] * (pa - pb)
     va, vb = chamber_volumes(y, hp)
     ka = bulk_modulus(pa, hp) / va
@@ -145,11 +148,12 @@ def spool_step(spool: float, command: float, h: float, hp: np.ndarray) -> float:
 
 
 @numba.njit(cache=True)
-def chamber_step(state: np.ndarray, y: float, v: float, ps: float, h: float, hp: np.ndarray) -> None:
+def chamber_step(state: np.ndarray, y: float, v: float, ps: float, h: float, hp: np.ndarray,
+                 ports: float) -> None:
     """Advance PA, PB of one leg's state row by h, linearly implicit (Rosenbrock-Euler
     on each chamber's own slope); v and y are the end-of-step mechanical state."""
     pa, pb = state[S_PA], state[S_PB]
-    rate_a, rate_b, slope_a, slope_b = pressure_rates(y, v, pa, pb, state[S_SPOOL], ps, hp)
+    rate_a, rate_b, slope_a, slope_b = pressure_rates(y, v, pa, pb, state[S_SPOOL], ps, hp, ports)
     p_min = hp[HP_P_MIN]
     state[S_PA] = max(pa + h * rate_a / (1.0 - h * slope_a), p_min)
     state[S_PB] = max(pb + h * rate_b / (1.0 - h * slope_b), p_min)

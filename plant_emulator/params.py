@@ -66,6 +66,7 @@ RANGES: dict[str, dict[str, tuple]] = {
     "nodes": {
         "sync_period_ms": (0.5, 100.0), "command_timeout_syncs": (1, 1000),
         "sync_timeout_periods": (1.0, 10000.0), "heartbeat_ms": (10.0, 10000.0), "nmt_autostart": bool,
+        "hold_blocks_ports": bool,
         "spool_jam_threshold_pct": (0.1, 100.0), "spool_jam_syncs": (1, 10000),
         "leg_pressure_divisor": (0, 240), "imu_divisor": (0, 240), "valve_status_divisor": (0, 240),
     },
@@ -139,6 +140,7 @@ class EmulatorConfig:
     sync_timeout_periods: float
     heartbeat_s: float
     nmt_autostart: bool
+    hold_blocks_ports: bool
     spool_jam_threshold: float
     spool_jam_syncs: int
     leg_pressure_divisor: int
@@ -227,7 +229,7 @@ def build(raw: dict) -> EmulatorConfig:
         imu_rate_noise_rad_s=s["imu_rate_noise_rad_s"], seed=s["seed"],
         sync_period_s=n["sync_period_ms"] * 1e-3, command_timeout_syncs=n["command_timeout_syncs"],
         sync_timeout_periods=n["sync_timeout_periods"], heartbeat_s=n["heartbeat_ms"] * 1e-3,
-        nmt_autostart=n["nmt_autostart"], spool_jam_threshold=n["spool_jam_threshold_pct"] / 100.0,
+        nmt_autostart=n["nmt_autostart"], hold_blocks_ports=n["hold_blocks_ports"], spool_jam_threshold=n["spool_jam_threshold_pct"] / 100.0,
         spool_jam_syncs=n["spool_jam_syncs"], leg_pressure_divisor=n["leg_pressure_divisor"],
         imu_divisor=n["imu_divisor"], valve_status_divisor=n["valve_status_divisor"],
     )

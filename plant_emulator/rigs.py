@@ -3,7 +3,9 @@
 Both expose the same surface to the node layer: `n_legs`, `state` (n_legs x S_SIZE, the
 actuator states of hydraulics.py), `command` (valve input per leg, fraction of full
 input, written by the valve nodes), `jammed` (per-leg spool frozen), `seized` (per-leg rod
-stuck mechanically: `set_rod_seized`), `supply_pressure_pa`,
+stuck mechanically: `set_rod_seized`), `ports_open` (per leg, 0 when the load-holding valves
+between servo-valve and cylinder are closed: the node layer closes them whenever the valve
+is not ACTIVE), `supply_pressure_pa`,
 `advance(period_s)` (integrate exactly that much physics), `rod_force_n` (what the load
 cells measure) and `set_load(kg)`.
 
@@ -44,8 +46,8 @@ SEIZED_SOLIMP = (0.9999, 0.9999, 0.0001, 0.5, 2.0)
 
 
 @numba.njit(cache=True)
-def testbench_advance(st: np.ndarray, command: float, jammed: bool, seized: bool, n: int, h: float, ps: float,
-                      hp: np.ndarray, fp: np.ndarray, gp: np.ndarray, rod_mass: float, load_mass: float,
+def testbench_advance(st: np.ndarray, command: float, jammed: bool, seized: bool, ports: float, n: int, h: float,
+                      ps: float, hp: np.ndarray, fp: np.ndarray, gp: np.ndarray, rod_mass: float, load_mass: float,
                       out: np.ndarray) -> None:
     """n sub-steps of h of the test bench; out = [acceleration, seal friction, guide friction]."""
     mass = rod_mass + load_mass
@@ -75,7 +77,7 @@ def testbench_advance(st: np.ndarray, command: float, jammed: bool, seized: bool
         guide = guide_z + guide_c * v_new
         st[hy.S_Z] = lugre_z_step(st[hy.S_Z], v_new, h, fp)
         st[hy.S_ZG] = lugre_z_step(st[hy.S_ZG], v_new, h, gp)
-        hy.chamber_step(st, y_new, v_new, ps, h, hp)
+        hy.chamber_step(st, y_new, v_new, ps, h, hp, ports)
         accel = (v_new - v) / h
         y, v = y_new, v_new
     st[hy.S_Y], st[hy.S_V] = y, v
@@ -94,7 +96,8 @@ def legs_drive_into(st: np.ndarray, velocity: np.ndarray, hp: np.ndarray, fp: np
 
 @numba.njit(cache=True)
 def legs_hydraulics(st: np.ndarray, stroke: np.ndarray, velocity: np.ndarray, command: np.ndarray,
-                    jammed: np.ndarray, n: int, h: float, ps: float, hp: np.ndarray, fp: np.ndarray) -> None:
+                    jammed: np.ndarray, ports: np.ndarray, n: int, h: float, ps: float, hp: np.ndarray,
+                    fp: np.ndarray) -> None:
     """Advance spool, bristles and chambers of every leg by n x h at the given leg motion."""
     for i in range(st.shape[0]):
         st[i, hy.S_Y] = stroke[i]
@@ -103,7 +106,7 @@ def legs_hydraulics(st: np.ndarray, stroke: np.ndarray, velocity: np.ndarray, co
             if not jammed[i]:
                 st[i, hy.S_SPOOL] = hy.spool_step(st[i, hy.S_SPOOL], command[i], h, hp)
             st[i, hy.S_Z] = lugre_z_step(st[i, hy.S_Z], velocity[i], h, fp)
-            hy.chamber_step(st[i], stroke[i], velocity[i], ps, h, hp)
+            hy.chamber_step(st[i], stroke[i], velocity[i], ps, h, hp, ports[i])
 
 
 def holding_pressures(cfg: EmulatorConfig, force_n: float) -> tuple[float, float]:
@@ -123,6 +126,7 @@ class _RigBase:
         self.command = np.zeros(self.n_legs)
         self.jammed = np.zeros(self.n_legs, dtype=bool)
         self.seized = np.zeros(self.n_legs, dtype=bool)
+        self.ports_open = np.ones(self.n_legs)     # 0: the load-holding valves block the chambers
         self.rod_force_n = np.zeros(self.n_legs)
         self.supply_pressure_pa = cfg.supply_pressure_pa
         self.supply_lost = False
@@ -172,8 +176,8 @@ class TestbenchRig(_RigBase):
     def advance(self, period_s: float) -> None:
         n = max(1, round(period_s / self.cfg.substep_s))
         ps = self._supply_for(period_s)
-        testbench_advance(self.state[0], float(self.command[0]), bool(self.jammed[0]), bool(self.seized[0]), n,
-                          period_s / n, ps,
+        testbench_advance(self.state[0], float(self.command[0]), bool(self.jammed[0]), bool(self.seized[0]),
+                          float(self.ports_open[0]), n, period_s / n, ps,
                           self.cfg.hp, self.cfg.friction, self.guide_friction, self.cfg.piston_rod_mass_kg,
                           self.load_mass_kg, self.out)
         # the rod carries the load's weight, inertia and guide friction
@@ -183,7 +187,7 @@ class TestbenchRig(_RigBase):
     def warm_up(self) -> None:
         """Load the compiled kernels now: their first call costs 0.2-0.25 s (numba's cache),
         which in the first SYNC made the nodes miss ~45 realtime cycles. Scratch copies only."""
-        testbench_advance(self.state[0].copy(), 0.0, False, False, 1, self.cfg.substep_s, self.cfg.supply_pressure_pa,
+        testbench_advance(self.state[0].copy(), 0.0, False, False, 1.0, 1, self.cfg.substep_s, self.cfg.supply_pressure_pa,
                           self.cfg.hp, self.cfg.friction, self.guide_friction, self.cfg.piston_rod_mass_kg,
                           self.load_mass_kg, np.zeros(3))
 
@@ -259,7 +263,8 @@ class HexapodRig(_RigBase):
             data.ctrl[:] = self._force
             mujoco.mj_step(model, data)
             self._read_legs()
-            legs_hydraulics(self.state, self._stroke, self._velocity, self.command, self.jammed, sub, h, ps,
+            legs_hydraulics(self.state, self._stroke, self._velocity, self.command, self.jammed, self.ports_open,
+                            sub, h, ps,
                             cfg.hp, cfg.friction)
         self._measure_rod_forces()
         self.time_s += steps * model.opt.timestep
@@ -268,7 +273,8 @@ class HexapodRig(_RigBase):
         """As TestbenchRig.warm_up: the kernels loaded on scratch copies, the rig untouched."""
         cfg, state = self.cfg, self.state.copy()
         legs_drive_into(state, self._velocity, cfg.hp, cfg.friction, np.zeros(6), np.zeros(6))
-        legs_hydraulics(state, self._stroke.copy(), self._velocity.copy(), np.zeros(6), self.jammed, 1,
+        legs_hydraulics(state, self._stroke.copy(), self._velocity.copy(), np.zeros(6), self.jammed,
+                        self.ports_open, 1,
                         cfg.substep_s, cfg.supply_pressure_pa, cfg.hp, cfg.friction)
 
     def _measure_rod_forces(self) -> None:
