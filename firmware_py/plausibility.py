@@ -5,10 +5,11 @@ sink while the valves push them up).
 
 Rule: while the valve input stays beyond `spool_min` of full scale with one sign for
 `window` cycles, the encoder must advance at least `travel_min` in that direction; a
-window without it is implausible. Defaults (controller.toml): 10 % input moves this cylinder
-at 225-295 mm/s unloaded (k01 of Table A.3 x 1 V), 11-15 mm in the 50 ms window, so 0.5 mm
-(4 encoder counts) is far below any working actuator. In place on arrays made at
-construction (no allocation per cycle).
+window without it is implausible. Defaults (controller.toml): 30 % input for 0.2 s, 0.5 mm
+(4 encoder counts); 10 % moves this cylinder at 225-295 mm/s unloaded (k01 of Table A.3 x
+1 V), but the hexapod's legs (190-260 kg of joint-space inertia) tripped a 10 %, 50 ms
+window in the chapter 11 movements. In place on arrays made at construction (no allocation
+per cycle).
 """
 
 from __future__ import annotations

@@ -38,7 +38,14 @@ import numpy as np
 from firmware_py.geometry import default_geometry
 from firmware_py.supervisor import Command, Fault, State
 from plant_emulator.emulator import FAULT_CODES
-from protocol.values import EMU_CLEAR_ALL, EMU_INJECT, FLAG_LAST, FLAG_START, KIND_HOST_CMD, KIND_WAYPOINT
+from protocol.values import (
+    EMU_CLEAR_ALL,
+    EMU_INJECT,
+    FLAG_LAST,
+    FLAG_START,
+    KIND_HOST_CMD,
+    KIND_WAYPOINT,
+)
 
 from .host import HostError
 from .logdata import LogData
@@ -107,8 +114,12 @@ LOCKSTEP_CASES = [
          "CORRUPT", 2, 20, ("E2E_ERROR",), 3),
     Case("4f", "duplicated frames, leg 3 for 50 cycles", "rejected; no fault, <= 1 mm", "transient",
          "DUPLICATE", 3, 50),
-    Case("4g", "out-of-order counters, leg 3 for 50 cycles", "rejected; no fault, <= 1 mm", "transient",
-         "REORDER", 3, 50),
+    Case("4g", "out-of-order counters: one swapped pair, leg 3", "rejected; no fault, <= 1 mm", "transient",
+         "REORDER", 3, 2),
+    # swapped every other cycle: after the first swap the receiver re-synchronises to the late
+    # frame's counter and every later frame is a WRONG_SEQUENCE, as profile 1 demands
+    Case("4g2", "out-of-order counters, leg 3 for 50 cycles", "SENSOR_TIMEOUT or E2E_ERROR within 5 cycles",
+         "persistent", "REORDER", 3, 50, ("SENSOR_TIMEOUT", "E2E_ERROR"), 5),
     Case("4h", "repeated counter (stale frame), leg 4 for 1 cycle", "rejected; no fault, <= 1 mm", "transient",
          "REPEAT", 4, 1),
     Case("4i", "repeated counter (stale frame), leg 4 for 50 cycles", "E2E_ERROR within 3 cycles", "persistent",
