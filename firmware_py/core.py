@@ -104,8 +104,8 @@ class ControllerCore:
         self._mask = np.zeros(n, dtype=bool)
         self._mask3 = np.zeros((n, 3), dtype=bool)
         self._abs = np.zeros(n)
-        self.plausibility = MotionPlausibility(n, cfg.plausibility_spool, cfg.plausibility_cycles,
-                                               cfg.plausibility_travel_m)
+        self.plausibility = MotionPlausibility(n, cfg.plausibility_spool * cfg.valve_full_scale_v,
+                                               cfg.plausibility_cycles, cfg.plausibility_travel_m)
         self.overruns_in_row = 0
         self.dk_failures = 0
         self.reset_cycles = 0
@@ -495,8 +495,7 @@ class ControllerCore:
         np.abs(joint.st[:, ST_ERROR], out=self._abs)
         if self._abs.max() > cfg.tracking_error_max_m:
             sup.fault(Fault.TRACKING_ERROR)
-        np.multiply(u, 1.0 / cfg.valve_full_scale_v, out=self._abs)
-        if self.plausibility.update(self._abs, self.meas_y):
+        if self.plausibility.update(u, self.meas_y):
             sup.fault(Fault.MOTION_PLAUSIBILITY)
 
     def _write_outputs(self) -> None:

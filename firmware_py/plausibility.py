@@ -3,7 +3,7 @@ cylinder. It catches what the other limits only see late or never: a stuck encod
 reference runs away from a frozen reading), a seized rod, a lost supply pressure (the legs
 sink while the valves push them up).
 
-Rule: while the valve input stays beyond `spool_min` of full scale with one sign for
+Rule: while the valve input stays beyond `input_min` (volts) with one sign for
 `window` cycles, the encoder must advance at least `travel_min` in that direction; a
 window without it is implausible. Defaults (controller.toml): 30 % input for 0.2 s, 0.5 mm
 (4 encoder counts); 10 % moves this cylinder at 225-295 mm/s unloaded (k01 of Table A.3 x
@@ -18,8 +18,8 @@ import numpy as np
 
 
 class MotionPlausibility:
-    def __init__(self, n: int, spool_min: float, window: int, travel_min_m: float):
-        self.spool_min, self.window, self.travel_min_m = spool_min, window, travel_min_m
+    def __init__(self, n: int, input_min_v: float, window: int, travel_min_m: float):
+        self.input_min_v, self.window, self.travel_min_m = input_min_v, window, travel_min_m
         self.count = np.zeros(n, dtype=np.int64)        # cycles in the current window
         self.start = np.zeros(n)                         # encoder reading when it began
         self.sign = np.zeros(n)                          # the command's direction in it (0: none)
@@ -33,13 +33,13 @@ class MotionPlausibility:
         self.count[:] = 0
         self.sign[:] = 0.0
 
-    def update(self, spool: np.ndarray, position_m: np.ndarray) -> bool:
-        """One cycle: `spool` the commanded valve input (fraction of full), `position_m` the
-        encoder. True when a leg completed a window without moving along its command."""
+    def update(self, input_v: np.ndarray, position_m: np.ndarray) -> bool:
+        """One cycle: `input_v` the commanded valve input (V), `position_m` the encoder.
+        True when a leg completed a window without moving along its command."""
         sign, count = self._sign_now, self.count
-        np.abs(spool, out=self._progress)
-        np.greater_equal(self._progress, self.spool_min, out=self._driven)
-        np.sign(spool, out=sign)
+        np.abs(input_v, out=self._progress)
+        np.greater_equal(self._progress, self.input_min_v, out=self._driven)
+        np.sign(input_v, out=sign)
         np.multiply(sign, self._driven, out=sign)
         # a new direction (or none) starts a new window at the present reading
         np.not_equal(sign, self.sign, out=self._changed)

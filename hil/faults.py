@@ -170,8 +170,6 @@ class CaseResult:
 class Session(Scenario):
     """One emulator + controller pair running a list of cases."""
 
-    controllers = ("model-based",)
-
     def __init__(self, rig: str, pacing: str, cases: list[Case]):
         self.rig, self.pacing, self.pacings = rig, pacing, (pacing,)
         self.cases = [c for c in cases if rig in c.rigs]

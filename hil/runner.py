@@ -246,8 +246,9 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
         raise UserInputError(f"--out {out}: cannot create the directory ({error.strerror})") from None
     for stale in ("metrics.json", "report.md", LOG_NAME):
         (out / stale).unlink(missing_ok=True)
-    for stale in out.glob("*-[0-9]*.*"):          # a restarted child's files from an earlier run
-        stale.unlink(missing_ok=True)
+    for base in ("controller", "emulator"):       # a restarted child's files from an earlier run
+        for stale in out.glob(f"{base}-[0-9]*.*"):
+            stale.unlink(missing_ok=True)
     run = Run(scenario, options, spec, out)
     bus = open_bus(spec)
     run.host = Host(bus, str(out / LOG_NAME), watch=run._watch)

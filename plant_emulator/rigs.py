@@ -237,7 +237,7 @@ class HexapodRig(_RigBase):
     def set_rod_seized(self, leg: int, seized: bool) -> None:
         """A seized rod: MuJoCo's dry friction on the slide, far above any hydraulic force
         (113 mm2 x 100 bar ~ 1.1 kN), with a stiff constraint (the default soft one lets the
-        rod slide 150 mm in 0.5 s at 30 % valve input; this one 0.3 mm)."""
+        rod slide 150 mm in 0.5 s at 30 % valve input; this one 0.03 mm)."""
         super().set_rod_seized(leg, seized)
         model = self.mechanism.model
         dof = self.mechanism.slide_dof[leg]

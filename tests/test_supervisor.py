@@ -276,8 +276,8 @@ def test_a_recovering_leg_that_goes_further_out_faults():
 
 def test_plausibility_window_needs_motion_along_the_command():
     from firmware_py.plausibility import MotionPlausibility
-    check = MotionPlausibility(2, spool_min=0.2, window=10, travel_min_m=1e-3)
-    spool, y = np.array([0.3, -0.3]), np.zeros(2)
+    check = MotionPlausibility(2, input_min_v=2.0, window=10, travel_min_m=1e-3)
+    spool, y = np.array([3.0, -3.0]), np.zeros(2)
     for k in range(9):                                   # leg 1 follows, leg 2 does not
         y[0] += 0.5e-3
         assert not check.update(spool, y)
@@ -290,7 +290,7 @@ def test_plausibility_window_needs_motion_along_the_command():
     for k in range(30):                                  # a command that flips every 5 cycles
         assert not check.update(spool * (1 if k // 5 % 2 else -1), y)
     for k in range(30):                                  # below the threshold: not judged
-        assert not check.update(np.array([0.19, -0.19]), y)
+        assert not check.update(np.array([1.9, -1.9]), y)
 
 
 def test_a_stuck_encoder_during_a_move_faults_within_half_a_second():
