@@ -66,6 +66,7 @@ RANGES: dict[str, dict[str, object]] = {
         "waypoint_velocity_max_mm_s": (0.1, 1e4), "waypoint_step_max_mm": (0.0, 300.0), "waypoint_force_max_n": (1.0, 1e6),
         "waypoint_path_samples": (2, 1000), "plausibility_spool_pct": (1.0, 100.0),
         "plausibility_cycles": (1, 100000), "plausibility_travel_mm": (0.0, 1000.0),
+        "attitude_mismatch_deg": (0.01, 90.0), "attitude_mismatch_samples": (1, 10000),
     },
 }
 SCHEDULE_LOADS = ("0kg", "3kg", "6kg")
@@ -156,6 +157,8 @@ class ControllerConfig:
     plausibility_spool: float         # fraction of full input
     plausibility_cycles: int
     plausibility_travel_m: float
+    attitude_mismatch_rad: float      # encoders' DK attitude against the IMU's
+    attitude_mismatch_samples: int
     stall_fault_periods: float        # realtime: a SYNC this many periods after the previous one -> OVERRUN
 
 
@@ -234,6 +237,8 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         waypoint_force_max_n=sv["waypoint_force_max_n"], waypoint_path_samples=sv["waypoint_path_samples"],
         plausibility_spool=sv["plausibility_spool_pct"] / 100.0, plausibility_cycles=sv["plausibility_cycles"],
         plausibility_travel_m=sv["plausibility_travel_mm"] * MM,
+        attitude_mismatch_rad=math.radians(sv["attitude_mismatch_deg"]),
+        attitude_mismatch_samples=sv["attitude_mismatch_samples"],
         stall_fault_periods=t["stall_fault_periods"],
     )
 

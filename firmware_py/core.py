@@ -24,7 +24,7 @@ from .control import (IN_ACTIVE, IN_AR, IN_FORCE, IN_FRESH, IN_G_AX, IN_TAU, IN_
                       ST_INTEGRAL, ST_MASS, ST_U)
 from .control import MODEL_BASED, JointController
 from .geometry import GRAVITY_M_S2, Geometry, default_geometry
-from .plausibility import MotionPlausibility
+from .plausibility import AttitudeCrossCheck, MotionPlausibility
 from .supervisor import ACTIVE, Ack, Action, Command, Fault, State, Supervisor
 from .trajectory import JointTrajectory, hold_at, sls_coefficients, through_points
 
@@ -72,6 +72,8 @@ class ControllerCore:
         self.meas_y = np.zeros(n)
         self.meas_force = np.zeros(n)
         self.meas_fresh = np.zeros(n, dtype=bool)
+        self.meas_attitude = np.zeros(3)       # IMU roll, pitch, yaw [rad] (hexapod)
+        self.attitude_fresh = False            # a new IMU_ATTITUDE arrived this cycle
         self.meas_bad = np.zeros(n, dtype=bool)          # an E2E-rejected frame of the leg this cycle
         self.meas_sensor_fault = np.zeros(n, dtype=bool)
         self.valve_state = np.zeros(n, dtype=np.int64)
@@ -106,6 +108,7 @@ class ControllerCore:
         self._abs = np.zeros(n)
         self.plausibility = MotionPlausibility(n, cfg.plausibility_spool * cfg.valve_full_scale_v,
                                                cfg.plausibility_cycles, cfg.plausibility_travel_m)
+        self.attitude_check = AttitudeCrossCheck(cfg.attitude_mismatch_rad, cfg.attitude_mismatch_samples)
         self.overruns_in_row = 0
         self.dk_failures = 0
         self.reset_cycles = 0
@@ -402,11 +405,15 @@ class ControllerCore:
                 self.dk_failures = 0
                 if self.platform.det_ratio < cfg.singularity_ratio_min:
                     sup.fault(Fault.SINGULARITY)
+                if self.attitude_fresh and self.attitude_check.update(
+                        self.platform.rot, self.meas_attitude[0], self.meas_attitude[1], self.meas_attitude[2]):
+                    sup.fault(Fault.ATTITUDE_MISMATCH)
             else:
                 self.dk_failures += 1
                 if self.dk_failures >= cfg.dk_failures_fault:
                     sup.fault(Fault.DK_FAILURE)
             inputs[:, IN_G_AX] = self.platform.gravity_axial
+            self.attitude_fresh = False
         else:
             inputs[:, IN_G_AX] = GRAVITY_M_S2
         # reference

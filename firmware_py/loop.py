@@ -97,6 +97,11 @@ class ControllerLoop:
         self._emcy_of_id = {CODECS[f"EMCY_{i}"].frame_id: i for i in self.nodes}
         self._ids = {name: CODECS[name].frame_id for name in ("HOST_CMD", "HOST_WAYPOINT_POS",
                                                                 "HOST_WAYPOINT_ROT", "HOST_WAYPOINT_TIME")}
+        self._imu_attitude_id = CODECS["IMU_ATTITUDE"].frame_id if core.hexapod else -1
+        if core.hexapod:                             # views made once: the cycle copies through them
+            attitude, index = self.decoder.values["IMU_ATTITUDE"], CODECS["IMU_ATTITUDE"].index
+            self._imu_status = attitude[index["STATUS"]:index["STATUS"] + 1]
+            self._imu_rpy = attitude[index["ROLL"]:index["YAW"] + 1]
         self.out_sync = Outbox("SYNC")
         self.out_nmt = Outbox("NMT")
         self.out_cmd = [Outbox(f"VALVE_CMD_{i}") for i in self.legs]
@@ -140,6 +145,11 @@ class ControllerLoop:
             return
         if frame_id in self._leg_of_id:
             return                                   # read() copies it after the window
+        if frame_id == self._imu_attitude_id:
+            if self._imu_status[0] == 0:             # 0 = valid
+                self.core.meas_attitude[:] = self._imu_rpy
+                self.core.attitude_fresh = True
+            return
         node = self._heartbeat_of_id.get(frame_id)
         if node is not None:
             self.heartbeat_seen[node] = self.clock()

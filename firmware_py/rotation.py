@@ -31,6 +31,34 @@ def quat_to_matrix_into(p, out):
 
 
 @njit(cache=True)
+def rpy_to_matrix_into(roll, pitch, yaw, out):
+    """R = Rz(yaw) Ry(pitch) Rx(roll), the bus's roll-pitch-yaw (IMU_ATTITUDE)."""
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    out[0, 0] = cy * cp
+    out[0, 1] = cy * sp * sr - sy * cr
+    out[0, 2] = cy * sp * cr + sy * sr
+    out[1, 0] = sy * cp
+    out[1, 1] = sy * sp * sr + cy * cr
+    out[1, 2] = sy * sp * cr - cy * sr
+    out[2, 0] = -sp
+    out[2, 1] = cp * sr
+    out[2, 2] = cp * cr
+
+
+@njit(cache=True)
+def angle_between_matrices(a, b):
+    """Angle of the rotation a^T b [rad]: trace(a^T b) = 1 + 2 cos(angle)."""
+    trace = 0.0
+    for i in range(3):
+        for j in range(3):
+            trace += a[i, j] * b[i, j]
+    c = min(max(0.5 * (trace - 1.0), -1.0), 1.0)
+    return np.arccos(c)
+
+
+@njit(cache=True)
 def g_matrix_into(p, out):
     """G = [-e, -e~ + e0 I] (3x4), so that the body-frame virtual rotation is 2 G dp (eq. C.10)."""
     e0, e1, e2, e3 = p[0], p[1], p[2], p[3]

@@ -48,6 +48,7 @@ class Fault(IntEnum):          # CTRL_STATUS.FAULT_CODE (DBC value table)
     SENSOR_FAULT = 14
     VELOCITY_LIMIT = 15
     MOTION_PLAUSIBILITY = 16   # a valve driven hard that does not move its cylinder (plausibility.py)
+    ATTITUDE_MISMATCH = 17     # the encoders' platform attitude disagrees with the IMU's (plausibility.py)
 
 
 class Command(IntEnum):        # HOST_CMD.COMMAND

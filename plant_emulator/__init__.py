@@ -2,3 +2,5 @@
 on the bus, fault injection. Physics is pure; node behaviour is frames. (Built by the
 later issues.)
 """
+
+import firmware_py  # noqa: F401  (sets numba's cache directory before any kernel compiles)

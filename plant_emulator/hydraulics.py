@@ -17,11 +17,17 @@ Modelling choices (all SI, gauge pressures):
   bandwidth (> 100 Hz) is well above the actuator's ~17 Hz hydraulic mode, and a second
   order valve resonance would sit beyond the 250 Hz Nyquist limit of the 500 Hz loop, so a
   first-order lag is all the loop can see. It is integrated exactly.
-- Chambers: continuity eq. 4.7-4.8 with internal (cross-piston) leakage, volumes eq. 4.9-4.10
+- Chambers: continuity eq. 4.7-4.8 with internal (A <-> B) leakage, volumes eq. 4.9-4.10
   with dead volumes that include the hoses, and an effective bulk modulus that depends on
   the absolute chamber pressure: oil, entrained air (polytropic) and the hose wall in
   series. Integrated linearly-implicitly per chamber (stable for stiff orifices and small
   volumes at any sub-step).
+- Where the A <-> B leakage flows: the calibrated leakage (`HP_LEAK`, the damping the
+  identification sees) is a lumped path on the valve side of the load-holding valves, the
+  servo-valve's spool clearances at null; the piston seal itself leaks only `HP_SEAL_LEAK`.
+  So closing the ports (`ports` = 0) cuts the lumped path and the cylinder holds its load:
+  with the lumped leakage across the piston a blocked leg under 20 bar of load pressure
+  would run at ~0.2 m/s, which no real load-holding valve allows.
 - Force on the piston eq. 4.15 / 4.24: F = Ap (PA - alpha PB).
 """
 
@@ -52,7 +58,8 @@ HP_TANK = 13           # return-line pressure [Pa]
 HP_LAMINAR = 14        # laminar transition pressure of the orifice law [Pa]
 HP_TAU_SPOOL = 15      # spool time constant [s]
 HP_P_MIN = 16          # lowest chamber pressure (cavitation) [Pa gauge]
-HP_SIZE = 17
+HP_SEAL_LEAK = 17      # leakage across the piston seal itself [m^3/s/Pa]
+HP_SIZE = 18
 
 # -- per-leg state columns -------------------------------------------------------------------
 S_Y = 0        # piston position from fully retracted [m]
@@ -130,14 +137,15 @@ def pressure_rates(y: float, v: float, pa: float, pb: float, spool: float, ps: f
     `ports` 1 = the valve connected to the chambers, 0 = the load-holding valves closed."""
     qa, qb, dqa, dqb = valve_flows(spool, pa, pb, ps, hp)
     qa, qb, dqa, dqb = qa * ports, qb * ports, dqa * ports, dqb * ports
-    leak = hp[HP_LEAK] * (pa - pb)
+    leak_coefficient = hp[HP_LEAK] * ports + hp[HP_SEAL_LEAK]
+    leak = leak_coefficient * (pa - pb)
     va, vb = chamber_volumes(y, hp)
     ka = bulk_modulus(pa, hp) / va
     kb = bulk_modulus(pb, hp) / vb
     area = hp[HP_AREA_A]
     rate_a = ka * (qa - leak - area * v)
     rate_b = kb * (qb + leak + hp[HP_ALPHA] * area * v)
-    return rate_a, rate_b, ka * (dqa - hp[HP_LEAK]), kb * (dqb - hp[HP_LEAK])
+    return rate_a, rate_b, ka * (dqa - leak_coefficient), kb * (dqb - leak_coefficient)
 
 
 @numba.njit(cache=True)

@@ -41,7 +41,8 @@ RANGES: dict[str, dict[str, tuple]] = {
         "dead_volume_a_cm3": (0.1, 5000.0), "dead_volume_b_cm3": (0.1, 5000.0),
         "oil_bulk_modulus_bar": (1000.0, 30000.0), "air_fraction_pct": (0.0, 50.0),
         "air_polytropic_index": (1.0, 1.4), "hose_bulk_modulus_bar": (10.0, 1e6),
-        "cross_leakage_l_min_per_bar": (0.0, 10.0), "min_pressure_bar": (-1.0, 0.0),
+        "cross_leakage_l_min_per_bar": (0.0, 10.0), "seal_leakage_l_min_per_bar": (0.0, 10.0),
+        "min_pressure_bar": (-1.0, 0.0),
     },
     "friction": {
         "alpha0_pos_n": (-1000.0, 1000.0), "alpha1_pos_n": (-1000.0, 1000.0), "vs_pos_mm_s": (0.01, 1e4),
@@ -180,6 +181,7 @@ def pack_hydraulics(raw: dict) -> np.ndarray:
     hp[hy.HP_LAP_P] = v["supply_lap_pct"] / 100.0
     hp[hy.HP_LAP_T] = v["return_lap_pct"] / 100.0
     hp[hy.HP_LEAK] = c["cross_leakage_l_min_per_bar"] * L_MIN / BAR
+    hp[hy.HP_SEAL_LEAK] = c["seal_leakage_l_min_per_bar"] * L_MIN / BAR
     hp[hy.HP_TANK] = a["tank_pressure_bar"] * BAR
     hp[hy.HP_LAMINAR] = v["laminar_bar"] * BAR
     hp[hy.HP_TAU_SPOOL] = v["spool_time_constant_ms"] * 1e-3

@@ -41,6 +41,10 @@ class FakeBus:
         self.silent = set()           # legs whose LEG_STATE is not sent
         self.corrupt = set()          # legs whose LEG_STATE has a bad CRC
         self.stuck = {}               # leg -> the encoder reading it is frozen at
+        self.imu_rpy = None           # [roll, pitch, yaw]: sent as IMU_ATTITUDE every SYNC when set
+        self._imu = (CODECS["IMU_ATTITUDE"], can.Message(arbitration_id=CODECS["IMU_ATTITUDE"].frame_id,
+                                                         data=bytearray(8), is_extended_id=False),
+                     CODECS["IMU_ATTITUDE"].new_values())
         self.sent = collections.Counter()
         self._state = [(CODECS[f"LEG_STATE_{i}"], can.Message(arbitration_id=CODECS[f"LEG_STATE_{i}"].frame_id,
                                                                data=bytearray(6), is_extended_id=False),
@@ -109,6 +113,11 @@ class FakeBus:
             codec.encode_into(values, msg.data)
             if leg in self.corrupt:
                 msg.data[0] ^= 0xFF
+            self.queue.append(msg)
+        if self.imu_rpy is not None:
+            codec, msg, values = self._imu
+            values[3], values[4], values[5] = self.imu_rpy
+            codec.encode_into(values, msg.data)
             self.queue.append(msg)
         self._advance()
 

@@ -43,6 +43,8 @@ def test_steady_cycles_allocate_no_numpy_memory(rig, controller):
     # late heartbeat (the heartbeat supervision has its own tests)
     loop, core, bus = make_loop(rig, controller, {"timing": {"heartbeat_timeout_ms": 60000.0}})
     assert core.state is State.READY
+    if core.hexapod:
+        bus.imu_rpy = [0.0, 0.0, 0.0]              # the attitude cross-check runs in the window too
     trajectory = moving_trajectory(core)
 
     def run(n):
@@ -72,4 +74,5 @@ def test_steady_cycles_allocate_no_numpy_memory(rig, controller):
     # and the loop really ran: no faults, tracking, E2E clean
     assert core.state in (State.RUNNING, State.READY), core.sup.fault_code.name
     assert loop.stats.e2e_errors == 0 and loop.stats.missing_frames == 0
+    assert not core.hexapod or core.attitude_check.angle_rad < 2e-3        # IMU frames were compared
     assert np.max(np.abs(core.joint.st[:, 10])) < 2e-3          # ST_ERROR: tracking within 2 mm

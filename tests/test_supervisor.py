@@ -7,8 +7,11 @@ import time
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
-from firmware_py.kinematics import ik_batch
+from firmware_py.kinematics import DirectKinematics, ik_batch
+from firmware_py.rotation import quat_to_rpy
 from firmware_py.supervisor import Ack, Command, Fault, State, Supervisor
 from tests.test_controller_alloc import make_loop
 
@@ -308,6 +311,59 @@ def test_a_stuck_encoder_during_a_move_faults_within_half_a_second():
     # at the default window the tracking limit is first here (the PI drives a leg it cannot see)
     assert core.sup.fault_code in (Fault.MOTION_PLAUSIBILITY, Fault.TRACKING_ERROR), core.sup.fault_code.name
     assert k < 250
+
+
+@given(roll=st.floats(-3.1, 3.1), pitch=st.floats(-1.5, 1.5), yaw=st.floats(-3.1, 3.1),
+       axis=st.tuples(*[st.floats(-1, 1)] * 3), angle=st.floats(0.0, 3.1))
+@settings(max_examples=200, deadline=None)
+def test_attitude_kernels_match_scipy(roll, pitch, yaw, axis, angle):
+    from scipy.spatial.transform import Rotation
+
+    from firmware_py.rotation import angle_between_matrices, rpy_to_matrix_into
+    rot = np.empty((3, 3))
+    rpy_to_matrix_into(roll, pitch, yaw, rot)
+    oracle = Rotation.from_euler("ZYX", [yaw, pitch, roll])          # R = Rz Ry Rx, the bus's convention
+    np.testing.assert_allclose(rot, oracle.as_matrix(), atol=1e-12)
+    axis = np.asarray(axis)
+    assume(np.linalg.norm(axis) > 0.1)
+    turned = oracle * Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle)
+    assert angle_between_matrices(rot, turned.as_matrix()) == pytest.approx(angle, abs=1e-6)
+
+
+def test_attitude_cross_check_needs_samples_in_a_row():
+    from firmware_py.plausibility import AttitudeCrossCheck
+    check = AttitudeCrossCheck(limit_rad=math.radians(1.0), samples=3)
+    level = np.eye(3)
+    assert not check.update(level, 0.0, 0.0, 0.0) and check.angle_rad < 1e-12
+    assert not check.update(level, 0.02, 0.0, 0.0)                # 1.15 deg: 1 of 3
+    assert not check.update(level, 0.0, 0.0, 0.0)                 # agreement starts over
+    assert not check.update(level, 0.0, -0.02, 0.0)
+    assert not check.update(level, 0.0, 0.0, 0.02)
+    assert check.update(level, 0.015, 0.015, 0.0)                 # the third in a row
+    assert check.angle_rad == pytest.approx(math.hypot(0.015, 0.015), rel=1e-3)
+
+
+def test_a_frozen_hexapod_encoder_is_caught_by_the_imu():
+    """A leg's encoder freezes while the leg moves on: the encoders' attitude leaves the IMU's."""
+    loop, core, bus = make_loop("hexapod", "pi")
+    bus.imu_rpy = [0.0, 0.0, 0.0]
+    cycles(loop, 50)
+    assert core.state is State.READY and core.attitude_check.angle_rad < 2e-3
+    # leg 1's encoder freezes; the leg itself is 10 mm further out, which the IMU sees
+    bus.stuck[0] = round(bus.y[0] / bus.res) * bus.res
+    lengths = np.asarray(bus.y) + core.geometry.leg_min_m
+    lengths[0] += 0.010
+    dk = DirectKinematics(core.geometry, 1e-9, 50)
+    dk.solve(lengths)
+    assert dk.converged
+    bus.imu_rpy = list(quat_to_rpy(dk.pose[3:7]))
+    for k in range(10):
+        loop.cycle()
+        if core.state is State.FAULT:
+            break
+    assert core.sup.fault_code is Fault.ATTITUDE_MISMATCH, core.sup.fault_code.name
+    assert k == 2                                                 # the third IMU frame in a row
+    assert valve_words(bus, loop)[2] == 0
 
 
 def test_a_stalled_realtime_loop_faults_overrun_and_stays_held_until_reset():
