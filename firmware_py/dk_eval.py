@@ -109,7 +109,7 @@ def evaluate(geometry: Geometry, samples: int, seed: int, min_condition_index: f
             guess = solver.home if name == "qH" else perturbed_guess(positions[k], quats[k],
                                                                    GUESS_OFFSET[name], rng)
             start = time.perf_counter()
-            iterations[k] = solver.solve(lengths[k], guess)
+            iterations[k] = solver.solve(lengths[k], guess, fallback=False)
             elapsed += time.perf_counter() - start
             converged[k] = solver.converged
             if converged[k]:

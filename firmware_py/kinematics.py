@@ -213,6 +213,12 @@ class DirectKinematics:
     `solve(lengths)` starts from the previous solution (or `guess` when given), writes the
     pose into `self.pose` (7,) and returns the number of iterations; `residual_m` and
     `converged` describe the last solve. Nothing is allocated per call.
+
+    A solve that does not converge from the warm start is tried once more from home; if
+    that fails too, `pose` goes back to the last converged one. A failed Newton iterate is
+    no start: once the reference ran away while the sensors were dead (the Kalman filter
+    predicting without measurements), every later warm start diverged from it and the
+    controller faulted SINGULARITY after each RESET.
     """
 
     def __init__(self, geometry: Geometry, tolerance_m: float = DK_TOLERANCE_M,
@@ -226,6 +232,7 @@ class DirectKinematics:
         self.pose[0:3] = geometry.home_position_m
         self.pose[3] = 1.0
         self.home = self.pose.copy()
+        self.last_good = self.pose.copy()
         self.status = np.zeros(3)
         self._rot = np.empty((3, 3))
         self._platform_world = np.empty((N_LEGS, 3))
@@ -239,10 +246,24 @@ class DirectKinematics:
 
     def reset(self) -> None:
         self.pose[:] = self.home
+        self.last_good[:] = self.home
 
-    def solve(self, lengths_m: np.ndarray, guess: np.ndarray | None = None) -> int:
+    def solve(self, lengths_m: np.ndarray, guess: np.ndarray | None = None, fallback: bool = True) -> int:
         if guess is not None:
             self.pose[:] = guess
+        iterations = self._newton(lengths_m)
+        if not fallback:                 # the bare Newton solve (dk_eval measures its convergence)
+            return iterations
+        if not self.converged:
+            self.pose[:] = self.home
+            iterations += self._newton(lengths_m)
+        if self.converged:
+            self.last_good[:] = self.pose
+        else:
+            self.pose[:] = self.last_good
+        return iterations
+
+    def _newton(self, lengths_m: np.ndarray) -> int:
         dk_solve_into(self.base, self.platform, lengths_m, self.pose, self.tolerance_m, self.max_iterations,
                       self.max_step_quat, self._rot, self._platform_world, self._units, self._phi, self._gmat,
                       self._jac, self._normal, self._y, self._step, self.status)

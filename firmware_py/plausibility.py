@@ -85,6 +85,10 @@ class AttitudeCrossCheck:
         self.beyond = 0
         self.angle_rad = 0.0          # the last disagreement, for logs and tests
         self._imu_rot = np.empty((3, 3))
+        # load the kernels now: compiled (or read from numba's cache) inside a realtime cycle
+        # they would stall the loop past its OVERRUN limit at the first IMU frame
+        self.update(np.eye(3), 0.0, 0.0, 0.0)
+        self.reset()
 
     def reset(self) -> None:
         self.beyond = 0

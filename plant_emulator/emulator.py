@@ -59,6 +59,7 @@ FAULT_NAMES = {1: "DROP", 2: "DELAY", 3: "DUPLICATE", 4: "CORRUPT", 5: "STUCK", 
                13: "LEG_JAM"}
 FREE_RUN_CATCH_UP_STEPS = 25         # free run: periods of physics per poll at most (a late wake-up)
 FAULT_CODES = {name: code for code, name in FAULT_NAMES.items()}
+VALUE_PARAM_FAULTS = {"BABBLE", "OUT_OF_RANGE"}   # FAULT_PARAM is the fault's value: until cleared
 CONTROLLER_TARGET = 16
 
 
@@ -221,12 +222,14 @@ class Emulator:
         limit = self.cfg.sync_timeout_periods * period
         if self.last_sync_time is not None and not self.sync_lost_reported and now - self.last_sync_time > limit:
             self.sync_lost_reported = True
-            # the last SYNC integrated one period; the valves kept their setpoints until now
-            self._free_run(int((now - self.last_sync_time) / period) - 1)
+            # the valves go to FAULT_HOLD now, and say so at once (EMCY); the physics then
+            # catches up to now with the setpoints the rig still has (the last SYNC
+            # integrated one period, the valves kept their setpoints until the trip)
             for n, valve in self.valves.items():
                 emergency = valve.sync_lost((now - self.last_sync_time) / period)
                 if emergency is not None:
                     self._emergency(n, emergency)
+            self._free_run(int((now - self.last_sync_time) / period) - 1, apply_valves=False)
             self._free_run_next = now + period
         elif self.sync_lost_reported and self._free_run_next is not None and now >= self._free_run_next:
             steps = int((now - self._free_run_next) / period) + 1
@@ -239,11 +242,13 @@ class Emulator:
             wait = min(wait, self._free_run_next - now)
         return max(wait, 0.0)
 
-    def _free_run(self, steps: int) -> None:
-        """`steps` periods of physics without SYNC, the valves' spools as they are now; the
-        truth after each (the sensor nodes stay quiet: they sample on SYNC)."""
+    def _free_run(self, steps: int, apply_valves: bool = True) -> None:
+        """`steps` periods of physics without SYNC, the valves' spools as they are now (or,
+        `apply_valves` False, the rig's commands as they were); the truth after each (the
+        sensor nodes stay quiet: they sample on SYNC)."""
         for _ in range(max(steps, 0)):
-            self._apply_valves()
+            if apply_valves:
+                self._apply_valves()
             self.rig.advance(self.cfg.sync_period_s)
             self.counters.free_run_steps += 1
             self._send_truth(self.sync_counter)
@@ -306,7 +311,8 @@ class Emulator:
         if command == EMU_SET_LOAD:
             self.rig.set_load(load_kg)
         elif command == EMU_INJECT and kind in FAULT_NAMES:
-            self.faults[(target, kind)] = [param if param > 0 else -1, param]
+            lasts = param if param > 0 and FAULT_NAMES[kind] not in VALUE_PARAM_FAULTS else -1
+            self.faults[(target, kind)] = [lasts, param]
             self.counters.injected[FAULT_NAMES[kind]] = self.counters.injected.get(FAULT_NAMES[kind], 0) + 1
             self._apply_state_fault(target, kind, True)
         elif command == EMU_CLEAR:

@@ -95,6 +95,25 @@ def test_dk_reports_failure_instead_of_raising():
     assert not solver.converged
 
 
+def test_dk_never_keeps_a_diverged_iterate():
+    """A failed solve leaves the last converged pose (not the Newton iterate) as the next
+    warm start, and a wild start is retried from home."""
+    solver = DirectKinematics(GEOMETRY)
+    target = np.array([[0.02, -0.01, 0.64]])
+    lengths, _ = ik_batch(GEOMETRY, target, rpy_to_quat(0.05, 0.0, 0.1)[None])
+    solver.solve(lengths[0])
+    assert solver.converged
+    good = solver.pose.copy()
+    solver.solve(np.array([0.01, 5.0, 0.01, 5.0, 0.01, 5.0]))
+    assert not solver.converged
+    np.testing.assert_array_equal(solver.pose, good)
+    wild = np.array([28.4, -13.2, -5.4, 0.28, 0.38, 0.5, 0.7])      # a run-away reference's iterate
+    assert solver.solve(lengths[0], wild, fallback=False) >= 0 and not solver.converged
+    solver.solve(lengths[0], wild)
+    assert solver.converged
+    np.testing.assert_allclose(solver.pose[:3], target[0], atol=1e-9)
+
+
 def test_jacobian_matches_finite_differences_of_ik(poses):
     positions, quats = poses
     rng = np.random.default_rng(3)
