@@ -57,6 +57,18 @@ def _faults(args) -> int:
     return 0 if doc["passed"] else 1
 
 
+def _fuzz(args) -> int:
+    from .fuzz import TARGETS, as_dicts, format_reports, run
+    targets = [t.strip() for t in args.targets.split(",") if t.strip()]
+    bad = [t for t in targets if t not in TARGETS]
+    if bad or not targets:
+        raise UserInputError(f"--targets: unknown target {bad[0] if bad else args.targets!r} "
+                             f"(known: {', '.join(TARGETS)})")
+    reports = run(targets, args.frames, args.seed)
+    print(json.dumps(as_dicts(reports), indent=1) if args.json else format_reports(reports))
+    return 0 if all(r.ok for r in reports) else 1
+
+
 def _analyze(args) -> int:
     from .runner import analyze_log
     scenario = _scenario(args.scenario)
@@ -108,6 +120,15 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--start-timeout-s", type=number_in_range(float, 1.0, 3600.0), default=90.0)
     p.add_argument("--json", action="store_true", help="print faults.json instead of the table")
     p.set_defaults(handler=_faults)
+    p = hil_sub.add_parser("fuzz", help="random frames into the controller's receive side and the decoders: "
+                                        "zero exceptions, every frame counted")
+    p.add_argument("--frames", type=number_in_range(int, 1, 10**10), default=1_000_000,
+                   help="frames per target (default 1000000)")
+    p.add_argument("--seed", type=number_in_range(int, 0, 2**63 - 1), default=20161,
+                   help="generator seed (default 20161, as make test)")
+    p.add_argument("--targets", default="decoder,controller", help="comma-separated: decoder, controller")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_fuzz)
     p = hil_sub.add_parser("analyze", help="the scenario's analysis on a recorded log (BLF or ASC), e.g. from the rig")
     p.add_argument("log", metavar="LOG")
     p.add_argument("--scenario", required=True)
