@@ -64,6 +64,7 @@ class Stats:
     emergencies: int = 0
     host_commands: int = 0
     unknown_frames: int = 0
+    frames_sent: int = 0          # every frame the bus accepted (a log must hold as many of ours)
 
 
 class ControllerLoop:
@@ -270,6 +271,8 @@ class ControllerLoop:
                 self.bus.send(outbox.message)
             except Exception as exc:               # a full queue or a bus error drops the frame
                 self.log(f"send {outbox.codec.name} failed: {exc}")
+                return
+            self.stats.frames_sent += 1
 
     def _write(self) -> None:
         core = self.core
@@ -416,4 +419,4 @@ class ControllerLoop:
                 "cycles": s.cycles, "overruns": s.overruns, "e2e_errors": s.e2e_errors,
                 "missing_frames": s.missing_frames, "faults": s.faults, "fault_code": self.core.sup.fault_code.name,
                 "state": self.core.state.name, "emergencies": s.emergencies, "host_commands": s.host_commands,
-                "timing": self.timing()}
+                "frames_sent": s.frames_sent, "timing": self.timing()}
