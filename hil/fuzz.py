@@ -31,7 +31,7 @@ from firmware_py.control import CONTROLLER_NAMES
 from firmware_py.core import ControllerCore
 from firmware_py.loop import ControllerLoop
 from protocol import e2e
-from protocol.codec import CODECS, FrameDecoder
+from protocol.codec import CODECS, FrameDecoder, RxStatus
 
 VALID_SHARE = 0.25
 CYCLE_EVERY = 64          # controller target: frames per core cycle
@@ -167,7 +167,6 @@ def fuzz_controller(count: int, seed: int, controller: str = "model-based") -> F
 
 
 def _report(target, count, seed, decoder, exceptions, first, host_commands, non_finite, seconds) -> FuzzReport:
-    from protocol.codec import RxStatus
     counts = decoder.counts.sum(axis=0)
     counted = int(counts.sum()) - int(counts[RxStatus.NO_NEW_DATA]) + decoder.unknown_frames
     accepted = int(counts[RxStatus.OK])
