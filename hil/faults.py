@@ -4,14 +4,15 @@ host and recorder), measures the reaction from the recorded log and the emulator
 truth (EMU_TRUTH), and ends with RESET + ENABLE and a trajectory that must run normally.
 
 A session is one emulator + controller pair on one rig and pacing, running its cases in
-turn; the process cases (SIGKILL, SIGSTOP, a dead emulator) need realtime pacing and the
-valves' own 3-period SYNC watchdog, the frame and plant cases run in lockstep (the same
+turn; the process cases (SIGKILL, SIGSTOP, a dead emulator) need realtime pacing and a
+short valve SYNC watchdog (`VALVE_WATCHDOG_PERIODS`), the frame and plant cases run in lockstep (the same
 cycles every run). Every case starts at rest at home with the controller READY, runs the
 probe move (up 30 mm, back, 1.5 s each), injects its fault `INJECT_AT_S` into it, and
 reads from the log:
 - detection: cycles from the first affected SYNC to the controller's reaction (its first
   VALVE_CMD with M = 0, D = 0 for the e-stop), inclusive: a fault seen and acted on in the
-  same cycle is 1; the reason from the next CTRL_STATUS;
+  same cycle is 1; the reason from the next CTRL_STATUS. Persistent frame faults are
+  judged on the cycles since the leg's last valid frame (what the configured counts count);
 - excursion: the largest distance of the platform (the test bench's slide) from where it
   was at the injection, over `OBSERVE_S` after it (EMU_TRUTH, which keeps coming when the
   controller is dead: the emulator's plant runs on);
