@@ -57,6 +57,16 @@ def _faults(args) -> int:
     return 0 if doc["passed"] else 1
 
 
+def _soak(args) -> int:
+    from .runner import RunOptions, run_scenario
+    from .scenarios.soak import Soak
+    scenario = Soak(seconds=args.minutes * 60.0, seed=args.seed)
+    out = Path(args.out) if args.out else Path("hil-out") / "soak"
+    options = RunOptions(out_dir=out, bus=args.bus, rate_hz=500.0, valve_watchdog_periods=args.valve_watchdog_periods,
+                         start_timeout_s=args.start_timeout_s)
+    return _finish(args, run_scenario(scenario, options))
+
+
 def _fuzz(args) -> int:
     from .fuzz import TARGETS, as_dicts, format_reports, run
     targets = [t.strip() for t in args.targets.split(",") if t.strip()]
@@ -120,6 +130,19 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--start-timeout-s", type=number_in_range(float, 1.0, 3600.0), default=90.0)
     p.add_argument("--json", action="store_true", help="print faults.json instead of the table")
     p.set_defaults(handler=_faults)
+    p = hil_sub.add_parser("soak", help="realtime hexapod trajectory loop with random frame faults: jitter, "
+                           "overruns, faults, recoveries, log completeness")
+    p.add_argument("--minutes", type=number_in_range(float, 0.1, 10080.0), default=1.0,
+                   help="how long (default 1)")
+    p.add_argument("--seed", type=number_in_range(int, 0, 2**63 - 1), default=20161,
+                   help="the random faults' seed (default 20161)")
+    p.add_argument("--out", metavar="DIR", help="output directory (default: hil-out/soak)")
+    p.add_argument("--bus", metavar="SPEC", help="as for run (default: a fresh on-host multicast group)")
+    p.add_argument("--valve-watchdog-periods", type=number_in_range(float, 1.0, 10000.0), default=None,
+                   help="the emulated valves' SYNC watchdog and the controller's stall fault (default: as for run)")
+    p.add_argument("--start-timeout-s", type=number_in_range(float, 1.0, 3600.0), default=90.0)
+    p.add_argument("--json", action="store_true", help="print metrics.json instead of the summary")
+    p.set_defaults(handler=_soak)
     p = hil_sub.add_parser("fuzz", help="random frames into the controller's receive side and the decoders: "
                                         "zero exceptions, every frame counted")
     p.add_argument("--frames", type=number_in_range(int, 1, 10**10), default=1_000_000,

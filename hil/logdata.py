@@ -104,6 +104,32 @@ def _empty(name: str) -> Series:
 EMULATOR_SENDERS = {"LEG1", "LEG2", "LEG3", "LEG4", "LEG5", "LEG6", "IMU", "EMULATOR"}
 
 
+SENDER_GROUPS = ("controller", "emulator", "host", "not in the DBC")
+
+
+def frames_by_sender(path: str | Path) -> dict[str, int]:
+    """Frames in a log per sender group (the DBC's sender of each id): controller, emulator
+    (its leg, IMU and emulator nodes), host, and ids the DBC does not know."""
+    sender = {c.frame_id: c.schedule.sender for c in CODECS.values()}
+    counts = dict.fromkeys(SENDER_GROUPS, 0)
+    for frame_id, _, _ in _read_frames(Path(path)):
+        name = sender.get(frame_id)
+        counts["not in the DBC" if name is None else "controller" if name == "CONTROLLER"
+               else "host" if name == "HOST" else "emulator"] += 1
+    return counts
+
+
+def frames_counted_by_senders(children: dict[str, dict], host_frames_sent: int) -> dict[str, int]:
+    """What the senders counted sending: every controller's `frames_sent` and every
+    emulator's `frames_out` (restarted ones included, from their summaries), the host's own."""
+    counts = dict.fromkeys(SENDER_GROUPS, 0)
+    counts["host"] = host_frames_sent
+    for name, summary in children.items():
+        group, key = ("controller", "frames_sent") if name.startswith("controller") else ("emulator", "frames_out")
+        counts[group] += int(summary[key])
+    return counts
+
+
 def _read_frames(path: Path) -> list[tuple]:
     frames = []
     try:

@@ -8,7 +8,8 @@ from .realtime import RealtimeHexapod, RealtimeTestbench
 from .sha_identification import ShaIdentification
 from .sha_step import ShaStep
 from .sha_tracking import ShaPerturbation, ShaTracking
+from .soak import Soak
 
 SCENARIOS: dict[str, Scenario] = {s.name: s for s in (ShaStep(), ShaTracking(), ShaPerturbation(), ShaIdentification(), PmDiagonal(),
                                                       PmCircle(),
-                                                      RealtimeTestbench(), RealtimeHexapod())}
+                                                      RealtimeTestbench(), RealtimeHexapod(), Soak())}

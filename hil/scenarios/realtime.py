@@ -56,43 +56,49 @@ class Realtime(Scenario):
 
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
         period = 1.0 / rate_hz
-        timing = ctrl_status_timing(log)
-        intervals = np.diff(log.sync_time_s)
-        sync_us = in_us(percentiles(np.abs(intervals - period), (50, 99)))
         seconds = log.n_cycles * period
         faults = fault_codes(log)
         checks = [Check("ran for the requested time", seconds >= 0.95 * self.requested_s,
                         f"{seconds:.1f} s of cycles", f">= {self.requested_s:g} s"),
                   Check("no controller fault", not faults, f"fault codes {faults}" if faults else "none", "none")]
-        p99 = timing.get("period_error_us", {}).get("p99")
-        checks.append(Check("controller period error p99 (CTRL_STATUS, max of each 16-cycle window)",
-                            p99 is not None and p99 <= P99_MAX_FRACTION * period * 1e6,
-                            f"{p99} us", f"<= {P99_MAX_FRACTION * period * 1e6:.0f} us (one period)"))
-        checks.append(Check("overruns", timing.get("overruns") == 0, f"{timing.get('overruns')}", "0",
-                            required=False))
-        gaps = int(np.sum(intervals > VALVE_WATCHDOG_PERIODS * period))
-        checks.append(Check(f"SYNC gaps > {VALVE_WATCHDOG_PERIODS} periods (the valves' own watchdog)", gaps == 0,
-                            f"{gaps}", "0", required=False))
-        metrics = {"seconds": round(seconds, 2), "cycles": log.n_cycles, "ctrl_status": timing,
-                   "sync_interval_error_us": sync_us, "sync_gaps_over_valve_watchdog": gaps}
-        figures = []
-        if out is not None and len(intervals):
-            fig, ax = plt.subplots(figsize=(7, 3.5))
-            ax.hist(np.abs(intervals[np.isfinite(intervals)] - period) * 1e6, bins=100, log=True)
-            ax.set_xlabel("|SYNC interval - 2 ms| at the recorder [us]")
-            ax.set_ylabel("cycles")
-            path = out / f"{self.name.replace('-', '_')}_jitter.png"
-            save(fig, path)
-            figures.append(Figure(path.name, "SYNC interval error as recorded on the bus",
-                                  "thesis: a 500 Hz loop (no jitter figure given)"))
-        pe = timing.get("period_error_us", {})
-        ct = timing.get("compute_time_us", {})
-        table = ["| what | p50 us | p99 us | max us |", "|---|---|---|---|",
-                 f"| period error (CTRL_STATUS) | {pe.get('p50')} | {pe.get('p99')} | {pe.get('max')} |",
-                 f"| compute time (CTRL_STATUS) | {ct.get('p50')} | {ct.get('p99')} | {ct.get('max')} |",
-                 f"| SYNC interval error (recorder) | {sync_us.get('p50')} | {sync_us.get('p99')} | {sync_us.get('max')} |",
-                 f"| overruns | {timing.get('overruns')} | | |"]
-        return Analysis(metrics, self.thesis, checks, figures, ["\n".join(table)])
+        timing = loop_timing(log, period, out, self.name.replace("-", "_"))
+        metrics = {"seconds": round(seconds, 2), "cycles": log.n_cycles, **timing.metrics}
+        return Analysis(metrics, self.thesis, checks + timing.checks, timing.figures, timing.tables)
+
+
+def loop_timing(log: LogData, period: float, out: Path | None, stem: str) -> Analysis:
+    """The loop's timing from a log: CTRL_STATUS period error, compute time and overruns; the
+    SYNC intervals as the recorder saw them (table, histogram, checks)."""
+    timing = ctrl_status_timing(log)
+    intervals = np.diff(log.sync_time_s)
+    sync_us = in_us(percentiles(np.abs(intervals - period), (50, 99)))
+    p99 = timing.get("period_error_us", {}).get("p99")
+    checks = [Check("controller period error p99 (CTRL_STATUS, max of each 16-cycle window)",
+                    p99 is not None and p99 <= P99_MAX_FRACTION * period * 1e6,
+                    f"{p99} us", f"<= {P99_MAX_FRACTION * period * 1e6:.0f} us (one period)"),
+              Check("overruns", timing.get("overruns") == 0, f"{timing.get('overruns')}", "0", required=False)]
+    gaps = int(np.sum(intervals > VALVE_WATCHDOG_PERIODS * period))
+    checks.append(Check(f"SYNC gaps > {VALVE_WATCHDOG_PERIODS} periods (the valves' own watchdog)", gaps == 0,
+                        f"{gaps}", "0", required=False))
+    figures = []
+    if out is not None and len(intervals):
+        fig, ax = plt.subplots(figsize=(7, 3.5))
+        ax.hist(np.abs(intervals[np.isfinite(intervals)] - period) * 1e6, bins=100, log=True)
+        ax.set_xlabel(f"|SYNC interval - {period * 1e3:g} ms| at the recorder [us]")
+        ax.set_ylabel("cycles")
+        path = out / f"{stem}_jitter.png"
+        save(fig, path)
+        figures.append(Figure(path.name, "SYNC interval error as recorded on the bus",
+                              "thesis: a 500 Hz loop (no jitter figure given)"))
+    pe = timing.get("period_error_us", {})
+    ct = timing.get("compute_time_us", {})
+    table = ["| what | p50 us | p99 us | max us |", "|---|---|---|---|",
+             f"| period error (CTRL_STATUS) | {pe.get('p50')} | {pe.get('p99')} | {pe.get('max')} |",
+             f"| compute time (CTRL_STATUS) | {ct.get('p50')} | {ct.get('p99')} | {ct.get('max')} |",
+             f"| SYNC interval error (recorder) | {sync_us.get('p50')} | {sync_us.get('p99')} | {sync_us.get('max')} |",
+             f"| overruns | {timing.get('overruns')} | | |"]
+    metrics = {"ctrl_status": timing, "sync_interval_error_us": sync_us, "sync_gaps_over_valve_watchdog": gaps}
+    return Analysis(metrics, {}, checks, figures, ["\n".join(table)])
 
 
 class RealtimeTestbench(Realtime):
