@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from protocol.cliutil import number_in_range
+from protocol.cliutil import number_in_range, output_file
 from protocol.errors import UserInputError
 
 from .geometry import default_geometry, load_geometry_file
@@ -117,7 +117,7 @@ def configure_controller_parser(ctl) -> None:
     ctl.add_argument("--pacing", choices=("realtime", "lockstep"), default="realtime")
     ctl.add_argument("--controller", choices=tuple(CONTROLLER_NAMES), default="pi")
     ctl.add_argument("--config", metavar="FILE", help="controller TOML overriding the packaged defaults")
-    ctl.add_argument("--summary", metavar="FILE", help="write the run's summary as JSON on exit")
+    ctl.add_argument("--summary", metavar="FILE", type=output_file, help="write the run's summary as JSON on exit")
     ctl.set_defaults(handler=run_daemon)
     ctl_sub = ctl.add_subparsers(dest="controller_command", required=False, metavar="SUBCOMMAND",
                                  parser_class=type(ctl))

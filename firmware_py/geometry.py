@@ -124,7 +124,32 @@ def universal_axes(base_anchor_m: np.ndarray, rule: str) -> np.ndarray:
     raise GeometryError(f"geometry: joints.universal_first_axis = {rule!r}: use 'tangential' or 'radial'")
 
 
+_LINK_KEYS = {"mass_kg": None, "com_mm": None, "inertia_kg_mm2": None}
+# every key a geometry file may hold: a misspelt one is an error, not silently the default
+GEOMETRY_KEYS = {
+    "rings": dict.fromkeys(("base_radius_mm", "platform_radius_mm", "base_anchor_angles_deg",
+                            "platform_anchor_angles_deg")),
+    "legs": dict.fromkeys(("min_length_mm", "stroke_mm", "home_height_mm")),
+    "joints": dict.fromkeys(("universal_cone_deg", "spherical_cone_deg", "universal_first_axis")),
+    "links": dict.fromkeys(("cylinder_length_mm", "cylinder_diameter_mm", "rod_length_mm", "rod_diameter_mm")),
+    "inertia": {"platform": _LINK_KEYS, "cylinder": _LINK_KEYS, "rod": _LINK_KEYS},
+}
+
+
+def _reject_unknown(table: dict, known: dict, where: str = "") -> None:
+    for key, value in table.items():
+        name = f"{where}.{key}" if where else key
+        if key not in known:
+            kind = "section" if isinstance(value, dict) else "key"
+            raise GeometryError(f"geometry: unknown {kind} {name} (known: {', '.join(known)})")
+        if isinstance(known[key], dict):
+            if not isinstance(value, dict):
+                raise GeometryError(f"geometry: {name} = {value!r} must be a section ([{name}])")
+            _reject_unknown(value, known[key], name)
+
+
 def parse_geometry(data: dict, source: str = "") -> Geometry:
+    _reject_unknown(data, GEOMETRY_KEYS)
     rings = _need(data, "rings", "")
     legs = _need(data, "legs", "")
     joints = _need(data, "joints", "")

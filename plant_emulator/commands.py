@@ -6,7 +6,8 @@ import argparse
 import json
 import sys
 
-from protocol.cliutil import number_in_range
+from protocol.cliutil import number_in_range, output_file
+from protocol.errors import UserInputError
 
 from .params import load_config
 
@@ -49,8 +50,6 @@ def _run(args) -> int:
 
 
 def _calibrate(args) -> int:
-    from protocol.errors import UserInputError
-
     from . import calibration
     from .params import build
 
@@ -86,8 +85,13 @@ def _calibrate(args) -> int:
 def _bench(args) -> int:
     from .bench import bench_rig, format_bench
 
+    from .rigs import RIGS
+    names = [n.strip() for n in args.rigs.split(",") if n.strip()]
+    bad = [n for n in names if n not in RIGS]
+    if bad or not names:
+        raise UserInputError(f"--rigs: unknown rig {bad[0] if bad else args.rigs!r} (known: {', '.join(RIGS)})")
     cfg = _config(args)
-    rows = [bench_rig(name, cfg, args.seconds, args.rate_hz) for name in args.rigs.split(",")]
+    rows = [bench_rig(name, cfg, args.seconds, args.rate_hz) for name in names]
     if args.json:
         print(json.dumps(rows, indent=1))
     else:
@@ -107,7 +111,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     emu.add_argument("--rate-hz", type=number_in_range(float, 10.0, 2000.0), default=None,
                      help="SYNC rate the controller runs at (default: the config's sync_period_ms)")
     emu.add_argument("--config", metavar="FILE", help="TOML overriding data/emulator.toml")
-    emu.add_argument("--summary", metavar="FILE", help="write the exit counters as JSON")
+    emu.add_argument("--summary", metavar="FILE", type=output_file, help="write the exit counters as JSON")
     emu.set_defaults(handler=_run)
     esub = emu.add_subparsers(dest="emulator_command", metavar="{calibrate,bench}",
                               parser_class=type(emu))

@@ -7,9 +7,11 @@ with exactly one line on stderr naming the culprit and exit code 2, never a trac
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 from collections.abc import Callable
+from pathlib import Path
 
 from .errors import UserInputError
 
@@ -40,7 +42,22 @@ def number_in_range(kind: type, low: float | None = None, high: float | None = N
             raise argparse.ArgumentTypeError(f"{text} is out of range: must be <= {high:g}")
         return value
     parse.__name__ = kind.__name__
+    parse.kind, parse.low, parse.high, parse.low_open = kind, low, high, low_open   # for the error-path tests
     return parse
+
+
+def output_file(text: str) -> str:
+    """argparse `type=` for a file written at the end of a run (a summary): its directory
+    must exist and be writable now, not after an hour of running."""
+    path = Path(text)
+    parent = path.parent if str(path.parent) else Path(".")
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} is a directory")
+    if not parent.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r}: no such directory {str(parent)!r}")
+    if not os.access(parent, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise argparse.ArgumentTypeError(f"{text!r}: not writable")
+    return text
 
 
 def run(handler: Callable[[argparse.Namespace], int], args: argparse.Namespace, prog: str) -> int:
