@@ -409,7 +409,7 @@ class Session(Scenario):
         legs = platform = None
         if baseline is not None and mark is not baseline:    # the same probe again: the comparison's floor
             legs, platform = view.deviation_from(mark, baseline)
-            measured += f"; legs {_mm(legs)}, platform {_mm(platform)} from the first no-fault run"
+            measured += f"; legs {_mm(legs)}, platform {_mm(platform)} from the first no-fault run (from {INJECT_AT_S:g} s into the probe)"
         return ran and not faults, measured, {"faults": faults, "leg_deviation_m": legs,
                                               "platform_deviation_m": platform}
 
@@ -418,7 +418,7 @@ class Session(Scenario):
         legs, platform = view.deviation_from(mark, baseline)
         rejected = view.rejected_between(mark.case.target, mark.t_inject, mark.t_end)
         passed = not faults and legs is not None and legs <= TRANSIENT_MAX_M
-        measured = (f"no fault; legs {_mm(legs)} (platform {_mm(platform)}) from the no-fault run; leg "
+        measured = (f"no fault; legs {_mm(legs)} (platform {_mm(platform)}) from the no-fault run after the injection; leg "
                     f"{mark.case.target}: {rejected['missing']} cycles without its frame, "
                     f"{rejected['rejected']} frames rejected" if not faults else f"FAULT {faults}")
         return passed, measured, {"faults": faults, "leg_deviation_m": legs, "platform_deviation_m": platform,
@@ -672,16 +672,22 @@ class LogView:
                 "rejected": int(np.count_nonzero((rejected >= k0) & (rejected < k1)))}
 
     def deviation_from(self, mark: Marks, baseline: Marks | None) -> tuple[float | None, float | None]:
-        """Largest difference of this probe from the baseline's, aligned at the commit of
-        the probe's first waypoint, over both segments and 0.5 s: (largest leg stroke
-        difference, largest platform distance)."""
+        """Largest difference of this probe from the baseline's after the injection (the
+        probes aligned at the commit of their first waypoint), to 0.5 s after the probe:
+        (largest leg stroke difference, largest platform distance). What comes before the
+        injection cannot be the fault's: two no-fault probes differ there by the start from
+        rest (the test bench's stiction: a breakaway 75 ms earlier or later, 1.1 mm)."""
         if baseline is None:
             return None, None
-        span = 2 * PROBE_SEGMENT_S + 0.5
         ka, kb = self.waypoint_ack_cycle(mark), self.waypoint_ack_cycle(baseline)
-        a, b = self._truth_window(ka, span), self._truth_window(kb, span)
+        if ka is None or kb is None:
+            return None, None
+        k_inject = self.cycle_at(mark.t_inject) if not math.isnan(mark.t_inject) else None
+        skip = k_inject - ka if k_inject is not None else int(round(INJECT_AT_S / self.period_s))
+        span = 2 * PROBE_SEGMENT_S + 0.5 - skip * self.period_s
+        a, b = self._truth_window(ka + skip, span), self._truth_window(kb + skip, span)
         platform = None if a is None or b is None else float(np.max(np.linalg.norm(a - b, axis=1)))
-        la, lb = self._legs_window(ka, span), self._legs_window(kb, span)
+        la, lb = self._legs_window(ka + skip, span), self._legs_window(kb + skip, span)
         legs = None if la is None or lb is None else float(np.nanmax(np.abs(la - lb)))
         return legs, platform
 
