@@ -71,7 +71,7 @@ HOLD_WITHIN_PERIODS = 3           # case 1: every valve in FAULT_HOLD this long 
 VALVE_WATCHDOG_PERIODS = 2.5
 PLANT_FAULT_MAX_CYCLES = 250      # stuck encoder: FAULT within 0.5 s
 SLOW_PLANT_FAULT_MAX_CYCLES = 500  # seized rod, lost supply: within 1 s (the motion window, see 5c)
-TRY_LIMIT = 3                     # realtime cases spoiled by a machine stall before injection
+TRY_LIMIT = 5                     # realtime: attempts of a case (or a recovery) a machine stall may spoil
 
 
 @dataclass
