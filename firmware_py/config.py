@@ -31,7 +31,8 @@ RANGES: dict[str, dict[str, object]] = {
         "bore_radius_mm": (0.5, 100.0), "rod_radius_mm": (0.1, 99.0), "stroke_mm": (10.0, 2000.0),
         "moving_mass_kg": (0.0, 50.0), "valve_full_scale_v": (0.01, 24.0), "encoder_resolution_mm": (1e-4, 10.0),
     },
-    "testbench": {"slide_mass_kg": (0.0, 100.0), "home_mm": (0.0, 2000.0), "park_mm": (0.0, 2000.0)},
+    "testbench": {"slide_mass_kg": (0.0, 100.0), "home_mm": (0.0, 2000.0), "park_mm": (0.0, 2000.0),
+                  "plausibility_spool_pct": (1.0, 100.0), "plausibility_cycles": (1, 100000)},
     "hexapod": {"park_stroke_mm": (0.0, 2000.0), "kp_factor": (0.01, 10.0), "ki_factor": (0.0, 10.0)},
     "friction": {
         "alpha0_pos_n": (-1000.0, 1000.0), "alpha1_pos_n": (-1000.0, 1000.0), "vs_pos_mm_s": (0.01, 1e4),
@@ -105,6 +106,8 @@ class ControllerConfig:
     slide_mass_kg: float
     testbench_home_m: float
     testbench_park_m: float
+    testbench_plausibility_spool: float   # the test bench's own motion window (fraction of full input) ...
+    testbench_plausibility_cycles: int    # ... and length: its slide carries no static load
     hexapod_park_stroke_m: float
     hexapod_kp_factor: float          # every controller's Kp on the hexapod (see controller.toml)
     hexapod_ki_factor: float          # every controller's Ki on the hexapod
@@ -213,6 +216,8 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         piston_area_m2=area, area_ratio=ratio, stroke_m=a["stroke_mm"] * MM, moving_mass_kg=a["moving_mass_kg"],
         valve_full_scale_v=a["valve_full_scale_v"], encoder_resolution_m=a["encoder_resolution_mm"] * MM,
         slide_mass_kg=tb["slide_mass_kg"], testbench_home_m=tb["home_mm"] * MM, testbench_park_m=tb["park_mm"] * MM,
+        testbench_plausibility_spool=tb["plausibility_spool_pct"] / 100.0,
+        testbench_plausibility_cycles=tb["plausibility_cycles"],
         hexapod_park_stroke_m=raw["hexapod"]["park_stroke_mm"] * MM, hexapod_kp_factor=raw["hexapod"]["kp_factor"],
         hexapod_ki_factor=raw["hexapod"]["ki_factor"],
         friction=friction, jerk_psd=k["jerk_psd_mm2_s5"] * MM ** 2, kalman_adaptive_gain=k["adaptive_gain"],

@@ -106,8 +106,9 @@ class ControllerCore:
         self._mask = np.zeros(n, dtype=bool)
         self._mask3 = np.zeros((n, 3), dtype=bool)
         self._abs = np.zeros(n)
-        self.plausibility = MotionPlausibility(n, cfg.plausibility_spool * cfg.valve_full_scale_v,
-                                               cfg.plausibility_cycles, cfg.plausibility_travel_m)
+        spool, cycles = ((cfg.plausibility_spool, cfg.plausibility_cycles) if self.hexapod else
+                         (cfg.testbench_plausibility_spool, cfg.testbench_plausibility_cycles))
+        self.plausibility = MotionPlausibility(n, spool * cfg.valve_full_scale_v, cycles, cfg.plausibility_travel_m)
         self.attitude_check = AttitudeCrossCheck(cfg.attitude_mismatch_rad, cfg.attitude_mismatch_samples)
         self.overruns_in_row = 0
         self.dk_failures = 0

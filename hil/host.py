@@ -168,7 +168,7 @@ class Host:
         if result is Ack.ACCEPTED:
             self.waypoint_seq = (seq + 1) % 256
         elif expect_ok:
-            raise HostError(f"waypoint {seq} at {[round(p * 1e3, 3) for p in position_m]} mm refused: "
+            raise HostError(f"waypoint {seq} at {[round(float(p) * 1e3, 3) for p in position_m]} mm refused: "
                             f"{result.name}")
         return result
 

@@ -84,7 +84,6 @@ def _calibrate(args) -> int:
 
 def _bench(args) -> int:
     from .bench import bench_rig, format_bench
-
     from .rigs import RIGS
     names = [n.strip() for n in args.rigs.split(",") if n.strip()]
     bad = [n for n in names if n not in RIGS]

@@ -18,7 +18,7 @@ HYDRAPOD = [sys.executable, "-m", "hil.cli"]
 def soak_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("soak")
     proc = subprocess.run(HYDRAPOD + ["hil", "soak", "--minutes", "1", "--out", str(out), "--json"],
-                          capture_output=True, text=True, timeout=400)
+                          capture_output=True, text=True, timeout=400, check=False)
     return out, proc
 
 
@@ -58,7 +58,7 @@ def test_the_analysis_fails_a_transient_fault_that_faulted(soak_run, monkeypatch
 ])
 def test_soak_cli_errors_are_one_line_and_exit_2(argv, culprit, tmp_path):
     proc = subprocess.run(HYDRAPOD + ["hil", "soak", "--out", str(tmp_path)] + argv,
-                          capture_output=True, text=True, timeout=60)
+                          capture_output=True, text=True, timeout=60, check=False)
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and culprit in lines[0] and "Traceback" not in proc.stderr

@@ -296,6 +296,24 @@ def test_plausibility_window_needs_motion_along_the_command():
         assert not check.update(np.array([1.9, -1.9]), y)
 
 
+def test_plausibility_counts_progress_from_the_furthest_point_back():
+    """A heavy load still coasting against a reversed command, then following it, is
+    plausible (sha-identification's P-control reversals with 6 kg); coasting, then still, is not."""
+    from firmware_py.plausibility import MotionPlausibility
+    check = MotionPlausibility(2, input_min_v=0.5, window=25, travel_min_m=0.5e-3)
+    spool, y = np.array([1.0, 1.0]), np.zeros(2)
+    for k in range(25):
+        y -= 0.2e-3 if k < 12 else 0.0                  # both coast back 2.4 mm for 12 cycles
+        y[0] += 0.3e-3 if k >= 12 else 0.0               # then leg 1 comes forward 3.9 mm: net -1.5 mm
+        tripped = check.update(spool, y)
+    assert tripped                                       # leg 2 never came forward
+    check.reset()
+    y[:] = 0.0
+    for k in range(25):                                  # leg 1 alone now: the same motion
+        y[0] += -0.2e-3 if k < 12 else 0.3e-3
+        assert not check.update(np.array([1.0, 0.0]), y)
+
+
 def test_a_stuck_encoder_during_a_move_faults_within_half_a_second():
     loop, core, bus = make_loop("testbench", "pi")
     cycles(loop, 20)
@@ -307,8 +325,8 @@ def test_a_stuck_encoder_during_a_move_faults_within_half_a_second():
         loop.cycle()
         if core.state is State.FAULT:
             break
-    # the plausibility window (30 % for 0.2 s) or the 25 mm tracking limit, whichever first:
-    # at the default window the tracking limit is first here (the PI drives a leg it cannot see)
+    # the test bench's plausibility window (5 % for 50 ms, [testbench]) or the 25 mm tracking
+    # limit, whichever first (the PI drives a leg it cannot see)
     assert core.sup.fault_code in (Fault.MOTION_PLAUSIBILITY, Fault.TRACKING_ERROR), core.sup.fault_code.name
     assert k < 250
 

@@ -106,8 +106,8 @@ class Soak(Scenario):
         host, poses = run.host, self.poses()
         deadline = time.monotonic() + seconds
         k = 0
+        moving = (State.RUNNING, State.STOPPING)         # CTRL_STATUS lags a move's end by up to 16 cycles
         while time.monotonic() < deadline:
-            moving = (State.RUNNING, State.STOPPING)     # CTRL_STATUS lags a move's end by up to 16 cycles
             host.wait_until(lambda: host.state not in moving, run.cycles(1.0), what=None)
             if host.state is not State.READY:
                 self._recover(run, f"{host.state.name if host.state else None} before move {k}")
