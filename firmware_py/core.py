@@ -30,6 +30,7 @@ from .trajectory import JointTrajectory, hold_at, sls_coefficients, through_poin
 
 RIGS = ("testbench", "hexapod")
 VALVE_FAULT_STATES = (4, 5)            # CiA 408 FAULT_HOLD, FAULT_DISABLED
+MOTION_COMMANDS = (Command.ENABLE, Command.HOME, Command.PARK, Command.START)
 RESET_GRACE_CYCLES = 4                 # valves need a SYNC or two to leave FAULT after R
 RECOVERY_INSET_M = 2e-3                # enabled inside the end-stop guard: held this far inside it
 RECOVERY_CYCLES = 500                  # ... and back inside the guard within 1 s (500 Hz)
@@ -117,6 +118,7 @@ class ControllerCore:
         self.time_s = 0.0
         self.cycles = 0
         self.initialised = False
+        self.reinitialise = False              # a RESET waits for a complete fresh set of measurements
         # waypoints
         self.queue: list[dict] = []
         self.expected_seq: int | None = None
@@ -182,6 +184,8 @@ class ControllerCore:
 
     # -- host interface (events) ------------------------------------------------------------
     def host_command(self, command: int, argument: int) -> Ack:
+        if self.reinitialise and command in MOTION_COMMANDS:
+            return Ack.BAD_STATE             # after RESET: not before every sensor has reported again
         result = self.sup.command(command, argument)
         if result is Ack.ACCEPTED:
             self._do_action()
@@ -211,7 +215,11 @@ class ControllerCore:
             self.overruns_in_row = 0
             self.dk_failures = 0
             self.trajectory = None
-            self.joint.st[:, ST_INTEGRAL] = 0.0
+            # estimators and reference start again at the first complete set of fresh
+            # measurements after it: after an outage the Kalman filter had predicted on for
+            # seconds, and holding where the legs were last seen (not where a restarted sensor
+            # node now reads them) drove them there (VELOCITY_LIMIT at the ENABLE after it)
+            self.reinitialise = True
         elif action is Action.CLEAR:
             self.queue.clear()
             self.expected_seq = None
@@ -377,6 +385,9 @@ class ControllerCore:
             else:
                 self._write_outputs()
                 return
+        elif self.reinitialise and self.meas_fresh.all():
+            self.initialise()
+            self.reinitialise = False
         # sensor frames: missing and E2E-rejected, consecutive
         np.logical_not(self.meas_fresh, out=self._mask)
         np.multiply(self.missing, self._mask, out=self.missing)

@@ -61,7 +61,6 @@ OBSERVE_S = 1.0                   # excursion window after the injection
 SETTLE_S = 2.0                    # at rest before the next case (the hexapod rings at ~1.5 Hz after a stop)
 TRANSIENT_MAX_M = 1e-3            # transient faults: within 1 mm of the no-fault probe
 HOLD_MOTION_MAX_M = 2e-3          # controller killed: the platform moves <= 2 mm afterwards
-TRUTH_RESOLUTION_M = 0.025e-3     # EMU_TRUTH's position scale
 ENCODER_COUNT_M = 0.125e-3        # LEG_STATE's encoder (LXEP40, chapter 8.2.3)
 STALL_S = 0.050                   # SIGSTOP
 BABBLE_FRAMES_PER_SYNC = 15       # 1 Mbit/s, 135-bit frames: 7,400 frames/s = 14.8 per 2 ms
@@ -267,7 +266,7 @@ class Session(Scenario):
                 host.wait_state(State.IDLE, max_cycles=run.cycles(2.0))
             if host.state is State.IDLE:
                 host.command(Command.CLEAR_WAYPOINTS)
-                host.command(Command.ENABLE)
+                run.enable()
                 host.wait_state(State.READY, max_cycles=run.cycles(2.0))
             run.wait_s(0.3)
             host.waypoint(self.home, segment_time_s=PROBE_SEGMENT_S, accel_time_s=PROBE_ACCEL_S,
@@ -468,19 +467,22 @@ class Session(Scenario):
         ok = all(acks.get(k) in allowed for k, allowed in expected.items()
                  if k in acks or not k.startswith("through"))          # no singularity on the bench
         ok = ok and acks.get("NaN field", "").startswith("REFUSED")
-        # zero motion: never RUNNING, and the platform moves no more than it did holding at
-        # rest in as long a window just before (the pose hunts as encoder counts flip), or
-        # than one encoder count, which a position loop on that encoder cannot see (the test
-        # bench's hold hunts 0.02-0.10 mm from one window to the next)
+        # zero motion: never RUNNING, and no leg's encoder moves by more than the one count its
+        # hold hunts over (a position loop cannot see less). The platform's own range (truth)
+        # is reported beside its range holding at rest in as long a window just before: both
+        # hunt (0.1-0.3 mm on the hexapod, one count of a slender leg amplified)
         span = mark.t_end - mark.t_inject
-        motion = view.excursion(mark.t_inject, span)
-        floor = view.excursion(mark.t_inject - span, span)
+        k0, k1 = view.cycle_at(mark.t_inject), view.cycle_at(mark.t_end)
+        legs = view.leg_range(k0, k1)
+        motion = view.truth_range(mark.t_inject, mark.t_end)
+        floor = view.truth_range(mark.t_inject - span, mark.t_inject)
         states = view.states_between(mark.t_inject, mark.t_end)
-        allowed = None if floor is None else max(floor, ENCODER_COUNT_M) + TRUTH_RESOLUTION_M
-        still = "RUNNING" not in states and motion is not None and allowed is not None and motion <= allowed
+        still = "RUNNING" not in states and legs is not None and legs <= ENCODER_COUNT_M * 1.001
         measured = "; ".join(f"{k}: {v}" for k, v in acks.items()) + \
-            f"; states {states}; motion {_mm(motion)} (holding at rest before: {_mm(floor)}; allowed {_mm(allowed)})"
-        return ok and still, measured, {"acks": acks, "motion_m": motion, "hold_floor_m": floor, "states": states}
+            (f"; states {states}; legs moved {_mm(legs)} at most (one count: {_mm(ENCODER_COUNT_M)}); platform "
+             f"range {_mm(motion)} (holding at rest before: {_mm(floor)})")
+        return ok and still, measured, {"acks": acks, "leg_range_m": legs, "platform_range_m": motion,
+                                        "hold_platform_range_m": floor, "states": states}
 
     def _measure_babble(self, view, mark, baseline):
         faults = view.faults_between(mark.t_start, mark.t_end)
@@ -720,6 +722,22 @@ class LogView:
         rows[truth.cycle[sel] - k0] = self.truth[sel]
         keep = np.all(np.isfinite(rows), axis=1)
         return rows if keep.mean() > 0.9 else None
+
+    def leg_range(self, k0: int | None, k1: int | None) -> float | None:
+        """The largest range (max - min) of any leg's encoder over cycles [k0, k1)."""
+        if k0 is None or k1 is None or k1 <= k0:
+            return None
+        window = self.legs[k0:k1]
+        if not np.isfinite(window).any():
+            return None
+        return float(np.nanmax(np.nanmax(window, axis=0) - np.nanmin(window, axis=0)))
+
+    def truth_range(self, t0: float, t1: float) -> float | None:
+        """The size of the box the platform (or slide) stayed in between t0 and t1 (truth)."""
+        sel = (self.truth_t >= t0) & (self.truth_t <= t1)
+        if not sel.any():
+            return None
+        return float(np.linalg.norm(self.truth[sel].max(axis=0) - self.truth[sel].min(axis=0)))
 
     def excursion(self, t0: float, span: float) -> float | None:
         sel = (self.truth_t >= t0) & (self.truth_t <= t0 + span)

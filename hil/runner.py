@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from firmware_py.control import CONTROLLER_NAMES
-from firmware_py.supervisor import Command, Fault, State
+from firmware_py.supervisor import Ack, Command, Fault, State
 from protocol.bus import BusSpec, default_bus_spec, open_bus, parse_bus_spec
 from protocol.errors import UserInputError
 
@@ -217,9 +217,22 @@ class Run:
         self.host.command(Command.RESET)
         self.host.wait_state(State.IDLE, max_cycles=self.cycles(2.0))
         self.host.command(Command.CLEAR_WAYPOINTS)
-        self.host.command(Command.ENABLE)
+        self.enable()
         self.host.wait_state(State.READY, max_cycles=self.cycles(2.0))
         self.wait_s(1.0)
+
+    def enable(self, within_s: float = 2.0) -> None:
+        """ENABLE from IDLE. After a RESET the controller refuses it (BAD_STATE) until every
+        sensor has reported again and its estimators restarted there: ask again until then."""
+        give_up = time.monotonic() + within_s
+        while True:
+            result = self.host.command(Command.ENABLE, expect_ok=False)
+            if result is Ack.ACCEPTED:
+                return
+            if result is not Ack.BAD_STATE or self.host.state is not State.IDLE or time.monotonic() > give_up:
+                raise HostError(f"HOST_CMD ENABLE refused: {result.name} (state "
+                                f"{self.host.state.name if self.host.state else None})")
+            self.wait_s(0.02)
 
     def wait_motion_done(self, max_s: float) -> None:
         """Until the controller is back in READY after a motion (CTRL_STATUS every 16 SYNC)."""

@@ -103,8 +103,9 @@ def test_missing_sensor_frames_fault_after_the_configured_count_then_reset():
     bus.silent.clear()
     cycles(loop, 5)
     assert core.state is State.FAULT                          # needs an explicit reset
-    core.host_command(Command.RESET, 0)
-    core.host_command(Command.ENABLE, 0)
+    assert core.host_command(Command.RESET, 0) is Ack.ACCEPTED
+    cycles(loop, 1)                                           # every sensor reported: estimators restart
+    assert core.host_command(Command.ENABLE, 0) is Ack.ACCEPTED
     cycles(loop, 10)
     assert core.state is State.READY
 
@@ -401,8 +402,9 @@ def test_a_stalled_realtime_loop_faults_overrun_and_stays_held_until_reset():
         loop.cycle()
         assert valve_words(bus, loop)[2] == 0                           # M = 0: held, no motion
     assert core.state is State.FAULT
-    core.host_command(Command.RESET, 0)
-    core.host_command(Command.ENABLE, 0)
+    assert core.host_command(Command.RESET, 0) is Ack.ACCEPTED
+    loop.cycle()                                          # every sensor reported: estimators restart
+    assert core.host_command(Command.ENABLE, 0) is Ack.ACCEPTED
     for _ in range(10):
         now[0] += loop.period_s
         loop.cycle()
@@ -430,3 +432,25 @@ def test_nodes_that_reboot_are_started_again_on_reset():
     assert core.host_command(Command.ENABLE, 0) is Ack.ACCEPTED
     cycles(loop, 10)
     assert core.state is State.READY and bus.valve == [3]
+
+
+def test_after_reset_enable_waits_for_every_sensor_and_holds_where_it_reads():
+    """A sensor node silent, RESET, the node back reading 30 mm elsewhere (restarted, or the
+    rod moved while unseen): ENABLE is refused until it has reported, then the estimators
+    start there and the leg is held where it is, not driven to where it was last seen."""
+    loop, core, bus = make_loop("testbench", "pi")
+    cycles(loop, 20)
+    assert core.state is State.READY
+    bus.silent.add(0)
+    cycles(loop, 10)
+    assert core.state is State.FAULT and core.sup.fault_code is Fault.SENSOR_TIMEOUT
+    bus.y[0] += 0.030
+    assert core.host_command(Command.RESET, 0) is Ack.ACCEPTED and core.state is State.IDLE
+    cycles(loop, 2)
+    assert core.host_command(Command.ENABLE, 0) is Ack.BAD_STATE       # still silent
+    bus.silent.discard(0)
+    cycles(loop, 1)
+    assert core.host_command(Command.ENABLE, 0) is Ack.ACCEPTED
+    cycles(loop, 100)
+    assert core.state is State.READY, core.sup.fault_code.name
+    assert abs(core.yr[0] - bus.y[0]) < 1e-3 and abs(core.meas_y[0] - bus.y[0]) < 1e-3
