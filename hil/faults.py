@@ -479,8 +479,9 @@ class Session(Scenario):
         states = view.states_between(mark.t_inject, mark.t_end)
         still = "RUNNING" not in states and legs is not None and legs <= ENCODER_COUNT_M * 1.001
         measured = "; ".join(f"{k}: {v}" for k, v in acks.items()) + \
-            (f"; states {states}; legs moved {_mm(legs)} at most (one count: {_mm(ENCODER_COUNT_M)}); platform "
-             f"range {_mm(motion)} (holding at rest before: {_mm(floor)})")
+            (f"; states {states}; legs moved "
+             f"{'n/a' if legs is None else f'{legs / ENCODER_COUNT_M:.0f}'} encoder count(s) at most (bound 1); "
+             f"platform range {_mm(motion)} (holding at rest before: {_mm(floor)})")
         return ok and still, measured, {"acks": acks, "leg_range_m": legs, "platform_range_m": motion,
                                         "hold_platform_range_m": floor, "states": states}
 
