@@ -8,11 +8,13 @@ sink while the valves push them up).
 
 Rule: while the valve input stays beyond `input_min` (volts) with one sign for
 `window` cycles, the encoder must advance at least `travel_min` in that direction from the
-furthest point back it reached in the window; a window without it is implausible. Defaults (controller.toml): 30 % input for 0.2 s, 0.5 mm
-(4 encoder counts) on the hexapod; the test bench's own 5 % for 50 ms ([testbench]); 10 % moves this cylinder at 225-295 mm/s unloaded (k01 of Table A.3 x
-1 V), but the hexapod's legs (190-260 kg of joint-space inertia) tripped a 10 %, 50 ms
-window in the chapter 11 movements. In place on arrays made at construction (no allocation
-per cycle).
+furthest point back it reached in the window; a window without it is implausible.
+Defaults (controller.toml): on the hexapod 30 % input for 0.2 s, 0.5 mm (4 encoder counts):
+its legs (190-260 kg of joint-space inertia) tripped a 10 %, 50 ms window in the chapter
+11 movements, and they hold the platform's weight at > 10 % input without moving. On the
+test bench ([testbench]) 5 % for 50 ms: its horizontal slide holds no static load, and 10 %
+moves the cylinder at 225-295 mm/s unloaded (k01 of Table A.3 x 1 V). In place on arrays
+made at construction (no allocation per cycle).
 """
 
 from __future__ import annotations
