@@ -216,6 +216,14 @@ class JointController:
             self.st[:, column] = value          # F u
             self.st[:, column + 2] = value      # previous input: at rest
 
+    def restart_at(self, position_m, gravity_axial=None) -> None:
+        """As `reset`, but the load's mass estimate (RLS) and its covariance are kept: after a
+        fault the load is the same, only the motion states start again at the measurement."""
+        mass, covariance = self.st[:, ST_MASS].copy(), self.st[:, ST_RLS_P].copy()
+        self.reset(position_m, gravity_axial)
+        self.st[:, ST_MASS] = mass
+        self.st[:, ST_RLS_P] = covariance
+
     def set_mode(self, mode: int) -> None:
         """Switch controller; the integral carries over (bumpless for equal gains)."""
         self.mode = int(mode)

@@ -352,14 +352,18 @@ class ControllerCore:
         return Ack.ACCEPTED, strokes
 
     # -- the cycle ---------------------------------------------------------------------------
-    def initialise(self) -> None:
-        """First measurements are in: estimators and the reference start at the measured state."""
+    def initialise(self, keep_load: bool = False) -> None:
+        """First measurements are in (or the first after a RESET): estimators and the reference
+        start at the measured state; `keep_load` keeps the load's mass estimate."""
         gravity = GRAVITY_M_S2
         if self.hexapod:
             self.platform.estimate(self.meas_y)
             gravity = self.platform.gravity_axial
             self.platform.reset_reference(self.meas_y)
-        self.joint.reset(self.meas_y, gravity)
+        if keep_load:
+            self.joint.restart_at(self.meas_y, gravity)
+        else:
+            self.joint.reset(self.meas_y, gravity)
         self.yr[:] = self.meas_y
         self.hold_position[:] = self.meas_y
         self.initialised = True
@@ -386,7 +390,7 @@ class ControllerCore:
                 self._write_outputs()
                 return
         elif self.reinitialise and self.meas_fresh.all():
-            self.initialise()
+            self.initialise(keep_load=True)
             self.reinitialise = False
         # sensor frames: missing and E2E-rejected, consecutive
         np.logical_not(self.meas_fresh, out=self._mask)
