@@ -18,6 +18,8 @@ wall clock with the valves in FAULT_HOLD, and EMU_TRUTH reports where the mechan
 
 from __future__ import annotations
 
+import json
+import sys
 import time
 from dataclasses import dataclass, field
 
@@ -61,6 +63,7 @@ FREE_RUN_CATCH_UP_STEPS = 25         # free run: periods of physics per poll at 
 FAULT_CODES = {name: code for code, name in FAULT_NAMES.items()}
 VALUE_PARAM_FAULTS = {"BABBLE", "OUT_OF_RANGE"}   # FAULT_PARAM is the fault's value: until cleared
 CONTROLLER_TARGET = 16
+SYNC_TIMEOUT_EVENT = "emulator: event sync_timeout"   # a stderr line per SYNC-watchdog trip (JSON after it)
 
 
 @dataclass
@@ -77,12 +80,16 @@ class Counters:
     host_stall_max_s: float = 0.0
     free_run_steps: int = 0           # periods of physics run on the wall clock after a lost SYNC
     injected: dict = field(default_factory=dict)
+    # every SYNC-watchdog trip: when (epoch s), and how late this process woke for it (ms): a
+    # real node's hardware timer fires on time; ours is this process's wake-up (hil faults, case 1)
+    sync_timeouts: list = field(default_factory=list)
 
     def as_dict(self) -> dict:
         return {k: getattr(self, k) for k in ("syncs", "frames_in", "frames_out", "e2e_errors",
                                               "sync_sequence_errors", "valve_faults", "emergencies",
                                               "unknown_frames", "host_stalls", "free_run_steps")} | {
-            "host_stall_max_ms": round(self.host_stall_max_s * 1e3, 3), "injected": dict(self.injected)}
+            "host_stall_max_ms": round(self.host_stall_max_s * 1e3, 3), "injected": dict(self.injected),
+            "sync_timeouts": list(self.sync_timeouts)}
 
 
 class Emulator:
@@ -222,6 +229,10 @@ class Emulator:
         limit = self.cfg.sync_timeout_periods * period
         if self.last_sync_time is not None and not self.sync_lost_reported and now - self.last_sync_time > limit:
             self.sync_lost_reported = True
+            trip = {"t_epoch_s": time.time(), "late_ms": round((now - self.last_sync_time - limit) * 1e3, 3)}
+            self.counters.sync_timeouts.append(trip)
+            # also on stderr at once: a process killed later never writes its summary
+            print(f"{SYNC_TIMEOUT_EVENT} {json.dumps(trip)}", file=sys.stderr, flush=True)
             # the valves go to FAULT_HOLD now, and say so at once (EMCY); the physics then
             # catches up to now with the setpoints the rig still has (the last SYNC
             # integrated one period, the valves kept their setpoints until the trip)
