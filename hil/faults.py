@@ -524,15 +524,18 @@ class Session(Scenario):
         legs = sorted({leg for leg, _, _ in emcy})
         latest = max((t for _, t, _ in emcy), default=math.nan)
         periods = (latest - last_cmd) / view.period_s if last_cmd is not None else math.nan
-        # the emulated nodes' SYNC watchdog is the emulator process's wake-up, not a hardware
-        # timer: how late it woke for this trip (its own measurement) is not the node's
+        # the emulated nodes' SYNC watchdog is the emulator process's clock, not a hardware
+        # timer started by the SYNC on the bus: how far behind it ran for this trip (the last
+        # SYNC's wait in its socket plus its wake-up for the trip, its own measurement) is not
+        # the node's
         late_ms = self._emulator_trip_late_ms(mark.t_inject - 0.01, mark.t_inject + 1.0)
         node_periods = periods - (late_ms or 0.0) * 1e-3 / view.period_s
         excursion = view.excursion(mark.t_inject, OBSERVE_S)
         passed = (legs == list(range(1, view.n_legs + 1)) and node_periods <= HOLD_WITHIN_PERIODS
                   and excursion is not None and excursion <= HOLD_MOTION_MAX_M)
         late = ("" if late_ms is None else
-                f" ({node_periods:.2f} on the nodes' clock: the emulator woke {late_ms:.2f} ms late for the trip)")
+                f" ({node_periods:.2f} on the nodes' clock: the emulator process ran {late_ms:.2f} ms behind "
+                f"it, handling the last SYNC and waking for the trip)")
         measured = (f"EMCY (SYNC timeout) from legs {legs}, the last {periods:.2f} periods after the last "
                     f"VALVE_CMD{late}; platform moved {_mm(excursion)} in {OBSERVE_S:g} s after")
         return passed, measured, {"emcy_legs": legs, "periods_after_last_command": periods,
