@@ -208,7 +208,8 @@ class Session(Scenario):
             for attempt in range(TRY_LIMIT):
                 if attempt:                        # the spoiled attempt stays in the log, not in the table
                     spoiled_mark = self.marks.pop()
-                    earlier.append(f"attempt {attempt}: " + "; ".join(spoiled_mark.notes))
+                    own = spoiled_mark.notes[len(earlier):]
+                    earlier.append(f"attempt {attempt}: " + "; ".join(own))
                 mark = Marks(case, notes=list(earlier))
                 self._ready(run, mark)
                 try:
@@ -520,27 +521,32 @@ class Session(Scenario):
 
     def _measure_kill(self, view, mark, baseline):
         last_cmd = view.last_command_before(mark.t_inject + 0.5)
+        # SYNC is part of the command stream (a VALVE_CMD takes effect at the next SYNC): a
+        # controller killed between its SYNC and its VALVE_CMD (the host acts on SYNC, so
+        # often) last commanded with that SYNC, a period after its last VALVE_CMD frame
+        last_sync = view.last_sync_before(mark.t_inject + 0.5)
+        applied = None if last_cmd is None else max(last_cmd, last_sync or last_cmd)
         emcy = view.emergencies_after(mark.t_inject - 0.01, mark.t_inject + 1.0)
         legs = sorted({leg for leg, _, _ in emcy})
         latest = max((t for _, t, _ in emcy), default=math.nan)
         periods = (latest - last_cmd) / view.period_s if last_cmd is not None else math.nan
+        from_applied = (latest - applied) / view.period_s if applied is not None else math.nan
         # the emulated nodes' SYNC watchdog is the emulator process's clock, not a hardware
         # timer started by the SYNC on the bus: how far behind it ran for this trip (the last
         # SYNC's wait in its socket plus its wake-up for the trip, its own measurement) is not
         # the node's
         late_ms = self._emulator_trip_late_ms(mark.t_inject - 0.01, mark.t_inject + 1.0)
-        node_periods = periods - (late_ms or 0.0) * 1e-3 / view.period_s
+        node_periods = from_applied - (late_ms or 0.0) * 1e-3 / view.period_s
         excursion = view.excursion(mark.t_inject, OBSERVE_S)
         passed = (legs == list(range(1, view.n_legs + 1)) and node_periods <= HOLD_WITHIN_PERIODS
                   and excursion is not None and excursion <= HOLD_MOTION_MAX_M)
-        late = ("" if late_ms is None else
-                f" ({node_periods:.2f} on the nodes' clock: the emulator process ran {late_ms:.2f} ms behind "
-                f"it, handling the last SYNC and waking for the trip)")
+        late = "" if late_ms is None else f", the emulator process {late_ms:.2f} ms behind it"
         measured = (f"EMCY (SYNC timeout) from legs {legs}, the last {periods:.2f} periods after the last "
-                    f"VALVE_CMD{late}; platform moved {_mm(excursion)} in {OBSERVE_S:g} s after")
+                    f"VALVE_CMD frame, {from_applied:.2f} after its last SYNC or VALVE_CMD ({node_periods:.2f} on "
+                    f"the nodes' clock{late}); platform moved {_mm(excursion)} in {OBSERVE_S:g} s after")
         return passed, measured, {"emcy_legs": legs, "periods_after_last_command": periods,
-                                  "emulator_trip_late_ms": late_ms, "node_periods": node_periods,
-                                  "excursion_m": excursion}
+                                  "periods_after_last_sync_or_command": from_applied, "emulator_trip_late_ms": late_ms,
+                                  "node_periods": node_periods, "excursion_m": excursion}
 
     def _emulator_trip_late_ms(self, t0: float, t1: float) -> float | None:
         """The emulator's own record of its SYNC-watchdog trips in [t0, t1] (None: no run)."""
@@ -784,6 +790,10 @@ class LogView:
             if e.name.startswith("EMCY_") and t0 <= e.time_s <= t1 and e.values["ERROR_CODE"] != 0:
                 out.append((int(e.name.split("_")[1]), e.time_s, int(e.values["DETAIL"])))
         return out
+
+    def last_sync_before(self, t: float) -> float | None:
+        earlier = self.sync_t[np.isfinite(self.sync_t) & (self.sync_t <= t)]
+        return float(earlier.max()) if len(earlier) else None
 
     def last_command_before(self, t: float) -> float | None:
         times = [c.time_s[c.time_s <= t] for c in self.cmds]
