@@ -195,6 +195,7 @@ class Session(Scenario):
         self.controllers = ("model-based",) if rig == "hexapod" else ("adaptive",)
         self.marks: list[Marks] = []
         self.results: list[CaseResult] = []
+        self._run = None                           # the run being scripted (its children's files)
         geometry = default_geometry()
         self.home = tuple(geometry.home_position_m) if rig == "hexapod" else (0.0, 0.0, 0.150)
         self.up = (self.home[0], self.home[1], self.home[2] + PROBE_RISE_M)
@@ -550,7 +551,7 @@ class Session(Scenario):
 
     def _emulator_trip_late_ms(self, t0: float, t1: float) -> float | None:
         """The emulator's own record of its SYNC-watchdog trips in [t0, t1] (None: no run)."""
-        run = getattr(self, "_run", None)
+        run = self._run
         if run is None:
             return None
         late = []

@@ -128,6 +128,7 @@ class Soak(Scenario):
             target = int(rng.integers(1, 7))
             host.emulator(EMU_INJECT, target=target, fault=FAULT_CODES[kind.fault], param=param)
             run.wait_s(MOVE_S - into + 0.1)
+        host.wait_until(lambda: host.state not in moving, run.cycles(1.0), what=None)
         if host.state is not State.READY:
             self._recover(run, "at the end")
         # home: the last recovery's move, and a clean end
