@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -188,9 +189,7 @@ class Soak(Scenario):
         transient = [j for j in judged if j["transient"] and j["verdict"] != "spoiled"]
         persistent = [j for j in judged if not j["transient"] and j["verdict"] != "spoiled"]
         spoiled = sum(1 for j in judged if j["verdict"] == "spoiled")
-        by_code: dict[str, int] = {}
-        for _, _, code in transitions:
-            by_code[code] = by_code.get(code, 0) + 1
+        by_code = dict(Counter(code for _, _, code in transitions))
         recoveries = _recoveries(log, transitions)
         timing = loop_timing(log, period, out, "soak")
         checks = [
@@ -214,16 +213,15 @@ class Soak(Scenario):
                   required=False),
         ]
         counted = self._sender_counts()
+        in_log = None if counted is None else frames_by_sender(log.path)    # reads the whole log once
         if counted is not None:
-            in_log = frames_by_sender(log.path)
             checks.append(Check("the log holds every frame each sender counted sending", in_log == counted,
                                 f"log {in_log}", f"counted {counted}"))
         metrics = {"seconds": round(seconds, 2), "cycles": log.n_cycles, "seed": self.seed,
                    "injections": judged, "faults_by_code": by_code, "machine_stalls": stalls,
                    "unexpected_faults": unexpected, "recoveries": recoveries,
                    "frames_rejected": log.e2e_errors, "host_notes": list(self.notes),
-                   "log_vs_senders": None if counted is None else {"log": frames_by_sender(log.path),
-                                                                    "counted": counted},
+                   "log_vs_senders": None if counted is None else {"log": in_log, "counted": counted},
                    **timing.metrics}
         table = ["| injected | count | met as bound | faults |", "|---|---|---|---|"]
         for what in sorted({j["what"] for j in judged}):
