@@ -71,7 +71,7 @@ HOLD_WITHIN_PERIODS = 3           # case 1: every valve in FAULT_HOLD this long 
 VALVE_WATCHDOG_PERIODS = 2.5
 PLANT_FAULT_MAX_CYCLES = 250      # stuck encoder: FAULT within 0.5 s
 SLOW_PLANT_FAULT_MAX_CYCLES = 500  # seized rod, lost supply: within 1 s (the motion window, see 5c)
-TRY_LIMIT = 5                     # realtime: attempts of a case (or a recovery) a machine stall may spoil
+TRY_LIMIT = 8                     # realtime: attempts of a case (or a recovery) a machine stall may spoil
 
 
 @dataclass
@@ -254,6 +254,8 @@ class Session(Scenario):
         run.wait_s(0.1)
         for attempt in range(1, TRY_LIMIT + 1):
             ok, error = self._recover_once(run)
+            if error is not None and "BAD_STATE" in error:     # as in `script`: the FAULT shows later
+                host.wait_until(lambda: host.state is State.FAULT, run.cycles(0.1), what=None)
             stalled = (not ok and run.pacing == "realtime" and host.state is State.FAULT
                        and host.fault_code == Fault.OVERRUN)
             if error is not None:

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from firmware_py.supervisor import State
+
 from .logdata import LogData
 
 SETTLING_BAND = 0.05          # settling time: last exit from +/- 5 % of the step
@@ -52,6 +54,45 @@ def ctrl_status_timing(log: LogData) -> dict:
     return {"windows": len(status), "overruns": overruns,
             "period_error_us": in_us(percentiles(status["PERIOD_ERROR_MAX"])),
             "compute_time_us": in_us(percentiles(status["COMPUTE_TIME_MAX"]))}
+
+
+# A fault this many cycles after a machine stall is the stall's: two CTRL_STATUS windows
+# (the overrun counter is reported every 16th cycle), and SENSOR_TIMEOUT's 5-cycle count fits.
+STALL_WINDOW_CYCLES = 32
+STALL_SYNC_GAP_PERIODS = 3.0    # a SYNC interval this long at the recorder: the bus's side stalled
+
+
+def overrun_counts(log: LogData) -> tuple[np.ndarray, np.ndarray]:
+    """(cycle, overruns so far) at each CTRL_STATUS, the modulo-256 counter unwrapped."""
+    status = log.get("CTRL_STATUS")
+    counter = np.asarray(status["OVERRUNS"], np.int64)
+    wraps = np.concatenate(([0], np.cumsum(np.diff(counter) < 0)))
+    return np.asarray(status.cycle, np.int64), counter + 256 * wraps
+
+
+def fault_transitions(log: LogData) -> list[tuple[float, int, int]]:
+    """(time, cycle, fault code) of every CTRL_STATUS that first shows a fault."""
+    s = log.get("CTRL_STATUS")
+    faulted = s["STATE"] == State.FAULT
+    start = np.flatnonzero(faulted & ~np.concatenate(([False], faulted[:-1])))
+    return [(float(s.time_s[i]), int(s.cycle[i]), int(s["FAULT_CODE"][i])) for i in start]
+
+
+def after_machine_stall(log: LogData, cycle: int, period_s: float) -> bool:
+    """Whether the machine stalled in the STALL_WINDOW_CYCLES before `cycle` (a fault reported
+    there): the controller counted an overrun in the status windows covering them, or the
+    recorder saw a SYNC interval over STALL_SYNC_GAP_PERIODS. On a shared machine without an RT
+    kernel either stall can starve the controller or the emulator of a few cycles; a fault
+    after one is the machine's, and is counted as such, not as the fault's cause."""
+    cycles, overruns = overrun_counts(log)
+    start = cycle - STALL_WINDOW_CYCLES
+    before = np.flatnonzero(cycles < start)
+    upto = np.flatnonzero(cycles <= cycle + 16)       # the fault's own window reports it
+    if len(upto) and overruns[upto[-1]] > (overruns[before[-1]] if len(before) else 0):
+        return True
+    lo, hi = max(start, 0), min(cycle + 1, log.n_cycles)
+    sync = log.sync_time_s[lo:hi]
+    return bool(np.any(np.diff(sync[np.isfinite(sync)]) > STALL_SYNC_GAP_PERIODS * period_s))
 
 
 def in_us(stats: dict) -> dict:

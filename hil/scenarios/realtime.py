@@ -1,6 +1,12 @@
 """rt-testbench and rt-hexapod: each rig in realtime pacing at 500 Hz for >= 60 s, moving
 back and forth the whole time; period jitter and overruns from CTRL_STATUS, and the SYNC
-intervals as the recorder saw them."""
+intervals as the recorder saw them.
+
+These are the loop's timing benchmark: the period-error check is a speed goal
+(`Check.benchmark`), asserted by the command and reported by the test suite. A machine stall
+that faults the controller (its stall watchdog, or a sensor starved for 5 cycles) is counted,
+the host recovers (RESET + ENABLE) and the run carries on; a fault with no stall before it
+fails the run."""
 
 from __future__ import annotations
 
@@ -10,10 +16,12 @@ from pathlib import Path
 import numpy as np
 
 from firmware_py.geometry import default_geometry
+from firmware_py.supervisor import Fault, State
 from protocol.values import FLAG_LAST, FLAG_START
 
 from ..logdata import LogData
-from ..metrics import ctrl_status_timing, fault_codes, in_us, percentiles
+from ..host import HostError
+from ..metrics import after_machine_stall, ctrl_status_timing, fault_transitions, in_us, percentiles
 from ..plotting import plt, save
 from ..scenario import Analysis, Check, Figure, Scenario
 from .common import MM
@@ -21,10 +29,11 @@ from .common import MM
 DEFAULT_S, SHORT_S = 60.0, 10.0
 LEG_S = 2.0                         # one move of the back-and-forth
 # Asserted: the controller's own period error stays below one period at the 99th percentile
-# and no cycle is lost to a fault. Overruns and the maximum are reported (a shared, noisy
-# machine without an RT kernel: README "Timing").
+# (a benchmark check) and no fault without a machine stall before it. Overruns and the
+# maximum are reported (a shared, noisy machine without an RT kernel: README "Timing").
 P99_MAX_FRACTION = 1.0
 VALVE_WATCHDOG_PERIODS = 3          # the valves' command/SYNC watchdog (DESIGN.md "Supervisor")
+MAX_RECOVERIES = 10                 # stall faults a run recovers from before it gives up
 
 
 class Realtime(Scenario):
@@ -46,10 +55,24 @@ class Realtime(Scenario):
         a, b = self.points()
         self.requested_s = self.duration(run)
         run.select(self.chosen(run)[0])
-        elapsed, k = 0.0, 0
+        host = run.host
+        elapsed, k, recoveries = 0.0, 0, 0
         while elapsed < self.duration(run):
-            run.host.waypoint(b if k % 2 == 0 else a, segment_time_s=LEG_S, accel_time_s=0.3,
+            if host.state is State.FAULT:              # a machine stall (judged from the log)
+                recoveries += 1
+                if recoveries > MAX_RECOVERIES:
+                    raise HostError(f"{self.name}: more than {MAX_RECOVERIES} faults; the machine "
+                                    "cannot keep the loop's time")
+                run.recover_from_fault()
+            try:
+                host.waypoint(b if k % 2 == 0 else a, segment_time_s=LEG_S, accel_time_s=0.3,
                               flags=FLAG_LAST | FLAG_START)
+            except HostError as error:
+                if "BAD_STATE" not in str(error):
+                    raise
+                # faulted before the waypoint: CTRL_STATUS shows it <= 16 cycles later
+                host.wait_until(lambda: host.state is State.FAULT, run.cycles(0.1), what=None)
+                continue
             run.wait_s(LEG_S + 0.1)
             elapsed += LEG_S + 0.1
             k += 1
@@ -57,12 +80,19 @@ class Realtime(Scenario):
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
         period = 1.0 / rate_hz
         seconds = log.n_cycles * period
-        faults = fault_codes(log)
+        stalled, unexplained = [], []
+        for _, cycle, code in fault_transitions(log):
+            stall = code == Fault.OVERRUN or after_machine_stall(log, cycle, period)
+            (stalled if stall else unexplained).append(Fault(code).name)
         checks = [Check("ran for the requested time", seconds >= 0.95 * self.requested_s,
                         f"{seconds:.1f} s of cycles", f">= {self.requested_s:g} s"),
-                  Check("no controller fault", not faults, f"fault codes {faults}" if faults else "none", "none")]
+                  Check("no controller fault without a machine stall before it", not unexplained,
+                        f"{unexplained or 'none'}", "none"),
+                  Check("faults after a machine stall (recovered, the run carried on)", not stalled,
+                        f"{stalled or 'none'}", "none", required=False)]
         timing = loop_timing(log, period, out, self.name.replace("-", "_"))
-        metrics = {"seconds": round(seconds, 2), "cycles": log.n_cycles, **timing.metrics}
+        metrics = {"seconds": round(seconds, 2), "cycles": log.n_cycles, "faults_after_stall": stalled,
+                   "faults_unexplained": unexplained, **timing.metrics}
         return Analysis(metrics, self.thesis, checks + timing.checks, timing.figures, timing.tables)
 
 
@@ -75,7 +105,7 @@ def loop_timing(log: LogData, period: float, out: Path | None, stem: str) -> Ana
     p99 = timing.get("period_error_us", {}).get("p99")
     checks = [Check("controller period error p99 (CTRL_STATUS, max of each 16-cycle window)",
                     p99 is not None and p99 <= P99_MAX_FRACTION * period * 1e6,
-                    f"{p99} us", f"<= {P99_MAX_FRACTION * period * 1e6:.0f} us (one period)"),
+                    f"{p99} us", f"<= {P99_MAX_FRACTION * period * 1e6:.0f} us (one period)", benchmark=True),
               Check("overruns", timing.get("overruns") == 0, f"{timing.get('overruns')}", "0", required=False)]
     gaps = int(np.sum(intervals > VALVE_WATCHDOG_PERIODS * period))
     checks.append(Check(f"SYNC gaps > {VALVE_WATCHDOG_PERIODS} periods (the valves' own watchdog)", gaps == 0,

@@ -30,6 +30,7 @@ from protocol.values import EMU_CLEAR_ALL, EMU_INJECT, FLAG_LAST, FLAG_START
 from ..faults import LogView
 from ..host import HostError
 from ..logdata import LogData, frames_by_sender, frames_counted_by_senders
+from ..metrics import after_machine_stall, fault_transitions
 from ..scenario import Analysis, Check, Scenario
 from .common import MM
 from .realtime import loop_timing
@@ -155,7 +156,8 @@ class Soak(Scenario):
         view = LogView(log, period, 6)
         seconds = log.n_cycles * period
         injections = _injections(log)
-        transitions = _fault_transitions(log)
+        transitions = [(t, cycle, Fault(code).name, code == Fault.OVERRUN or after_machine_stall(log, cycle, period))
+                       for t, cycle, code in fault_transitions(log)]
         status = log.get("CTRL_STATUS")
         attributed: set[int] = set()
         judged = []
@@ -164,10 +166,10 @@ class Soak(Scenario):
             k0 = view.cycle_at(t_inject)
             before = np.flatnonzero(status.time_s <= t_inject)
             faulted_before = len(before) and status["STATE"][before[-1]] == State.FAULT
-            hits = [i for i, (t, _, _) in enumerate(transitions) if t_inject <= t <= t_inject + ATTRIBUTE_S]
+            hits = [i for i, (t, *_) in enumerate(transitions) if t_inject <= t <= t_inject + ATTRIBUTE_S]
             first = transitions[hits[0]][2] if hits else None
             cycles = None
-            if faulted_before or first == "OVERRUN":
+            if faulted_before or (hits and transitions[hits[0]][3] and first not in kind.expect):
                 # a machine stall faulted the controller first: nothing to judge (the stall is counted)
                 verdict, code = "spoiled", first
             else:
@@ -183,13 +185,13 @@ class Soak(Scenario):
                     verdict = "ok" if ok else "failed"
             judged.append({"t_s": round(t_inject - t_first, 3), "what": kind.what, "leg": target, "param": param,
                            "transient": kind.transient, "fault": code, "cycles": cycles, "verdict": verdict})
-        unattributed = [code for i, (_, _, code) in enumerate(transitions) if i not in attributed]
-        stalls = sum(1 for c in unattributed if c == "OVERRUN")
-        unexpected = [c for c in unattributed if c != "OVERRUN"]
+        unattributed = [(code, stall) for i, (_, _, code, stall) in enumerate(transitions) if i not in attributed]
+        stalls = sum(1 for _, stall in unattributed if stall)
+        unexpected = [code for code, stall in unattributed if not stall]
         transient = [j for j in judged if j["transient"] and j["verdict"] != "spoiled"]
         persistent = [j for j in judged if not j["transient"] and j["verdict"] != "spoiled"]
         spoiled = sum(1 for j in judged if j["verdict"] == "spoiled")
-        by_code = dict(Counter(code for _, _, code in transitions))
+        by_code = dict(Counter(code for _, _, code, _ in transitions))
         recoveries = _recoveries(log, transitions)
         timing = loop_timing(log, period, out, "soak")
         checks = [
@@ -204,12 +206,12 @@ class Soak(Scenario):
                   all(j["verdict"] == "ok" for j in persistent),
                   f"{_count_ok(persistent)} of {len(persistent)}; cycles "
                   f"{sorted({j['cycles'] for j in persistent if j['cycles'] is not None})}", "all"),
-            Check("no fault without a cause (other than a machine stall's OVERRUN)", not unexpected,
+            Check("no fault without a cause (other than a machine stall)", not unexpected,
                   f"{unexpected or 'none'}", "none"),
             Check("every fault recovered (RESET + ENABLE -> READY, then a move)",
                   recoveries["recovered"] == recoveries["faults"],
                   f"{recoveries['recovered']} of {recoveries['faults']}", "all"),
-            Check("machine stalls (OVERRUN without an injection)", stalls == 0, f"{stalls}", "0",
+            Check("faults after a machine stall, without an injection", stalls == 0, f"{stalls}", "0",
                   required=False),
         ]
         counted = self._sender_counts()
@@ -263,19 +265,11 @@ def _injections(log: LogData) -> list[tuple[float, int, SoakFault, int]]:
     return out
 
 
-def _fault_transitions(log: LogData) -> list[tuple[float, int, str]]:
-    """(time, cycle, code) of every CTRL_STATUS that first shows a fault."""
-    s = log.get("CTRL_STATUS")
-    faulted = s["STATE"] == State.FAULT
-    start = np.flatnonzero(faulted & ~np.concatenate(([False], faulted[:-1])))
-    return [(float(s.time_s[i]), int(s.cycle[i]), Fault(int(s["FAULT_CODE"][i])).name) for i in start]
-
-
 def _recoveries(log: LogData, transitions: list) -> dict:
     """A fault is recovered when, after it, the controller is READY again and then RUNNING."""
     s = log.get("CTRL_STATUS")
     recovered = 0
-    for t, _, _ in transitions:
+    for t, *_ in transitions:
         after = s["STATE"][s.time_s > t]
         ready = np.flatnonzero(after == State.READY)
         if len(ready) and np.any(after[ready[0]:] == State.RUNNING):

@@ -1,0 +1,59 @@
+"""A fault right after a machine stall is the stall's (`hil.metrics.after_machine_stall`): an
+overrun the controller counted, or a long SYNC interval at the recorder, in the 32 cycles
+before it. The realtime scenarios and the soak recover from such a fault and count it; any
+other fault fails them. Synthetic CTRL_STATUS logs, every 16th cycle as the controller sends."""
+
+import numpy as np
+import pytest
+
+from firmware_py.supervisor import Fault, State
+from hil.logdata import LogData, Series
+from hil.metrics import STALL_WINDOW_CYCLES, after_machine_stall, fault_transitions, overrun_counts
+
+PERIOD_S = 0.002
+N = 1600
+
+
+def status_log(overrun_at=(), fault_at=None, code=Fault.SENSOR_TIMEOUT, gap_at=None, gap_periods=4.0,
+               start_overruns=250):
+    """CTRL_STATUS every 16 cycles; the overrun counter (modulo 256, starting near its wrap)
+    steps at each cycle in `overrun_at`; FAULT with `code` from `fault_at` on."""
+    cycles = np.arange(0, N, 16)
+    overruns = np.array([(start_overruns + sum(1 for c in overrun_at if c <= k)) % 256 for k in cycles])
+    state = np.where((fault_at is not None) & (cycles >= (fault_at or 0)), State.FAULT, State.RUNNING)
+    fault = np.where(state == State.FAULT, int(code), 0)
+    values = np.column_stack([state, fault, overruns]).astype(float)
+    sync = np.arange(N) * PERIOD_S
+    if gap_at is not None:
+        sync[gap_at:] += (gap_periods - 1.0) * PERIOD_S
+    status = Series("CTRL_STATUS", cycles, cycles * PERIOD_S, values, {"STATE": 0, "FAULT_CODE": 1, "OVERRUNS": 2})
+    return LogData("synthetic", N, sync, {"CTRL_STATUS": status}, [], 0, {}, {}, 0)
+
+
+def test_the_overrun_counter_is_unwrapped():
+    _, counts = overrun_counts(status_log(overrun_at=range(100, 110)))
+    assert counts[0] == 250 and counts[-1] == 260 and np.all(np.diff(counts) >= 0)
+
+
+def test_a_fault_with_nothing_before_it_is_not_a_stall():
+    log = status_log(fault_at=800)
+    [(_, cycle, code)] = fault_transitions(log)
+    assert code == Fault.SENSOR_TIMEOUT and cycle == 800
+    assert not after_machine_stall(log, cycle, PERIOD_S)
+
+
+@pytest.mark.parametrize("overrun_cycle", [800 - STALL_WINDOW_CYCLES + 8, 790, 800])
+def test_a_fault_after_an_overrun_is_the_stall(overrun_cycle):
+    log = status_log(overrun_at=[overrun_cycle], fault_at=800)
+    assert after_machine_stall(log, 800, PERIOD_S)
+
+
+def test_an_overrun_long_before_the_fault_does_not_explain_it():
+    log = status_log(overrun_at=[600], fault_at=800)
+    assert not after_machine_stall(log, 800, PERIOD_S)
+
+
+@pytest.mark.parametrize("periods, stall", [(4.0, True), (2.5, False)])
+def test_a_long_sync_gap_before_the_fault_is_a_stall(periods, stall):
+    log = status_log(fault_at=800, gap_at=790, gap_periods=periods)
+    assert after_machine_stall(log, 800, PERIOD_S) is stall
