@@ -10,6 +10,7 @@ import sys
 
 from firmware_py import commands as firmware_commands
 from hil import commands as hil_commands
+from hil.design import commands as design_commands
 from plant_emulator import commands as emulator_commands
 from protocol import commands as protocol_commands
 from protocol.cliutil import OneLineArgumentParser, run
@@ -26,6 +27,7 @@ def build_parser() -> OneLineArgumentParser:
     firmware_commands.add_parsers(sub)
     emulator_commands.add_parsers(sub)
     hil_commands.add_parsers(sub)
+    design_commands.add_parsers(sub)
     return parser
 
 

@@ -41,8 +41,23 @@ def _run(args) -> int:
     out = Path(args.out) if args.out else Path("hil-out") / scenario.name
     options = RunOptions(out_dir=out, bus=args.bus, pacing=args.pacing, rate_hz=500.0, short=args.short,
                          controllers=_controllers(args.controllers), duration_s=args.duration_s,
-                         valve_watchdog_periods=args.valve_watchdog_periods, start_timeout_s=args.start_timeout_s)
+                         valve_watchdog_periods=args.valve_watchdog_periods, start_timeout_s=args.start_timeout_s,
+                         controller_config=_controller_config(args.controller_config))
+    if args.controller_config:
+        options.notes.append(f"controller config {args.controller_config}: "
+                             f"[{'], ['.join(options.controller_config)}] over the scenario's own")
     return _finish(args, run_scenario(scenario, options))
+
+
+def _controller_config(path: str | None) -> dict:
+    """The file's sections, after the controller's own validation (one line, exit 2, naming
+    the file and key); the controller process validates it again when it starts."""
+    if path is None:
+        return {}
+    from firmware_py.config import load_config
+    from protocol.tomlconfig import read_toml
+    load_config(path)
+    return read_toml(Path(path))
 
 
 def _faults(args) -> int:
@@ -117,6 +132,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--valve-watchdog-periods", type=number_in_range(float, 1.0, 10000.0), default=None,
                    help="realtime: the emulated valves' SYNC watchdog in periods (default 25 on a shared host; "
                         "3 is the valves' own, for an RT kernel)")
+    p.add_argument("--controller-config", metavar="FILE",
+                   help="controller config sections over the scenario's (e.g. from `hydrapod design schedule`)")
     p.add_argument("--start-timeout-s", type=number_in_range(float, 1.0, 3600.0), default=90.0,
                    help="how long the processes may take to come up (default 90; a VM without KVM needs more)")
     p.add_argument("--json", action="store_true", help="print metrics.json instead of the summary")

@@ -53,6 +53,9 @@ class RunOptions:
     duration_s: float | None = None  # realtime scenarios: how long
     valve_watchdog_periods: float | None = None   # realtime: the emulated valves' SYNC watchdog
     start_timeout_s: float = START_TIMEOUT_S       # a slow machine (a VM in software emulation) needs more
+    # a controller config file's sections (e.g. `hydrapod design schedule`), over the
+    # scenario's own overrides: validated by the caller before the run
+    controller_config: dict = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
 
 
@@ -131,7 +134,7 @@ class Run:
 
     def start_controller(self, controller: str, overrides: dict | None = None) -> None:
         merged = {section: dict(values) for section, values in self.scenario.controller_overrides.items()}
-        for section, values in (overrides or {}).items():
+        for section, values in [*self.options.controller_config.items(), *(overrides or {}).items()]:
             merged.setdefault(section, {}).update(values)
         if self.pacing == "lockstep":
             merged.setdefault("timing", {}).setdefault("heartbeat_timeout_ms", LOCKSTEP_HEARTBEAT_TIMEOUT_MS)

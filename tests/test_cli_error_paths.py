@@ -31,6 +31,9 @@ BAD_TEXT = {
     "--scenario": ("no-such-scenario", "no-such-scenario"),
     "scenario": ("no-such-scenario", "no-such-scenario"),
     "log": ("/nonexistent/run.blf", "/nonexistent/run.blf"),
+    "--plants": ("/nonexistent/metrics.json", "/nonexistent/metrics.json"),
+    "--nominal": ("120;6", "120;6"),
+    "--controller-config": ("/nonexistent/schedule.toml", "/nonexistent/schedule.toml"),
 }
 OUTPUT_DIRS = ("--out", "--plot")          # given a path below a regular file: cannot be created
 # what a command needs before the option under test is reached

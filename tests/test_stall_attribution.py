@@ -8,7 +8,12 @@ import pytest
 
 from firmware_py.supervisor import Fault, State
 from hil.logdata import LogData, Series
-from hil.metrics import STALL_WINDOW_CYCLES, after_machine_stall, fault_transitions, overrun_counts
+from hil.metrics import (
+    STALL_WINDOW_CYCLES,
+    after_machine_stall,
+    fault_transitions,
+    overrun_counts,
+)
 
 PERIOD_S = 0.002
 N = 1600

@@ -1,0 +1,112 @@
+"""`hydrapod design ...`: the thesis's design work as commands (chapters 7.3-7.5.1).
+
+    hydrapod design robustness [--plants SRC] [--nominal MM,KG] [--kp --ki] [--out DIR] [--json]
+    hydrapod design schedule [--plants SRC] [--out FILE] [--ki-scale] [--kp-fraction] [--ti-fraction] [--json]
+
+SRC: `table-a3` (the thesis's plants), `emulator` (the emulator's linearisation) or the
+metrics.json of a `hil run sha-identification`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from protocol.cliutil import number_in_range, output_file
+from protocol.errors import UserInputError
+
+THESIS_KP_V_MM, THESIS_KI_V_MM_S = 0.085, 0.46      # chapter 7.4.2
+
+
+def _plants(text: str) -> str:
+    """argparse `type=`: a known source, or a file that exists (read later, errors one line)."""
+    from .plants import SOURCES
+    if text in SOURCES or Path(text).is_file():
+        return text
+    raise argparse.ArgumentTypeError(f"{text!r} is neither {' nor '.join(SOURCES)} nor an existing file")
+
+
+def _nominal(text: str) -> tuple[float, float]:
+    """argparse `type=`: POSITION_MM,LOAD_KG."""
+    try:
+        position, load = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not POSITION_MM,LOAD_KG (e.g. 120,6)") from None
+    return position, load
+
+
+def _out_dir(text: str | None, default: str) -> Path:
+    out = Path(text) if text else Path(default)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise UserInputError(f"--out {out}: cannot create the directory ({error.strerror})") from None
+    return out
+
+
+def _robustness(args) -> int:
+    from .plants import plant_set
+    from .reports import find_plant, format_robustness, plot_uncertainty, robustness_doc
+    out = _out_dir(args.out, "hil-out/design-robustness")
+    plants = plant_set(args.plants)
+    if args.nominal is not None and find_plant(plants, *args.nominal) is None:
+        raise UserInputError(f"--nominal {args.nominal[0]:g},{args.nominal[1]:g}: no such plant in {args.plants} "
+                             f"(positions {sorted({round(p.position_m * 1e3, 3) for p in plants})} mm, "
+                             f"loads {sorted({p.load_kg for p in plants})} kg)")
+    doc, arrays = robustness_doc(plants, args.plants, args.kp, args.ki, args.nominal)
+    plot_uncertainty(arrays, out / "uncertainty.png")
+    doc["figures"] = ["uncertainty.png"]
+    (out / "robustness.json").write_text(json.dumps(doc, indent=1))
+    text = format_robustness(doc)
+    (out / "robustness.md").write_text(text + "\n![Multiplicative uncertainty](uncertainty.png)\n")
+    print(json.dumps(doc, indent=1) if args.json else text + f"\n(written to {out})")
+    # the verdict: the nominal loop internally stable and the small-gain test met
+    return 0 if doc["pi"]["internally_stable"] and doc["uncertainty"]["robustly_stable"] else 1
+
+
+def _schedule(args) -> int:
+    from .plants import plant_set
+    from .reports import format_schedule, schedule_doc
+    from .schedule import schedule_toml, write_schedule
+    out = Path(args.out)
+    plants = plant_set(args.plants)
+    doc, tunings = schedule_doc(plants, args.plants, args.kp_fraction, args.ti_fraction, args.ki_scale)
+    write_schedule(out, schedule_toml(tunings, args.plants, args.ki_scale))
+    doc["file"] = str(out)
+    print(json.dumps(doc, indent=1) if args.json else format_schedule(doc, str(out)))
+    return 0 if doc["every_loop_stable_with_detuned_ki"] else 1
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    design = sub.add_parser("design", help="design tools: robustness of the PI, gain schedule (chapter 7)")
+    design_sub = design.add_subparsers(dest="design_command", required=True, metavar="TOOL")
+    plants_help = "table-a3 (default), emulator, or a sha-identification metrics.json"
+
+    p = design_sub.add_parser("robustness", help="nominal plant, well-posedness, PI poles, W1, ||W1 T||inf, "
+                                                 "robust performance (chapters 7.3-7.4)")
+    p.add_argument("--plants", type=_plants, default="table-a3", help=plants_help)
+    p.add_argument("--nominal", type=_nominal, default=None, metavar="MM,KG",
+                   help="the nominal plant's set point (default: chosen by eq. 7.10)")
+    p.add_argument("--kp", type=number_in_range(float, 0.0, 100.0, low_open=True), default=THESIS_KP_V_MM,
+                   help="PI proportional gain, V/mm (default: the thesis's 0.085)")
+    p.add_argument("--ki", type=number_in_range(float, 0.0, 1000.0), default=THESIS_KI_V_MM_S,
+                   help="PI integral gain, V/(mm s) (default: the thesis's 0.46)")
+    p.add_argument("--out", metavar="DIR", help="robustness.json, robustness.md, uncertainty.png "
+                                                "(default: hil-out/design-robustness)")
+    p.add_argument("--json", action="store_true", help="print robustness.json")
+    p.set_defaults(handler=_robustness)
+
+    p = design_sub.add_parser("schedule", help="Ziegler-Nichols PI per plant, 0.2 Ki, the [adaptive] table "
+                                               "the controller loads (chapter 7.5.1.1)")
+    p.add_argument("--plants", type=_plants, default="table-a3", help=plants_help)
+    p.add_argument("--out", type=output_file, default="hil-out/schedule.toml", metavar="FILE",
+                   help="the controller config file to write (default: hil-out/schedule.toml)")
+    p.add_argument("--ki-scale", type=number_in_range(float, 0.0, 1.0, low_open=True), default=0.2,
+                   help="the Ki detuning (thesis: 0.2)")
+    p.add_argument("--kp-fraction", type=number_in_range(float, 0.0, 1.0, low_open=True), default=0.45,
+                   help="Kp = this x Ku (Ziegler-Nichols PI: 0.45)")
+    p.add_argument("--ti-fraction", type=number_in_range(float, 0.0, 10.0, low_open=True), default=1.0 / 1.2,
+                   help="Ti = this x Tu (Ziegler-Nichols PI: 1/1.2)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_schedule)

@@ -1,0 +1,215 @@
+"""`hydrapod design robustness` and `design schedule`: the analysis put together, beside the
+thesis's numbers (data/chapter7.toml), as a JSON document, a markdown report and figures.
+Thesis units (mm, V, N) appear here, at the edge; the computations are SI."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..plotting import colour_for_load, plt, save
+from . import robustness as rb
+from .plants import MM, Plant, chapter7, select_nominal
+from .schedule import KI_DETUNING, compare_with_table_7_2, tune, ziegler_nichols
+
+
+def _poly_mm(p: np.ndarray, scale: float) -> list[float]:
+    return [float(v) for v in np.asarray(p, float) * scale]
+
+
+def _complex(values) -> list[list[float]]:
+    return [[round(float(v.real), 4), round(float(v.imag), 4)] for v in values]
+
+
+def thesis_plant() -> Plant:
+    """Eq. 7.13 as printed: 1.722e6 / (s^3 + 90.31 s^2 + 7692 s) mm/V."""
+    nominal = chapter7()["nominal_plant"]
+    num, den = nominal["numerator"][0], nominal["denominator"]
+    return Plant(nominal["position_mm"] * MM, nominal["load_kg"], den[2], den[1], num / den[2] * MM)
+
+
+def find_plant(plants: list[Plant], position_mm: float, load_kg: float) -> int | None:
+    for i, p in enumerate(plants):
+        if abs(p.position_m / MM - position_mm) < 1e-6 and abs(p.load_kg - load_kg) < 1e-6:
+            return i
+    return None
+
+
+def robustness_doc(plants: list[Plant], source: str, kp_v_mm: float, ki_v_mm_s: float,
+                   nominal_at: tuple[float, float] | None = None) -> tuple[dict, dict]:
+    """(the JSON document, the arrays the figure needs)."""
+    thesis = chapter7()
+    kp, ki = kp_v_mm / MM, ki_v_mm_s / MM
+    best, scores = select_nominal(plants)
+    totals = scores.sum(axis=1)
+    order = np.argsort(-totals)
+    chosen = best if nominal_at is None else find_plant(plants, *nominal_at)
+    p0 = plants[chosen]
+    thesis_index = find_plant(plants, thesis["nominal_plant"]["position_mm"], thesis["nominal_plant"]["load_kg"])
+    nominal = {
+        "criterion": "eq. 7.10-7.11 on synthesised registers (10 mm step, K = 0.25 V/mm, 0.3 s at 500 Hz)",
+        "selected_by": "eq. 7.10" if nominal_at is None else "--nominal",
+        "plant": p0.label, "b0": p0.b0, "b1": p0.b1, "k01_mm_s_v": p0.k01 / MM,
+        "numerator_mm": _poly_mm(p0.num(), 1.0 / MM), "denominator": _poly_mm(p0.den(), 1.0),
+        "sum_F": float(totals[chosen]), "best_by_eq_7_10": [(plants[i].label, round(float(totals[i]), 4))
+                                                             for i in order[:3]],
+        "thesis": "6 kg, 120 mm: 1.722e6 / (s^3 + 90.31 s^2 + 7692 s) (eq. 7.12-7.13)",
+        "thesis_plant_rank": None if thesis_index is None else int(np.flatnonzero(order == thesis_index)[0]) + 1,
+        "thesis_plant_sum_F": None if thesis_index is None else float(totals[thesis_index]),
+        "plants": len(plants),
+    }
+    w0 = (np.array(thesis["weights"]["w0_numerator"]) * MM, np.array(thesis["weights"]["w0_denominator"]))
+    table = rb.well_posedness(p0, w0[0])
+    posed = {kind: {"maps": {m.name: f"{m.num_degree}/{m.den_degree}" for m in maps},
+                    "well_posed": all(m.proper for m in maps)} for kind, maps in table.items()}
+
+    poles = rb.closed_loop_poles(p0, kp, ki)
+    thesis_poles = np.array([complex(*p) for p in thesis["pi"]["closed_loop_poles"]])
+    implied = np.real(np.poly(thesis_poles))                 # s^4 + b1 s^3 + b0 s^2 + Kp kb s + Ki kb
+    kb_mm = thesis["nominal_plant"]["numerator"][0]
+    maps = {name: rb.hinf(n, d)[0] for name, (n, d) in rb.internal_stability_maps(p0, kp, ki).items()}
+    worst = max(float(rb.closed_loop_poles(p, kp, ki).real.max()) for p in plants)
+    pi = {"kp_v_mm": kp_v_mm, "ki_v_mm_s": ki_v_mm_s, "poles": _complex(poles),
+          "internally_stable": rb.internally_stable(p0, kp, ki),
+          "map_hinf": {k: v for k, v in maps.items()},           # SI: V/m, m/V or 1
+          "poles_on_thesis_plant": _complex(rb.closed_loop_poles(thesis_plant(), kp, ki)),
+          "thesis_poles": _complex(thesis_poles),
+          "thesis_poles_imply": {"b1": float(implied[1]), "b0": float(implied[2]),
+                                 "kp_v_mm": float(implied[3] / kb_mm), "ki_v_mm_s": float(implied[4] / kb_mm)},
+          "every_plant_stabilised": worst < 0, "slowest_pole_real_over_set": worst}
+
+    w = rb.grid()
+    errors = rb.multiplicative_error(plants, p0, w)
+    bound = errors.max(axis=0)
+    w1 = rb.fit_weight(w, bound)
+    printed_w1 = (np.array(thesis["weights"]["w1_numerator"]), np.array(thesis["weights"]["w1_denominator"]))
+    wdm = (np.array(thesis["weights"]["wdm_numerator"]), np.array(thesis["weights"]["wdm_denominator"]))
+    w1t, w1t_at = rb.small_gain(p0, kp, ki, w1)
+    printed, printed_at = rb.small_gain(p0, kp, ki, printed_w1)
+    printed_peak, printed_peak_at = rb.hinf(*printed_w1)
+    uncertainty = {
+        "range_rad_s": list(rb.W_RANGE_RAD_S), "max_error": float(bound.max()),
+        "max_error_at_rad_s": float(w[np.argmax(bound)]),
+        "w1_numerator": [float(v) for v in w1[0]], "w1_denominator": [float(v) for v in w1[1]],
+        "w1_zeros": _complex(np.roots(w1[0])), "w1_poles": _complex(np.roots(w1[1])),
+        "w1_over_bound_min": float(np.min(np.abs(rb.response(*w1, w)) / bound)),
+        "w1t_hinf": w1t, "w1t_peak_rad_s": w1t_at, "robustly_stable": w1t <= 1.0,
+        "thesis_w1t_hinf": thesis["weights"]["w1t_hinf"],
+        "printed_w1": {"w1t_hinf": printed, "at_rad_s": printed_at, "w1_peak": printed_peak,
+                       "w1_peak_at_rad_s": printed_peak_at,
+                       "note": "eq. 7.15 as printed peaks far above Fig. 7.4's curve (<= ~3): its "
+                               "coefficients do not reproduce the figure nor eq. 7.22"},
+    }
+    nominal_disturbance, nd_at = rb.disturbance_response(p0, kp, ki, w0)
+    performance = {"s_w0_hinf_mm_n": nominal_disturbance / MM, "at_rad_s": nd_at,
+                   "worst_case_bound_mm_n": rb.robust_performance_bound(p0, kp, ki, w1, w0, wdm) / MM,
+                   "thesis_tyd_hinf": thesis["weights"]["tyd_hinf"],
+                   "weights": "W0 and Wdm as printed (eq. 7.23-7.24, mm/N); W1 the fitted one"}
+    doc = {"plants": source, "nominal": nominal, "well_posedness": posed, "pi": pi,
+           "uncertainty": uncertainty, "performance": performance}
+    arrays = {"w": w, "errors": errors, "bound": bound, "w1": w1, "printed_w1": printed_w1,
+              "loads": [p.load_kg for p in plants]}
+    return doc, arrays
+
+
+def format_robustness(doc: dict) -> str:
+    n, pi, u, perf = doc["nominal"], doc["pi"], doc["uncertainty"], doc["performance"]
+    lines = [f"# Robustness of the position PI (chapters 7.3-7.4), plants: {doc['plants']}", "",
+             "## Nominal plant (eq. 7.10-7.13)", "",
+             f"- {n['plant']} ({n['selected_by']}; {n['plants']} plants): b0 {n['b0']:.0f} 1/s^2, b1 {n['b1']:.2f} 1/s, "
+             f"k01 {n['k01_mm_s_v']:.1f} (mm/s)/V; P0 = {n['numerator_mm'][0]:.4g} / (s^3 + {n['denominator'][1]:.2f} s^2 "
+             f"+ {n['denominator'][2]:.0f} s) mm/V",
+             f"- best by eq. 7.10: {n['best_by_eq_7_10']}; {n['criterion']}",
+             f"- thesis: {n['thesis']}; in this set it ranks {n['thesis_plant_rank']} "
+             f"(sum F {n['thesis_plant_sum_F']})", "",
+             "## Well-posedness (Table 7.1 / B.1): degree of numerator / denominator", "",
+             "| controller | K/(1+KG1) | KG1/(1+KG1) | KG2/(1+KG1) | well-posed |", "|---|---|---|---|---|"]
+    for kind, row in doc["well_posedness"].items():
+        m = row["maps"]
+        lines.append(f"| {kind} | {m['K/(1+KG1)']} | {m['KG1/(1+KG1)']} | {m['KG2/(1+KG1)']} | "
+                     f"{'yes' if row['well_posed'] else '**no** (improper)'} |")
+    imp = pi["thesis_poles_imply"]
+    lines += ["", f"## PI Kp = {pi['kp_v_mm']:g} V/mm, Ki = {pi['ki_v_mm_s']:g} V/(mm s) (eq. 7.16-7.21)", "",
+              f"- closed-loop poles on the nominal plant: {pi['poles']}; internally stable: {pi['internally_stable']}",
+              f"- on the thesis's P0 (eq. 7.13): {pi['poles_on_thesis_plant']}",
+              f"- thesis (eq. 7.21): {pi['thesis_poles']}: their characteristic polynomial has b1 {imp['b1']:.2f}, "
+              f"b0 {imp['b0']:.0f}, Kp {imp['kp_v_mm']:.4f}, Ki {imp['ki_v_mm_s']:.4f}: the thesis's poles are "
+              "those of a smaller Ki than the one it states",
+              "- ||map||inf of eq. 7.17-7.20 (SI): " + ", ".join(f"{k} {v:.4g}" for k, v in pi["map_hinf"].items()),
+              f"- every plant of the set stabilised by this PI: {pi['every_plant_stabilised']} "
+              f"(slowest pole over the set: Re {pi['slowest_pole_real_over_set']:.3f} 1/s)", "",
+              "## Multiplicative uncertainty and robust stability (eq. 7.14-7.15, 7.22)", "",
+              f"- largest |P/P0 - 1| over w in {u['range_rad_s']} rad/s: {u['max_error']:.3f} at "
+              f"{u['max_error_at_rad_s']:.1f} rad/s",
+              f"- fitted W1 (stable, minimum phase, 3rd order): zeros {u['w1_zeros']}, poles {u['w1_poles']}, "
+              f"high-frequency gain {u['w1_numerator'][0]:.3f}; |W1| / bound >= {u['w1_over_bound_min']:.3f}",
+              f"- **||W1 T||inf = {u['w1t_hinf']:.4f}** at {u['w1t_peak_rad_s']:.1f} rad/s: robustly stable "
+              f"{u['robustly_stable']} (thesis: {u['thesis_w1t_hinf']})",
+              f"- with eq. 7.15 as printed: ||W1 T||inf = {u['printed_w1']['w1t_hinf']:.2f}; that W1 peaks at "
+              f"{u['printed_w1']['w1_peak']:.1f} ({u['printed_w1']['w1_peak_at_rad_s']:.1f} rad/s): "
+              + u["printed_w1"]["note"], "",
+              "## Robust performance (eq. 7.23-7.27)", "",
+              f"- nominal ||S W0||inf = {perf['s_w0_hinf_mm_n']:.4g} mm/N at {perf['at_rad_s']:.1f} rad/s",
+              f"- worst case over both uncertainty sets (pointwise bound): {perf['worst_case_bound_mm_n']:.4g} mm/N "
+              f"(thesis ||Tyd||inf = {perf['thesis_tyd_hinf']:.4g}); {perf['weights']}"]
+    return "\n".join(lines) + "\n"
+
+
+def plot_uncertainty(arrays: dict, path: Path) -> None:
+    """Like Fig. 7.4: every plant's |P/P0 - 1|, their maximum, the fitted W1 (and the printed one)."""
+    w = arrays["w"]
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for row, load in zip(arrays["errors"], arrays["loads"]):
+        ax.semilogx(w, row, color=colour_for_load(load), lw=0.6, alpha=0.6)
+    ax.semilogx(w, arrays["bound"], "r--", lw=1.2, label="maximum error")
+    ax.semilogx(w, np.abs(rb.response(*arrays["w1"], w)), "k", lw=1.5, label="fitted W1")
+    printed = np.abs(rb.response(*arrays["printed_w1"], w))
+    ax.semilogx(w, np.minimum(printed, 5.0), ":", color="gray", label="eq. 7.15 as printed (clipped at 5)")
+    ax.set_xlabel("w [rad/s]")
+    ax.set_ylabel("|P/P0 - 1|, |W1|")
+    ax.set_ylim(0, 5)
+    ax.legend(fontsize=8)
+    ax.set_title("Multiplicative uncertainty (thesis Fig. 7.4); colour: load 0/3/6 kg")
+    save(fig, path)
+
+
+def schedule_doc(plants: list[Plant], source: str, kp_fraction: float, ti_fraction: float,
+                 ki_scale: float = KI_DETUNING) -> tuple[dict, list]:
+    tunings = tune(plants, kp_fraction, ti_fraction)
+    rows = compare_with_table_7_2(tunings, chapter7()["table_7_2"])
+
+    def span(key):
+        values = [r[key] for r in rows]
+        return [round(min(values), 3), round(max(values), 3)] if values else None
+
+    zn = ziegler_nichols(thesis_plant(), kp_fraction, ti_fraction)
+    stable = all(rb.internally_stable(t.plant, t.kp_v_m, ki_scale * t.ki_v_m_s) for t in tunings)
+    doc = {"plants": source, "rule": {"kp_over_ku": kp_fraction, "ti_over_tu": ti_fraction, "ki_scale": ki_scale},
+           "points": len(tunings), "compared_with_table_7_2": rows,
+           "kp_ratio": span("kp_ratio"), "ki_ratio": span("ki_ratio"),
+           "thesis_kp_over_ku": span("thesis_kp_over_ku"), "thesis_ki_tu_over_kp": span("thesis_ki_tu_over_kp"),
+           "every_loop_stable_with_detuned_ki": stable,
+           # chapter 7.4.2's "Ziegler-Nichols on the nominal plant" by the same rule
+           "nominal_plant": {"kp_v_mm": zn.kp_v_m * MM, "ki_v_mm_s": zn.ki_v_m_s * MM,
+                             "detuned_ki_v_mm_s": ki_scale * zn.ki_v_m_s * MM,
+                             "thesis_kp_v_mm": chapter7()["pi"]["kp_v_mm"],
+                             "thesis_ki_v_mm_s": chapter7()["pi"]["ki_v_mm_s"]}}
+    return doc, tunings
+
+
+def format_schedule(doc: dict, path: str) -> str:
+    lines = [f"schedule: {doc['points']} plants of {doc['plants']} -> {path}",
+             f"  rule: Kp = {doc['rule']['kp_over_ku']:g} Ku, Ti = {doc['rule']['ti_over_tu']:.4g} Tu; "
+             f"ki_scale {doc['rule']['ki_scale']:g}; every loop stable with the detuned Ki: "
+             f"{doc['every_loop_stable_with_detuned_ki']}"]
+    if doc["compared_with_table_7_2"]:
+        lines += [f"  against Table 7.2 ({len(doc['compared_with_table_7_2'])} points): Kp x{doc['kp_ratio'][0]}-"
+                  f"{doc['kp_ratio'][1]}, Ki x{doc['ki_ratio'][0]}-{doc['ki_ratio'][1]}",
+                  f"  Table 7.2 itself is Kp = {doc['thesis_kp_over_ku'][0]}-{doc['thesis_kp_over_ku'][1]} Ku and "
+                  f"Ki = ({doc['thesis_ki_tu_over_kp'][0]}-{doc['thesis_ki_tu_over_kp'][1]}) Kp / Tu on this set's "
+                  f"plants (the classical rule: 0.45 Ku, 1.2 Kp / Tu)"]
+    n = doc["nominal_plant"]
+    lines.append(f"  nominal plant (eq. 7.13): Kp {n['kp_v_mm']:.4f} V/mm, Ki {n['ki_v_mm_s']:.3f} (x{doc['rule']['ki_scale']:g}: "
+                 f"{n['detuned_ki_v_mm_s']:.3f}) V/(mm s); thesis Kp {n['thesis_kp_v_mm']}, Ki {n['thesis_ki_v_mm_s']}")
+    return "\n".join(lines)
