@@ -32,7 +32,9 @@ RANGES: dict[str, dict[str, object]] = {
         "moving_mass_kg": (0.0, 50.0), "valve_full_scale_v": (0.01, 24.0), "encoder_resolution_mm": (1e-4, 10.0),
     },
     "testbench": {"slide_mass_kg": (0.0, 100.0), "home_mm": (0.0, 2000.0), "park_mm": (0.0, 2000.0),
-                  "plausibility_spool_pct": (1.0, 100.0), "plausibility_cycles": (1, 100000)},
+                  "plausibility_spool_pct": (1.0, 100.0), "plausibility_cycles": (1, 100000),
+                  "guide_coulomb_n": (0.0, 1000.0), "guide_viscous_ns_mm": (0.0, 100.0)},
+    "identification": {"force_gain_v_n": (0.0, 10.0), "stroke_guard_mm": (0.0, 500.0)},
     "hexapod": {"park_stroke_mm": (0.0, 2000.0), "kp_factor": (0.01, 10.0), "ki_factor": (0.0, 10.0)},
     "friction": {
         "alpha0_pos_n": (-1000.0, 1000.0), "alpha1_pos_n": (-1000.0, 1000.0), "vs_pos_mm_s": (0.01, 1e4),
@@ -108,6 +110,10 @@ class ControllerConfig:
     testbench_park_m: float
     testbench_plausibility_spool: float   # the test bench's own motion window (fraction of full input) ...
     testbench_plausibility_cycles: int    # ... and length: its slide carries no static load
+    guide_coulomb_n: float            # the test bench guide's friction (Table D.1, eq. D.3's gross
+    guide_viscous_ns_m: float         # motion): eq. 6.5's Ffg in the friction identification
+    test_force_gain_v_n: float        # HOST_TEST FORCE_SINE: P gain of the piston-force loop
+    test_stroke_guard_m: float        # HOST_TEST VALVE_STEP: ends this close to an end stop
     hexapod_park_stroke_m: float
     hexapod_kp_factor: float          # every controller's Kp on the hexapod (see controller.toml)
     hexapod_ki_factor: float          # every controller's Ki on the hexapod
@@ -190,6 +196,7 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
     from .estimation import pack_friction
 
     t, a, tb, f, k, m = (raw[s] for s in ("timing", "actuator", "testbench", "friction", "kalman", "mass_estimator"))
+    ident = raw["identification"]
     lp, pi, ad, lim, sv = (raw[s] for s in ("load_pressure", "pi", "adaptive", "limits", "supervisor"))
     if a["rod_radius_mm"] >= a["bore_radius_mm"]:
         raise ConfigError(f"config {source}: [actuator].rod_radius_mm = {a['rod_radius_mm']} must be smaller "
@@ -218,6 +225,8 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         slide_mass_kg=tb["slide_mass_kg"], testbench_home_m=tb["home_mm"] * MM, testbench_park_m=tb["park_mm"] * MM,
         testbench_plausibility_spool=tb["plausibility_spool_pct"] / 100.0,
         testbench_plausibility_cycles=tb["plausibility_cycles"],
+        guide_coulomb_n=tb["guide_coulomb_n"], guide_viscous_ns_m=tb["guide_viscous_ns_mm"] / MM,
+        test_force_gain_v_n=ident["force_gain_v_n"], test_stroke_guard_m=ident["stroke_guard_mm"] * MM,
         hexapod_park_stroke_m=raw["hexapod"]["park_stroke_mm"] * MM, hexapod_kp_factor=raw["hexapod"]["kp_factor"],
         hexapod_ki_factor=raw["hexapod"]["ki_factor"],
         friction=friction, jerk_psd=k["jerk_psd_mm2_s5"] * MM ** 2, kalman_adaptive_gain=k["adaptive_gain"],

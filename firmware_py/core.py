@@ -17,13 +17,28 @@ import math
 
 import numpy as np
 
-from protocol.values import FLAG_LAST, FLAG_START, FLAG_STEP
+from protocol.values import FLAG_LAST, FLAG_START, FLAG_STEP, TEST_ABORT
 
 from .config import ControllerConfig
-from .control import (IN_ACTIVE, IN_AR, IN_FORCE, IN_FRESH, IN_G_AX, IN_TAU, IN_VR, IN_Y, IN_YR, ST_ERROR,
-                      ST_INTEGRAL, ST_MASS, ST_U)
-from .control import MODEL_BASED, JointController
+from .control import (
+    IN_ACTIVE,
+    IN_AR,
+    IN_FORCE,
+    IN_FRESH,
+    IN_G_AX,
+    IN_TAU,
+    IN_VR,
+    IN_Y,
+    IN_YR,
+    MODEL_BASED,
+    ST_ERROR,
+    ST_INTEGRAL,
+    ST_MASS,
+    ST_U,
+    JointController,
+)
 from .geometry import GRAVITY_M_S2, Geometry, default_geometry
+from .identification import TEST_MODES, IdentificationSignal, piston_force_n
 from .plausibility import AttitudeCrossCheck, MotionPlausibility
 from .supervisor import ACTIVE, Ack, Action, Command, Fault, State, Supervisor
 from .trajectory import JointTrajectory, hold_at, sls_coefficients, through_points
@@ -78,6 +93,12 @@ class ControllerCore:
         self.meas_bad = np.zeros(n, dtype=bool)          # an E2E-rejected frame of the leg this cycle
         self.meas_sensor_fault = np.zeros(n, dtype=bool)
         self.valve_state = np.zeros(n, dtype=np.int64)
+        self.meas_pa = np.zeros(n)             # chamber pressures [Pa], every 16th SYNC (LEG_PRESSURE)
+        self.meas_pb = np.zeros(n)
+        self.pressure_seen = np.zeros(n, dtype=bool)
+        # identification tests (HOST_TEST, test bench only: chapter 6.4)
+        self.test = None if self.hexapod else IdentificationSignal(cfg.test_force_gain_v_n, cfg.test_stroke_guard_m,
+                                                          cfg.stroke_m, cfg.saturation_v, period_s)
         # outputs
         self.cw_d = np.ones(n)
         self.cw_h = np.ones(n)
@@ -191,9 +212,40 @@ class ControllerCore:
             self._do_action()
         return result
 
+    def piston_force(self) -> float:
+        """Leg 1's F_p from its latest chamber pressures (eq. 6.5)."""
+        return piston_force_n(self.meas_pa[0], self.meas_pb[0], self.cfg.piston_area_m2, self.cfg.area_ratio)
+
+    def test_command(self, mode: int, valve_v: float, force_n: float, duration_s: float) -> Ack:
+        """HOST_TEST (test bench): start an identification test from READY, or ABORT the one
+        running (the leg then holds where it is)."""
+        test = self.test
+        if test is None or mode not in TEST_MODES or not all(map(math.isfinite, (valve_v, force_n, duration_s))):
+            return Ack.BAD_ARGUMENT
+        if mode == TEST_ABORT:
+            if not test.running:
+                return Ack.BAD_STATE
+            self._end_test()
+            return Ack.ACCEPTED
+        if duration_s <= 0.0 or abs(valve_v) > self.cfg.saturation_v:
+            return Ack.BAD_ARGUMENT
+        if (self.sup.state is not State.READY or self.trajectory is not None or self.reinitialise
+                or not self.pressure_seen[0]):
+            return Ack.BAD_STATE
+        test.start(mode, valve_v, force_n, duration_s, self.cycles, self.piston_force(), float(self.joint.st[0, ST_U]))
+        self.sup.start_running()
+        return Ack.ACCEPTED
+
+    def _end_test(self) -> None:
+        self.test.stop()
+        self.hold_position[:] = self.joint.kalman_x[:, 0]
+        self.sup.motion_done()
+
     def _do_action(self) -> None:
         action, self.sup.action = self.sup.action, Action.NONE
         cfg = self.cfg
+        if self.test is not None and self.test.running and action is not Action.NONE:
+            self.test.stop()                 # STOP (or anything else that moves the leg) ends a test
         if action is Action.ENABLE:
             self._start_hold(self._inside_guard(self.meas_y))
             self.joint.st[:, ST_INTEGRAL] = 0.0
@@ -434,7 +486,15 @@ class ControllerCore:
             inputs[:, IN_G_AX] = GRAVITY_M_S2
         # reference
         active = sup.state in ACTIVE
-        if active and self.trajectory is not None:
+        testing = self.test is not None and self.test.running
+        if testing and not active:
+            self.test.stop()                         # a fault or an e-stop ends it: valves hold
+            testing = False
+        if testing:                                  # the test drives the valve: the loop follows the leg
+            self.yr[:] = joint.kalman_x[:, 0]
+            self.vr[:] = 0.0
+            self.ar[:] = 0.0
+        elif active and self.trajectory is not None:
             # integer cycles, not an accumulated float: a log's analysis rebuilds the same reference
             t = (self.cycles - self.trajectory_start_cycle) * self.period_s
             self.trajectory.evaluate_into(t, self.yr, self.vr, self.ar)
@@ -472,6 +532,11 @@ class ControllerCore:
         if joint.mode != sup.controller:
             joint.set_mode(sup.controller)
         joint.update()
+        if testing:
+            u, done = self.test.output(self.cycles, self.meas_y[0], self.piston_force())
+            joint.st[0, ST_U] = u
+            if done:
+                self._end_test()
         self._limits(active)
         self._write_outputs()
 

@@ -39,7 +39,14 @@ from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.outbox import Outbox
-from protocol.values import KIND_HOST_CMD, KIND_WAYPOINT, NMT_BOOTUP, NMT_OPERATIONAL, NMT_START
+from protocol.values import (
+    KIND_HOST_CMD,
+    KIND_TEST,
+    KIND_WAYPOINT,
+    NMT_BOOTUP,
+    NMT_OPERATIONAL,
+    NMT_START,
+)
 
 from .core import RESET_GRACE_CYCLES, ControllerCore
 from .supervisor import Ack, Command, Fault, State
@@ -82,7 +89,7 @@ class ControllerLoop:
         rx = [f"LEG_STATE_{i}" for i in self.legs] + [f"VALVE_STATUS_{i}" for i in self.legs]
         rx += [f"LEG_PRESSURE_{i}" for i in self.legs] + [f"EMCY_{i}" for i in self.nodes]
         rx += [f"HEARTBEAT_{i}" for i in self.nodes] + ["HOST_CMD", "HOST_WAYPOINT_POS", "HOST_WAYPOINT_ROT",
-                                                         "HOST_WAYPOINT_TIME"]
+                                                         "HOST_WAYPOINT_TIME", "HOST_TEST"]
         if core.hexapod:
             rx += ["IMU_ATTITUDE", "IMU_RATE"]
         self.decoder = FrameDecoder(rx)
@@ -97,7 +104,12 @@ class ControllerLoop:
         self._sender_of_node = {i: CODECS[f"HEARTBEAT_{i}"].schedule.sender for i in self.nodes}
         self._emcy_of_id = {CODECS[f"EMCY_{i}"].frame_id: i for i in self.nodes}
         self._ids = {name: CODECS[name].frame_id for name in ("HOST_CMD", "HOST_WAYPOINT_POS",
-                                                                "HOST_WAYPOINT_ROT", "HOST_WAYPOINT_TIME")}
+                                                                "HOST_WAYPOINT_ROT", "HOST_WAYPOINT_TIME", "HOST_TEST")}
+        index = CODECS["LEG_PRESSURE_1"].index
+        self._i_pa, self._i_pb = index["PA"], index["PB"]
+        self._i_pfault = (index["SENSOR_FAULT_A"], index["SENSOR_FAULT_B"])
+        self._pressure_of_id = {CODECS[f"LEG_PRESSURE_{i}"].frame_id: i - 1 for i in self.legs}
+        self._pressure_values = [self.decoder.values[f"LEG_PRESSURE_{i}"] for i in self.legs]
         self._imu_attitude_id = CODECS["IMU_ATTITUDE"].frame_id if core.hexapod else -1
         if core.hexapod:                             # views made once: the cycle copies through them
             attitude, index = self.decoder.values["IMU_ATTITUDE"], CODECS["IMU_ATTITUDE"].index
@@ -146,6 +158,16 @@ class ControllerLoop:
             return
         if frame_id in self._leg_of_id:
             return                                   # read() copies it after the window
+        leg = self._pressure_of_id.get(frame_id)
+        if leg is not None:                          # SI (Pa) from the codec
+            values = self._pressure_values[leg]
+            if values[self._i_pfault[0]] or values[self._i_pfault[1]]:
+                self.core.pressure_seen[leg] = False         # a transducer fault: no piston force
+                return
+            self.core.meas_pa[leg] = values[self._i_pa]
+            self.core.meas_pb[leg] = values[self._i_pb]
+            self.core.pressure_seen[leg] = True
+            return
         if frame_id == self._imu_attitude_id:
             if self._imu_status[0] == 0:             # 0 = valid
                 self.core.meas_attitude[:] = self._imu_rpy
@@ -182,6 +204,9 @@ class ControllerLoop:
         elif frame_id == self._ids["HOST_WAYPOINT_TIME"]:
             _, _, tag, seq, segment, accel, flags = self.decoder.values["HOST_WAYPOINT_TIME"]
             self.host_work.append((self._commit, (int(tag), int(seq), float(segment), float(accel), int(flags))))
+        elif frame_id == self._ids["HOST_TEST"]:
+            _, _, mode, seq, valve, force, duration = self.decoder.values["HOST_TEST"]
+            self._stage(self._test, (int(mode), int(seq), float(valve), float(force), float(duration)))
 
     # -- host work (outside the sensor window) ----------------------------------------------
     def _host_command(self, command: int, argument: int, seq: int) -> None:
@@ -201,6 +226,9 @@ class ControllerLoop:
             self.host_work.append((handler, values))
         else:
             handler(*values)
+
+    def _test(self, mode: int, seq: int, valve: float, force: float, duration: float) -> None:
+        self.acks.append((KIND_TEST, seq, int(self.core.test_command(mode, valve, force, duration))))
 
     def _commit(self, tag: int, seq: int, segment: float, accel: float, flags: int) -> None:
         self.acks.append((KIND_WAYPOINT, seq, int(self.core.waypoint_time(tag, seq, segment, accel, flags))))

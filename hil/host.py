@@ -8,6 +8,7 @@ frames this host sends are written too (the multicast bus does not echo them bac
 from __future__ import annotations
 
 import time
+from collections import deque
 from collections.abc import Callable
 
 import can
@@ -16,10 +17,13 @@ from firmware_py.supervisor import Ack, Command, State
 from protocol.codec import CODECS, EncodeStatus, FrameDecoder
 from protocol.e2e import RxStatus
 from protocol.outbox import Outbox
-from protocol.values import EMU_SET_LOAD, KIND_HOST_CMD, KIND_WAYPOINT
-
+from protocol.values import EMU_SET_LOAD, KIND_HOST_CMD, KIND_TEST, KIND_WAYPOINT
 
 CONTROLLER_MESSAGES = ["SYNC", "CTRL_STATUS", "CTRL_ACK"]    # what the host reads: all the controller's
+# ... and leg 1's encoder: the identification tests choose their next input from the last
+# one's velocity, as a lab's tool reading the sensor would (scenarios/friction.py)
+HOST_MESSAGES = CONTROLLER_MESSAGES + ["LEG_STATE_1"]
+TRACK_CYCLES = 2000                                             # leg 1's last positions kept
 HEARTBEAT_IDS = (0x701, 0x70F)                                  # the nodes' (the controller's is 0x710)
 
 
@@ -34,8 +38,9 @@ class Host:
         self.writer = can.Logger(log_path)
         self.watch = watch                      # raises when a child died (called every ~0.2 s)
         self.stall_timeout_s = stall_timeout_s
-        self.decoder = FrameDecoder(CONTROLLER_MESSAGES)
+        self.decoder = FrameDecoder(HOST_MESSAGES)
         self.syncs = 0
+        self.leg1_track: deque[tuple[int, float]] = deque(maxlen=TRACK_CYCLES)   # (SYNCs so far, stroke m)
         self.state: State | None = None
         self.fault_code = 0
         self.controller = -1
@@ -48,11 +53,14 @@ class Host:
         self._rot = Outbox("HOST_WAYPOINT_ROT")
         self._time = Outbox("HOST_WAYPOINT_TIME")
         self._emu = Outbox("EMU_CTRL")
+        self._test = Outbox("HOST_TEST")
         self._cmd_seq = 0
+        self._test_seq = 0
         self.waypoint_seq = 0
         self._last_watch = 0.0
         self._status = CODECS["CTRL_STATUS"].index
         self._ack = CODECS["CTRL_ACK"].index
+        self._leg1_id, self._leg1_position = CODECS["LEG_STATE_1"].frame_id, CODECS["LEG_STATE_1"].index["POSITION"]
 
     def new_controller(self) -> None:
         """A new controller process: its E2E counters start afresh, so the checks of the old
@@ -87,6 +95,8 @@ class Host:
             elif msg.arbitration_id == CODECS["CTRL_ACK"].frame_id:
                 v = self.decoder.values["CTRL_ACK"]
                 self.acks[(int(v[self._ack["KIND"]]), int(v[self._ack["SEQ"]]))] = int(v[self._ack["RESULT"]])
+            elif msg.arbitration_id == self._leg1_id:
+                self.leg1_track.append((self.syncs, float(self.decoder.values["LEG_STATE_1"][self._leg1_position])))
         return msg
 
     def wait_cycles(self, cycles: int) -> None:
@@ -147,6 +157,20 @@ class Host:
         result = self._await_ack(KIND_HOST_CMD, self._cmd_seq, f"HOST_CMD {command.name}")
         if expect_ok and result is not Ack.ACCEPTED:
             raise HostError(f"HOST_CMD {command.name} {argument} refused: {result.name}")
+        return result
+
+    def test(self, mode: int, valve_v: float = 0.0, force_n: float = 0.0, duration_s: float = 0.0,
+             expect_ok: bool = True) -> Ack:
+        """HOST_TEST (test bench identification, chapter 6.4) and its CTRL_ACK."""
+        self._test_seq = (self._test_seq + 1) % 256
+        v, i = self._test.values, self._test.index
+        v[i["MODE"]], v[i["SEQ"]], v[i["VALVE"]] = mode, self._test_seq, valve_v
+        v[i["FORCE"]], v[i["DURATION"]] = force_n, duration_s
+        self.send(self._test)
+        result = self._await_ack(KIND_TEST, self._test_seq, f"HOST_TEST mode {mode}")
+        if expect_ok and result is not Ack.ACCEPTED:
+            raise HostError(f"HOST_TEST mode {mode} ({valve_v:g} V, {force_n:g} N, {duration_s:g} s) refused: "
+                            f"{result.name}")
         return result
 
     def waypoint(self, position_m, rpy_rad=(0.0, 0.0, 0.0), segment_time_s: float = 1.0,

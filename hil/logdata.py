@@ -91,7 +91,7 @@ class LogData:
         return [e for e in self.events if e.name in names]
 
 
-EVENT_MESSAGES = ("NMT", "HOST_CMD", "HOST_WAYPOINT_POS", "HOST_WAYPOINT_ROT", "HOST_WAYPOINT_TIME",
+EVENT_MESSAGES = ("NMT", "HOST_CMD", "HOST_TEST", "HOST_WAYPOINT_POS", "HOST_WAYPOINT_ROT", "HOST_WAYPOINT_TIME",
                   "CTRL_ACK", "EMU_CTRL") + tuple(n for n in CODECS if n.startswith("EMCY_"))
 
 

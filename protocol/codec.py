@@ -45,6 +45,7 @@ UNIT_TO_SI = {
     "rad/s": 1.0,
     "s": 1.0,
     "kg": 1.0,
+    "V": 1.0,
 }
 
 E2E_SIGNALS = ("E2E_CRC", "E2E_COUNTER")

@@ -145,7 +145,8 @@ def test_slow_frames_spread_one_per_cycle_and_fit_the_sync_counter():
     assert not crowded, f"slow frames sharing a cycle: {crowded}"
 
 
-@pytest.mark.parametrize("name", ["HOST_CMD", "HOST_WAYPOINT_POS", "HOST_WAYPOINT_ROT", "HOST_WAYPOINT_TIME"])
+@pytest.mark.parametrize("name", ["HOST_CMD", "HOST_WAYPOINT_POS", "HOST_WAYPOINT_ROT", "HOST_WAYPOINT_TIME",
+                                  "HOST_TEST"])
 def test_host_frames_are_protected_and_go_to_the_controller(name):
     m = DB.get_message_by_name(name)
     assert CODECS[name].e2e and m.senders == ["HOST"]
