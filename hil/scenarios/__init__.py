@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ..scenario import Scenario
+from .friction import FrictionPresliding, FrictionSteady
 from .pm import PmCircle, PmDiagonal
 from .realtime import RealtimeHexapod, RealtimeTestbench
 from .sha_identification import ShaIdentification
@@ -12,4 +13,5 @@ from .soak import Soak
 
 SCENARIOS: dict[str, Scenario] = {s.name: s for s in (ShaStep(), ShaTracking(), ShaPerturbation(), ShaIdentification(), PmDiagonal(),
                                                       PmCircle(),
-                                                      RealtimeTestbench(), RealtimeHexapod(), Soak())}
+                                                      RealtimeTestbench(), RealtimeHexapod(), Soak(),
+                                                      FrictionSteady(), FrictionPresliding())}
