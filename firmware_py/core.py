@@ -97,8 +97,8 @@ class ControllerCore:
         self.meas_pb = np.zeros(n)
         self.pressure_seen = np.zeros(n, dtype=bool)
         # identification tests (HOST_TEST, test bench only: chapter 6.4)
-        self.test = None if self.hexapod else IdentificationSignal(cfg.test_force_gain_v_n, cfg.test_stroke_guard_m,
-                                                          cfg.stroke_m, cfg.saturation_v, period_s)
+        self.test = None if self.hexapod else IdentificationSignal(
+            cfg.test_force_gain_v_n, cfg.test_stroke_guard_m, cfg.stroke_m, cfg.saturation_v, period_s)
         # outputs
         self.cw_d = np.ones(n)
         self.cw_h = np.ones(n)
@@ -232,7 +232,8 @@ class ControllerCore:
         if (self.sup.state is not State.READY or self.trajectory is not None or self.reinitialise
                 or not self.pressure_seen[0]):
             return Ack.BAD_STATE
-        test.start(mode, valve_v, force_n, duration_s, self.cycles, self.piston_force(), float(self.joint.st[0, ST_U]))
+        test.start(mode, valve_v, force_n, duration_s, self.cycles, self.piston_force(),
+                   float(self.joint.st[0, ST_U]))           # the holding input: FORCE_SINE starts bumpless
         self.sup.start_running()
         return Ack.ACCEPTED
 

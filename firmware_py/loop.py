@@ -377,7 +377,20 @@ class ControllerLoop:
         self.compute_s[k] = compute
         self._compute_max = max(self._compute_max, compute)
         self.stats.cycles += 1
+        if self.core.sup.faults != faults_before:
+            self._log_fault(now)
         self.do_host_work()                     # after the write: its cost never delays VALVE_CMD
+
+    def _log_fault(self, sync_time: float) -> None:
+        """One stderr line when the controller faults (an event, not the steady cycle): which
+        legs' frames were missing or rejected how many cycles in a row, and what the receiver
+        last made of each; the leg a SENSOR_TIMEOUT or E2E_ERROR came from is named here."""
+        core = self.core
+        last = [RxStatus(int(self.decoder.last_status[slot])).name for slot in self._leg_slots]
+        self.log(f"fault {core.sup.fault_code.name} at cycle {self.stats.cycles}: missing in a row "
+                 f"{core.missing.tolist()}, rejected in a row {core.bad.tolist()}, last LEG_STATE status {last}, "
+                 f"overruns in a row {core.overruns_in_row}, this cycle {1e6 * (self.clock() - sync_time):.0f} us "
+                 f"after its SYNC")
 
     # -- lifecycle ------------------------------------------------------------------------
     def activate(self, should_stop=lambda: False) -> None:

@@ -60,6 +60,10 @@ def ctrl_status_timing(log: LogData) -> dict:
 # (the overrun counter is reported every 16th cycle), and SENSOR_TIMEOUT's 5-cycle count fits.
 STALL_WINDOW_CYCLES = 32
 STALL_SYNC_GAP_PERIODS = 3.0    # a SYNC interval this long at the recorder: the bus's side stalled
+# a sensor frame this long after its SYNC missed the controller's collection window
+# ([timing].sync_window_fraction): the nodes' process (the emulator) was not running
+STALL_LATE_FRAME_PERIODS = 0.6
+LEG_STATE_NAMES = tuple(f"LEG_STATE_{leg}" for leg in range(1, 7))
 
 
 def overrun_counts(log: LogData) -> tuple[np.ndarray, np.ndarray]:
@@ -80,10 +84,12 @@ def fault_transitions(log: LogData) -> list[tuple[float, int, int]]:
 
 def after_machine_stall(log: LogData, cycle: int, period_s: float) -> bool:
     """Whether the machine stalled in the STALL_WINDOW_CYCLES before `cycle` (a fault reported
-    there): the controller counted an overrun in the status windows covering them, or the
-    recorder saw a SYNC interval over STALL_SYNC_GAP_PERIODS. On a shared machine without an RT
-    kernel either stall can starve the controller or the emulator of a few cycles; a fault
-    after one is the machine's, and is counted as such, not as the fault's cause."""
+    there): the controller counted an overrun in the status windows covering them, the
+    recorder saw a SYNC interval over STALL_SYNC_GAP_PERIODS, or sensor frames reached the bus
+    more than STALL_LATE_FRAME_PERIODS after their SYNC (the emulator was not running: its
+    frames of ~10 ms came in one burst). On a shared machine without an RT kernel each can
+    starve the controller of a few cycles' frames; a fault after one is the machine's, and is
+    counted as such, not as the fault's cause."""
     cycles, overruns = overrun_counts(log)
     start = cycle - STALL_WINDOW_CYCLES
     before = np.flatnonzero(cycles < start)
@@ -92,7 +98,22 @@ def after_machine_stall(log: LogData, cycle: int, period_s: float) -> bool:
         return True
     lo, hi = max(start, 0), min(cycle + 1, log.n_cycles)
     sync = log.sync_time_s[lo:hi]
-    return bool(np.any(np.diff(sync[np.isfinite(sync)]) > STALL_SYNC_GAP_PERIODS * period_s))
+    if np.any(np.diff(sync[np.isfinite(sync)]) > STALL_SYNC_GAP_PERIODS * period_s):
+        return True
+    return late_sensor_frames(log, lo, hi, period_s) > 0
+
+
+def late_sensor_frames(log: LogData, lo: int, hi: int, period_s: float) -> int:
+    """LEG_STATE frames of cycles [lo, hi) on the bus more than STALL_LATE_FRAME_PERIODS after
+    their cycle's SYNC."""
+    late = 0
+    for name in LEG_STATE_NAMES:
+        series = log.get(name)
+        inside = (series.cycle >= lo) & (series.cycle < hi)
+        if inside.any():
+            delay = series.time_s[inside] - log.sync_time_s[series.cycle[inside]]
+            late += int(np.count_nonzero(delay > STALL_LATE_FRAME_PERIODS * period_s))
+    return late
 
 
 def in_us(stats: dict) -> dict:

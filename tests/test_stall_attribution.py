@@ -20,7 +20,7 @@ N = 1600
 
 
 def status_log(overrun_at=(), fault_at=None, code=Fault.SENSOR_TIMEOUT, gap_at=None, gap_periods=4.0,
-               start_overruns=250):
+               start_overruns=250, leg_delay_s=None):
     """CTRL_STATUS every 16 cycles; the overrun counter (modulo 256, starting near its wrap)
     steps at each cycle in `overrun_at`; FAULT with `code` from `fault_at` on."""
     cycles = np.arange(0, N, 16)
@@ -32,7 +32,14 @@ def status_log(overrun_at=(), fault_at=None, code=Fault.SENSOR_TIMEOUT, gap_at=N
     if gap_at is not None:
         sync[gap_at:] += (gap_periods - 1.0) * PERIOD_S
     status = Series("CTRL_STATUS", cycles, cycles * PERIOD_S, values, {"STATE": 0, "FAULT_CODE": 1, "OVERRUNS": 2})
-    return LogData("synthetic", N, sync, {"CTRL_STATUS": status}, [], 0, {}, {}, 0)
+    series = {"CTRL_STATUS": status}
+    if leg_delay_s is not None:        # leg 1's frames: 0.2 ms after each SYNC, some later
+        every = np.arange(N)
+        delay = np.full(N, 0.2e-3)
+        for k, d in leg_delay_s.items():
+            delay[k] = d
+        series["LEG_STATE_1"] = Series("LEG_STATE_1", every, sync + delay, np.zeros((N, 1)), {"POSITION": 0})
+    return LogData("synthetic", N, sync, series, [], 0, {}, {}, 0)
 
 
 def test_the_overrun_counter_is_unwrapped():
@@ -61,4 +68,13 @@ def test_an_overrun_long_before_the_fault_does_not_explain_it():
 @pytest.mark.parametrize("periods, stall", [(4.0, True), (2.5, False)])
 def test_a_long_sync_gap_before_the_fault_is_a_stall(periods, stall):
     log = status_log(fault_at=800, gap_at=790, gap_periods=periods)
+    assert after_machine_stall(log, 800, PERIOD_S) is stall
+
+
+@pytest.mark.parametrize("late_s, stall", [(8e-3, True), (1.3e-3, True), (0.5e-3, False)])
+def test_sensor_frames_late_after_their_sync_are_a_stall_of_the_nodes(late_s, stall):
+    """The emulator not running for ~10 ms: its frames reach the bus in one late burst while
+    the controller's SYNCs stay on time (seen in a CI soak: a SENSOR_TIMEOUT with every frame
+    in the log)."""
+    log = status_log(fault_at=800, leg_delay_s={k: late_s for k in range(785, 790)})
     assert after_machine_stall(log, 800, PERIOD_S) is stall

@@ -19,9 +19,16 @@ from firmware_py.geometry import default_geometry
 from firmware_py.supervisor import Fault, State
 from protocol.values import FLAG_LAST, FLAG_START
 
-from ..logdata import LogData
 from ..host import HostError
-from ..metrics import after_machine_stall, ctrl_status_timing, fault_transitions, in_us, percentiles
+from ..logdata import LogData
+from ..metrics import (
+    after_machine_stall,
+    ctrl_status_timing,
+    fault_transitions,
+    in_us,
+    late_sensor_frames,
+    percentiles,
+)
 from ..plotting import plt, save
 from ..scenario import Analysis, Check, Figure, Scenario
 from .common import MM
@@ -92,7 +99,8 @@ class Realtime(Scenario):
                         f"{stalled or 'none'}", "none", required=False)]
         timing = loop_timing(log, period, out, self.name.replace("-", "_"))
         metrics = {"seconds": round(seconds, 2), "cycles": log.n_cycles, "faults_after_stall": stalled,
-                   "faults_unexplained": unexplained, **timing.metrics}
+                   "faults_unexplained": unexplained,
+                   "late_sensor_frames": late_sensor_frames(log, 0, log.n_cycles, period), **timing.metrics}
         return Analysis(metrics, self.thesis, checks + timing.checks, timing.figures, timing.tables)
 
 

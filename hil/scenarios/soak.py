@@ -30,7 +30,7 @@ from protocol.values import EMU_CLEAR_ALL, EMU_INJECT, FLAG_LAST, FLAG_START
 from ..faults import LogView
 from ..host import HostError
 from ..logdata import LogData, frames_by_sender, frames_counted_by_senders
-from ..metrics import after_machine_stall, fault_transitions
+from ..metrics import after_machine_stall, fault_transitions, late_sensor_frames
 from ..scenario import Analysis, Check, Scenario
 from .common import MM
 from .realtime import loop_timing
@@ -222,6 +222,7 @@ class Soak(Scenario):
         metrics = {"seconds": round(seconds, 2), "cycles": log.n_cycles, "seed": self.seed,
                    "injections": judged, "faults_by_code": by_code, "machine_stalls": stalls,
                    "unexpected_faults": unexpected, "recoveries": recoveries,
+                   "late_sensor_frames": late_sensor_frames(log, 0, log.n_cycles, period),
                    "frames_rejected": log.e2e_errors, "host_notes": list(self.notes),
                    "log_vs_senders": None if counted is None else {"log": in_log, "counted": counted},
                    **timing.metrics}
