@@ -2,9 +2,6 @@
 through the real loop (SYNC, collect, read, update, write) with the bus replaced by an
 in-process fake; zero growth of NumPy-domain traces and of traced memory."""
 
-import gc
-import tracemalloc
-
 import numpy as np
 import pytest
 
@@ -14,6 +11,7 @@ from firmware_py.core import ControllerCore
 from firmware_py.loop import ControllerLoop
 from firmware_py.supervisor import State
 from firmware_py.trajectory import through_points
+from tests.alloc_probe import allocations
 from tests.fake_bus import FakeBus
 
 CYCLES = 10_000
@@ -55,22 +53,10 @@ def test_steady_cycles_allocate_no_numpy_memory(rig, controller):
             loop.cycle()
 
     run(500)
-    gc.collect()
-    gc.disable()
-    tracemalloc.start()
-    try:
-        numpy_only = [tracemalloc.DomainFilter(True, np.lib.tracemalloc_domain)]
-        # replays happen at cycle multiples of the trajectory length; start the window on one
-        baseline = tracemalloc.take_snapshot().filter_traces(numpy_only)
-        before, _ = tracemalloc.get_traced_memory()
-        run(CYCLES)
-        after, _ = tracemalloc.get_traced_memory()
-        grown = tracemalloc.take_snapshot().filter_traces(numpy_only).compare_to(baseline, "lineno")
-    finally:
-        tracemalloc.stop()
-        gc.enable()
-    assert [s for s in grown if s.count_diff > 0 or s.size_diff > 0] == []
-    assert after - before < 8192, f"traced memory grew by {after - before} bytes"
+    # replays happen at cycle multiples of the trajectory length; the window starts on one
+    grown, gained = allocations(lambda: run(CYCLES))
+    assert grown == []
+    assert gained < 8192, f"traced memory grew by {gained} bytes"
     # and the loop really ran: no faults, tracking, E2E clean
     assert core.state in (State.RUNNING, State.READY), core.sup.fault_code.name
     assert loop.stats.e2e_errors == 0 and loop.stats.missing_frames == 0

@@ -2,11 +2,8 @@
 bench: the valve input of an open-loop step and of a force-controlled sine, when they are
 accepted, how they end, and that a cycle with a test running allocates nothing."""
 
-import gc
 import math
-import tracemalloc
 
-import numpy as np
 import pytest
 
 from firmware_py.config import load_config
@@ -16,6 +13,7 @@ from firmware_py.identification import IdentificationSignal, piston_force_n
 from firmware_py.loop import ControllerLoop
 from firmware_py.supervisor import Ack, Fault, State
 from protocol.values import TEST_ABORT, TEST_FORCE_SINE, TEST_VALVE_STEP
+from tests.alloc_probe import allocations
 from tests.fake_bus import FakeBus
 
 PERIOD = 0.002
@@ -129,19 +127,7 @@ def test_a_cycle_with_a_test_running_allocates_no_numpy_memory():
             loop.cycle()
 
     run(600)
-    gc.collect()
-    gc.disable()
-    tracemalloc.start()
-    try:
-        numpy_only = [tracemalloc.DomainFilter(True, np.lib.tracemalloc_domain)]
-        baseline = tracemalloc.take_snapshot().filter_traces(numpy_only)
-        before, _ = tracemalloc.get_traced_memory()
-        run(5000)
-        after, _ = tracemalloc.get_traced_memory()
-        grown = tracemalloc.take_snapshot().filter_traces(numpy_only).compare_to(baseline, "lineno")
-    finally:
-        tracemalloc.stop()
-        gc.enable()
-    assert [s for s in grown if s.count_diff > 0 or s.size_diff > 0] == []
-    assert after - before < 8192, f"traced memory grew by {after - before} bytes"
+    grown, gained = allocations(lambda: run(5000))
+    assert grown == []
+    assert gained < 8192, f"traced memory grew by {gained} bytes"
     assert core.sup.fault_code is Fault.NONE and core.test.running

@@ -1,14 +1,12 @@
 """The loop's mechanism kernels allocate no NumPy memory over 10,000 calls."""
 
-import gc
-import tracemalloc
-
 import numpy as np
 
 from firmware_py.dynamics import InverseDynamics
 from firmware_py.geometry import default_geometry
 from firmware_py.kinematics import DirectKinematics, ik_batch
 from firmware_py.trajectory import diagonal_motion
+from tests.alloc_probe import allocations
 
 GEOMETRY = default_geometry()
 
@@ -29,20 +27,14 @@ def test_ik_dk_dynamics_and_trajectory_allocate_nothing_per_cycle():
 
     for k in range(100):
         cycle(k)
-    gc.collect()
-    tracemalloc.start()
-    try:
-        numpy_filter = [tracemalloc.DomainFilter(True, np.lib.tracemalloc_domain)]
-        baseline = tracemalloc.take_snapshot().filter_traces(numpy_filter)
-        before, _ = tracemalloc.get_traced_memory()
+
+    def steady():
         for k in range(100, 10_100):
             cycle(k)
-        after, _ = tracemalloc.get_traced_memory()
-        grown = tracemalloc.take_snapshot().filter_traces(numpy_filter).compare_to(baseline, "lineno")
-    finally:
-        tracemalloc.stop()
-    assert [s for s in grown if s.count_diff > 0 or s.size_diff > 0] == []
-    assert after - before < 4096
+
+    grown, gained = allocations(steady)
+    assert grown == []
+    assert gained < 4096
     assert dk.converged and np.all(np.isfinite(dyn.force_n))
     # the DK followed the trajectory: its pose reproduces the commanded lengths
     assert np.allclose(ik_batch(GEOMETRY, dk.pose[:3], dk.pose[3:])[0][0], lengths, atol=1e-10)
@@ -51,13 +43,10 @@ def test_ik_dk_dynamics_and_trajectory_allocate_nothing_per_cycle():
 def test_the_allocation_check_sees_numpy_temporaries():
     """The same measurement flags a function that keeps NumPy arrays (the check can fail)."""
     kept = []
-    tracemalloc.start()
-    try:
-        numpy_filter = [tracemalloc.DomainFilter(True, np.lib.tracemalloc_domain)]
-        baseline = tracemalloc.take_snapshot().filter_traces(numpy_filter)
+
+    def keep():
         for _ in range(10):
             kept.append(ik_batch(GEOMETRY, GEOMETRY.home_position_m, GEOMETRY.home_quaternion))
-        grown = tracemalloc.take_snapshot().filter_traces(numpy_filter).compare_to(baseline, "lineno")
-    finally:
-        tracemalloc.stop()
-    assert any(s.count_diff > 0 for s in grown)
+
+    grown, gained = allocations(keep)
+    assert any(s.count_diff > 0 for s in grown) and gained > 0
