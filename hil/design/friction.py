@@ -8,8 +8,10 @@ alpha0 + alpha1 exp(-(v/vs)^2) + sigma2 v on each side, the alphas carrying the 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -77,3 +79,67 @@ def presliding_stiffness(displacement_m: np.ndarray, friction_n: np.ndarray) -> 
 def presliding_damping(sigma0_n_m: float, mass_kg: float, sigma2_ns_m: float, zeta: float = 1.0) -> float:
     """Eq. 6.12: sigma1 = 2 zeta sqrt(sigma0 mT) - sigma2 (eq. 6.11 critically damped at zeta = 1)."""
     return 2.0 * zeta * np.sqrt(sigma0_n_m * mass_kg) - sigma2_ns_m
+
+
+# -- pre-sliding by the bristle model --------------------------------------------------------------
+@numba.njit(cache=True)
+def bristle_forces(dy_m, v_m_s, seal_g_pos, seal_g_neg, seal_vs_pos, seal_vs_neg, sigma0_pos, sigma0_neg,
+                   guide_g, guide_k, z_seal0, z_guide0, out_n):
+    """The bristle forces at the piston along a measured displacement: the seal's LuGre state
+    (eq. 6.2, sigma0 by the sign of z as Table 6.2's two slopes) and the guide's (the same
+    equation with its Coulomb level and one stiffness), each advanced exactly over every
+    displacement increment dy at the velocity v of that cycle; out_n[i] = sigma0 z_s + k_g z_g
+    (eq. 6.1 at rest: the sigma1 and sigma2 terms vanish with v). Starts from the given
+    deflections (a move makes both states forget them within ~0.1 mm)."""
+    z_s, z_g = z_seal0, z_guide0
+    for i in range(dy_m.shape[0]):
+        d, v = dy_m[i], v_m_s[i]
+        if d != 0.0:
+            if d > 0.0:                             # |g(v)| of the side of motion (eq. 6.3)
+                g = seal_g_pos[0] + seal_g_pos[1] * math.exp(-(v / seal_vs_pos) ** 2)
+            else:
+                g = seal_g_neg[0] + seal_g_neg[1] * math.exp(-(v / seal_vs_neg) ** 2)
+            sigma0 = sigma0_pos if z_s >= 0.0 else sigma0_neg
+            z_ss = g / sigma0 if d > 0.0 else -g / sigma0
+            z_s = z_ss + (z_s - z_ss) * math.exp(-sigma0 * abs(d) / g)
+            z_gs = guide_g / guide_k if d > 0.0 else -guide_g / guide_k
+            z_g = z_gs + (z_g - z_gs) * math.exp(-guide_k * abs(d) / guide_g)
+        out_n[i] = (sigma0_pos if z_s >= 0.0 else sigma0_neg) * z_s + guide_k * z_g
+
+
+def fit_presliding(dy_m: np.ndarray, v_m_s: np.ndarray, at: np.ndarray, friction_n: np.ndarray,
+                   steady: dict[str, SteadySide], guide_coulomb_n: float, guess_n_m: float = 2e5) -> dict:
+    """sigma0+, sigma0- of the seal and the guide's bristle stiffness by least squares: the
+    bristle forces simulated along the whole displacement record (`bristle_forces`) against
+    the friction measured at the indices `at` (eq. 6.5 at rest), plus a constant offset (the
+    weight's and the mass's error) and both states' deflections at the record's start.
+    `steady` gives the seal's g(v) (Table 6.1's map)."""
+    pos, neg = steady["+"], steady["-"]
+    g_pos = np.array([pos.alpha0_n, pos.alpha1_n])
+    g_neg = np.array([-neg.alpha0_n, -neg.alpha1_n])            # magnitudes: the side's sign is applied
+    out = np.empty(len(dy_m))
+
+    def model(q):
+        s0p, s0n, kg = np.exp(q[:3])
+        # the initial deflections as fractions of their steady values (the record's start
+        # state is unknown: after power-up, or after whatever moved the leg last)
+        z_s0 = q[4] * (g_pos.sum() / s0p if q[4] >= 0 else g_neg.sum() / s0n)
+        bristle_forces(dy_m, v_m_s, g_pos, g_neg, pos.vs_m_s, neg.vs_m_s, s0p, s0n, guide_coulomb_n, kg,
+                       z_s0, q[5] * guide_coulomb_n / kg, out)
+        return out[at] + q[3]
+
+    q0 = np.array([np.log(guess_n_m), np.log(guess_n_m), np.log(guess_n_m / 2), 0.0, 0.0, 0.0])
+    lower = [np.log(1e3)] * 3 + [-np.inf, -1.0, -1.0]
+    upper = [np.log(1e8)] * 3 + [np.inf, 1.0, 1.0]
+    result = least_squares(lambda q: model(q) - friction_n, q0, bounds=(lower, upper),
+                           x_scale=[1.0, 1.0, 1.0, 10.0, 0.5, 0.5])
+    s0p, s0n, kg = np.exp(result.x[:3])
+    # standard errors of the three logs (relative errors of the stiffnesses); pinv: after a
+    # move the initial deflections have no effect left, so their columns are zero
+    jac = result.jac
+    cov = np.linalg.pinv(jac.T @ jac) * np.mean(result.fun ** 2)
+    rel = np.sqrt(np.abs(np.diag(cov)))[:3]
+    return {"sigma0_pos_n_m": float(s0p), "sigma0_neg_n_m": float(s0n), "guide_n_m": float(kg),
+            "offset_n": float(result.x[3]), "initial_deflection_fractions": [float(result.x[4]), float(result.x[5])],
+            "rms_n": float(np.sqrt(np.mean(result.fun ** 2))),
+            "relative_std": [float(r) for r in rel], "points": len(friction_n)}
