@@ -74,6 +74,13 @@ SLOW_PLANT_FAULT_MAX_CYCLES = 500  # seized rod, lost supply: within 1 s (the mo
 TRY_LIMIT = 8                     # realtime: attempts of a case (or a recovery) a machine stall may spoil
 
 
+def _await_fault_shown(run, error: str | None) -> None:
+    """After a refusal BAD_STATE: the FAULT that caused it reaches CTRL_STATUS up to 16
+    cycles later; wait for it before judging whether a machine stall spoiled the attempt."""
+    if error is not None and "BAD_STATE" in error:
+        run.host.wait_until(lambda: run.host.state is State.FAULT, run.cycles(0.1), what=None)
+
+
 @dataclass
 class Case:
     key: str                      # "4b"
@@ -218,8 +225,7 @@ class Session(Scenario):
                 except (HostError, ChildFailed) as error:
                     mark.notes.append(f"host: {error}")
                     mark.extra["host_error"] = str(error)
-                    if "BAD_STATE" in str(error):      # the controller's FAULT reaches CTRL_STATUS <= 16 cycles later
-                        run.host.wait_until(lambda: run.host.state is State.FAULT, run.cycles(0.1), what=None)
+                    _await_fault_shown(run, str(error))
                     # realtime: a machine stall can fault the controller between READY and the
                     # probe's first waypoint (refused BAD_STATE): that attempt is spoiled too
                     spoiled = run.pacing == "realtime" and run.host.state is State.FAULT \
@@ -254,8 +260,7 @@ class Session(Scenario):
         run.wait_s(0.1)
         for attempt in range(1, TRY_LIMIT + 1):
             ok, error = self._recover_once(run)
-            if error is not None and "BAD_STATE" in error:     # as in `script`: the FAULT shows later
-                host.wait_until(lambda: host.state is State.FAULT, run.cycles(0.1), what=None)
+            _await_fault_shown(run, error)
             stalled = (not ok and run.pacing == "realtime" and host.state is State.FAULT
                        and host.fault_code == Fault.OVERRUN)
             if error is not None:
