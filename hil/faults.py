@@ -74,13 +74,6 @@ SLOW_PLANT_FAULT_MAX_CYCLES = 500  # seized rod, lost supply: within 1 s (the mo
 TRY_LIMIT = 8                     # realtime: attempts of a case (or a recovery) a machine stall may spoil
 
 
-def _await_fault_shown(run, error: str | None) -> None:
-    """After a refusal BAD_STATE: the FAULT that caused it reaches CTRL_STATUS up to 16
-    cycles later; wait for it before judging whether a machine stall spoiled the attempt."""
-    if error is not None and "BAD_STATE" in error:
-        run.host.wait_until(lambda: run.host.state is State.FAULT, run.cycles(0.1), what=None)
-
-
 @dataclass
 class Case:
     key: str                      # "4b"
@@ -225,7 +218,7 @@ class Session(Scenario):
                 except (HostError, ChildFailed) as error:
                     mark.notes.append(f"host: {error}")
                     mark.extra["host_error"] = str(error)
-                    _await_fault_shown(run, str(error))
+                    run.await_fault_shown(str(error))
                     # realtime: a machine stall can fault the controller between READY and the
                     # probe's first waypoint (refused BAD_STATE): that attempt is spoiled too
                     spoiled = run.pacing == "realtime" and run.host.state is State.FAULT \
@@ -260,7 +253,7 @@ class Session(Scenario):
         run.wait_s(0.1)
         for attempt in range(1, TRY_LIMIT + 1):
             ok, error = self._recover_once(run)
-            _await_fault_shown(run, error)
+            run.await_fault_shown(error)
             stalled = (not ok and run.pacing == "realtime" and host.state is State.FAULT
                        and host.fault_code == Fault.OVERRUN)
             if error is not None:

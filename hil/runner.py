@@ -214,6 +214,12 @@ class Run:
         self.host.wait_until(lambda: self.host.controller == CONTROLLER_NAMES[controller], 200,
                              what=f"controller {controller} in CTRL_STATUS")
 
+    def await_fault_shown(self, error: str | None) -> None:
+        """After a refusal BAD_STATE: the FAULT that caused it reaches CTRL_STATUS up to 16
+        cycles later; wait for it before judging whether a machine stall caused it."""
+        if error is not None and "BAD_STATE" in error:
+            self.host.wait_until(lambda: self.host.state is State.FAULT, self.cycles(0.1), what=None)
+
     def recover_from_fault(self) -> None:
         """After a FAULT: RESET (valves hold), drop what was queued, ENABLE (a leg left on an
         end stop is brought back inside the guard); READY again."""

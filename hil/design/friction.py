@@ -17,6 +17,8 @@ from scipy.optimize import least_squares
 
 from firmware_py.geometry import GRAVITY_M_S2
 
+MM = 1e-3
+
 
 @dataclass(frozen=True)
 class SteadySide:
@@ -29,6 +31,14 @@ class SteadySide:
         """Eq. 6.4."""
         v = np.asarray(v_m_s, float)
         return self.alpha0_n + self.alpha1_n * np.exp(-(v / self.vs_m_s) ** 2) + self.sigma2_ns_m * v
+
+
+def steady_sides(f: dict) -> dict[str, SteadySide]:
+    """Both sides of eq. 6.4 from a section in Table 6.1's keys and units (the controller's and
+    the emulator's [friction], the project's Table 6.1 copy): alpha in N, vs in mm/s, sigma2
+    in N s/mm."""
+    return {side: SteadySide(f[f"alpha0_{key}_n"], f[f"alpha1_{key}_n"], f[f"vs_{key}_mm_s"] * MM,
+                             f[f"sigma2_{key}_ns_mm"] / MM) for side, key in (("+", "pos"), ("-", "neg"))}
 
 
 def cylinder_friction(piston_force_n, accel_m_s2, velocity_m_s, moving_mass_kg: float, guide_coulomb_n: float,

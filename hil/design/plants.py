@@ -12,9 +12,7 @@ same 33 set points (the plant the HIL runs against), and the `metrics.json` of a
 from __future__ import annotations
 
 import json
-import tomllib
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +23,7 @@ from plant_emulator.params import load_config as load_emulator_config
 from protocol.errors import UserInputError
 
 from ..identification import fit_index
+from .thesis import thesis_data
 
 MM = 1e-3
 SOURCES = ("table-a3", "emulator")       # or a sha-identification metrics.json
@@ -65,8 +64,7 @@ class Plant:
 
 def chapter7() -> dict:
     """The thesis's chapter 7 numbers (data/chapter7.toml, the project's copy)."""
-    with resources.files("hil.design").joinpath("data/chapter7.toml").open("rb") as handle:
-        return tomllib.load(handle)
+    return thesis_data("chapter7")
 
 
 def table_a3_plants() -> list[Plant]:

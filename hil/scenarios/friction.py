@@ -20,8 +20,6 @@ thesis) are in parallel with the seal's: the stiffness measurable at the piston 
 
 from __future__ import annotations
 
-import tomllib
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -39,7 +37,9 @@ from ..design.friction import (
     fit_steady_side,
     presliding_damping,
     presliding_stiffness,
+    steady_sides,
 )
+from ..design.thesis import thesis_data
 from ..logdata import LogData
 from ..plotting import colour_for_load, plt, save
 from ..scenario import Analysis, Check, Figure, Scenario
@@ -71,8 +71,7 @@ REST_FRACTION = 0.8                # of the sines' samples, at least this many a
 
 
 def chapter6() -> dict:
-    with resources.files("hil.design").joinpath("data/chapter6.toml").open("rb") as handle:
-        return tomllib.load(handle)
+    return thesis_data("chapter6")
 
 
 def _track_velocity(track, first: int, last: int, period: float) -> float | None:
@@ -120,15 +119,11 @@ def _moving_mass(cfg, load_kg: float | None) -> float:
 
 
 def _truth_steady() -> dict[str, SteadySide]:
-    f = load_emulator_config().raw["friction"]
-    return {"+": SteadySide(f["alpha0_pos_n"], f["alpha1_pos_n"], f["vs_pos_mm_s"] * MM, f["sigma2_pos_ns_mm"] / MM),
-            "-": SteadySide(f["alpha0_neg_n"], f["alpha1_neg_n"], f["vs_neg_mm_s"] * MM, f["sigma2_neg_ns_mm"] / MM)}
+    return steady_sides(load_emulator_config().raw["friction"])
 
 
 def _table_6_1() -> dict[str, SteadySide]:
-    t = chapter6()["table_6_1"]
-    return {"+": SteadySide(t["alpha0_pos_n"], t["alpha1_pos_n"], t["vs_pos_mm_s"] * MM, t["sigma2_pos_ns_mm"] / MM),
-            "-": SteadySide(t["alpha0_neg_n"], t["alpha1_neg_n"], t["vs_neg_mm_s"] * MM, t["sigma2_neg_ns_mm"] / MM)}
+    return steady_sides(chapter6()["table_6_1"])
 
 
 def _thesis_units(side: SteadySide) -> dict:
@@ -439,11 +434,8 @@ class FrictionPresliding(Scenario):
             friction.append(fp[inside] - mass * GRAVITY_M_S2)
         if not at or not sum(len(a) for a in at):
             return None
-        f = cfg.raw["friction"]
-        steady = {"+": SteadySide(f["alpha0_pos_n"], f["alpha1_pos_n"], f["vs_pos_mm_s"] * MM, 0.0),
-                  "-": SteadySide(f["alpha0_neg_n"], f["alpha1_neg_n"], f["vs_neg_mm_s"] * MM, 0.0)}
-        fit = fit_presliding(dy, dy / period, np.concatenate(at), np.concatenate(friction), steady,
-                             cfg.guide_coulomb_n)
+        fit = fit_presliding(dy, dy / period, np.concatenate(at), np.concatenate(friction),
+                             steady_sides(cfg.raw["friction"]), cfg.guide_coulomb_n)
         return {**fit, "samples_in_sines": samples}
 
     def _plot(self, charts, results, out: Path) -> Figure:

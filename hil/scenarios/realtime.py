@@ -77,8 +77,7 @@ class Realtime(Scenario):
             except HostError as error:
                 if "BAD_STATE" not in str(error):
                     raise
-                # faulted before the waypoint: CTRL_STATUS shows it <= 16 cycles later
-                host.wait_until(lambda: host.state is State.FAULT, run.cycles(0.1), what=None)
+                run.await_fault_shown(str(error))         # faulted before the waypoint
                 continue
             run.wait_s(LEG_S + 0.1)
             elapsed += LEG_S + 0.1
