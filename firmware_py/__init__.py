@@ -1,8 +1,4 @@
-"""The controller: kinematics, dynamics, trajectory, estimation, control, supervisor, the
-fixed-step loop and the daemon. Pure math modules take arrays and write into preallocated
-arrays; only the loop/daemon modules touch the bus. (Built by the later issues.)
+"""The controller: what would run on the rig's controller. Kinematics, dynamics, trajectory,
+estimation, control, supervision, the fixed-step loop and the daemon. Pure computation takes
+arrays and writes into preallocated arrays; only `loop` and `daemon` touch the bus.
 """
-
-from .numba_cache import configure as _configure_numba_cache
-
-_configure_numba_cache()

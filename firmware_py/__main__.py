@@ -2,16 +2,19 @@
 
 import sys
 
-from protocol.cliutil import OneLineArgumentParser, run
+from physics.numba_cache import configure
 
-from .commands import configure_controller_parser
+configure()     # before any kernel is defined (see physics/numba_cache.py)
+
+from firmware_py.cli import configure_parser  # noqa: E402
+from protocol.cliutil import OneLineArgumentParser, run  # noqa: E402
 
 PROG = "python -m firmware_py"
 
 
 def main(argv=None) -> int:
     parser = OneLineArgumentParser(prog=PROG, description="hydrapod controller daemon")
-    configure_controller_parser(parser)
+    configure_parser(parser)
     args = parser.parse_args(argv)
     return run(args.handler, args, PROG)
 

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
+from physics import lugre
+from physics.actuator import cylinder_areas
+from physics.constants import BAR, MM
 from protocol.errors import UserInputError
 from protocol.tomlconfig import load_layered
-
-MM, BAR = 1e-3, 1e5
-GRAVITY_M_S2 = 9.81
 
 RANGES: dict[str, dict[str, object]] = {
     "timing": {
@@ -66,7 +66,8 @@ RANGES: dict[str, dict[str, object]] = {
         "dk_failures_fault": (1, 10000), "dk_tolerance_um": (0.001, 1000.0), "dk_max_iterations": (1, 100),
         "singularity_ratio_min": (0.0, 1.0), "auto_enable": bool, "homing_speed_mm_s": (0.1, 1000.0),
         "homing_accel_time_s": (0.001, 10.0), "waypoint_queue": (1, 255),
-        "waypoint_velocity_max_mm_s": (0.1, 1e4), "waypoint_step_max_mm": (0.0, 300.0), "waypoint_force_max_n": (1.0, 1e6),
+        "waypoint_velocity_max_mm_s": (0.1, 1e4), "waypoint_step_max_mm": (0.0, 300.0),
+        "waypoint_force_max_n": (1.0, 1e6),
         "waypoint_path_samples": (2, 1000), "plausibility_spool_pct": (1.0, 100.0),
         "plausibility_cycles": (1, 100000), "plausibility_travel_mm": (0.0, 1000.0),
         "attitude_mismatch_deg": (0.01, 90.0), "attitude_mismatch_samples": (1, 10000),
@@ -118,7 +119,8 @@ class ControllerConfig:
     hexapod_kp_factor: float          # every controller's Kp on the hexapod (see controller.toml)
     hexapod_ki_factor: float          # every controller's Ki on the hexapod
     # estimation
-    friction: np.ndarray              # LuGre observer vector, see estimation.FP_*
+    friction: np.ndarray              # LuGre vector of the seals (physics.lugre layout)
+    observer_gain_per_s: float        # k of the friction observer (eq. 7.30)
     jerk_psd: float                   # m^2/s^5
     kalman_adaptive_gain: float
     kalman_velocity_ref_m_s: float
@@ -193,8 +195,6 @@ def _schedule_tables(a: dict, source: str) -> tuple[np.ndarray, np.ndarray, np.n
 
 
 def build(raw: dict, source: str = "config") -> ControllerConfig:
-    from .estimation import pack_friction
-
     t, a, tb, f, k, m = (raw[s] for s in ("timing", "actuator", "testbench", "friction", "kalman", "mass_estimator"))
     ident = raw["identification"]
     lp, pi, ad, lim, sv = (raw[s] for s in ("load_pressure", "pi", "adaptive", "limits", "supervisor"))
@@ -205,13 +205,11 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         raise ConfigError(f"config {source}: [mass_estimator].covariance_initial = {m['covariance_initial']} "
                           f"exceeds covariance_max = {m['covariance_max']}")
     positions, loads, kp, ki = _schedule_tables(ad, source)
-    area = math.pi * (a["bore_radius_mm"] * MM) ** 2
-    ratio = 1.0 - (a["rod_radius_mm"] / a["bore_radius_mm"]) ** 2
-    friction = pack_friction(
-        f["alpha0_pos_n"], f["alpha1_pos_n"], f["vs_pos_mm_s"] * MM, f["sigma2_pos_ns_mm"] / MM,
-        f["alpha0_neg_n"], f["alpha1_neg_n"], f["vs_neg_mm_s"] * MM, f["sigma2_neg_ns_mm"] / MM,
-        f["sigma0_pos_n_mm"] / MM, f["sigma1_pos_ns_mm"] / MM, f["sigma0_neg_n_mm"] / MM,
-        f["sigma1_neg_ns_mm"] / MM, f["observer_gain_per_s"])
+    area, ratio = cylinder_areas(a["bore_radius_mm"] * MM, a["rod_radius_mm"] * MM)
+    try:
+        friction = lugre.from_table(f)
+    except ValueError as error:
+        raise ConfigError(f"config {source}: [friction]: {error}") from None
     return ControllerConfig(
         raw=raw,
         sync_window_fraction=t["sync_window_fraction"], spin_s=t["spin_us"] * 1e-6,
@@ -229,7 +227,8 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         test_force_gain_v_n=ident["force_gain_v_n"], test_stroke_guard_m=ident["stroke_guard_mm"] * MM,
         hexapod_park_stroke_m=raw["hexapod"]["park_stroke_mm"] * MM, hexapod_kp_factor=raw["hexapod"]["kp_factor"],
         hexapod_ki_factor=raw["hexapod"]["ki_factor"],
-        friction=friction, jerk_psd=k["jerk_psd_mm2_s5"] * MM ** 2, kalman_adaptive_gain=k["adaptive_gain"],
+        friction=friction, observer_gain_per_s=f["observer_gain_per_s"], jerk_psd=k["jerk_psd_mm2_s5"] * MM ** 2,
+        kalman_adaptive_gain=k["adaptive_gain"],
         kalman_velocity_ref_m_s=k["adaptive_velocity_ref_mm_s"] * MM,
         rls_forgetting=m["forgetting"], rls_filter_hz=m["filter_hz"], rls_filter_zeta=m["filter_zeta"],
         rls_initial_kg=m["initial_kg"], rls_p0=m["covariance_initial"], rls_p_max=m["covariance_max"],

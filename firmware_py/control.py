@@ -27,13 +27,26 @@ import numpy as np
 from numba import njit
 from scipy.interpolate import CubicSpline
 
-from .config import ControllerConfig
-from .estimation import (adaptive_r, filter_step, kalman_model, kalman_step_into, load_pressure,
-                         lugre_observer_step, piston_inverse_dynamics, quantisation_variance,
-                         rls_step, second_order_filter)
+from physics.constants import GRAVITY_M_S2
+from protocol.enums import ControllerKind
 
-PI, ADAPTIVE, MODEL_BASED = 0, 1, 2
-CONTROLLER_NAMES = {"pi": PI, "adaptive": ADAPTIVE, "model-based": MODEL_BASED}
+from .config import ControllerConfig
+from .estimation import (
+    adaptive_r,
+    filter_step,
+    kalman_model,
+    kalman_step_into,
+    load_pressure,
+    lugre_observer_step,
+    piston_inverse_dynamics,
+    quantisation_variance,
+    rls_step,
+    second_order_filter,
+)
+
+PI, ADAPTIVE, MODEL_BASED = int(ControllerKind.PI), int(ControllerKind.ADAPTIVE), int(ControllerKind.MODEL_BASED)
+# command-line names of the controllers, from CTRL_STATUS.CONTROLLER's value table
+CONTROLLER_NAMES = {kind.name.lower().replace("_", "-"): int(kind) for kind in ControllerKind}
 
 # -- gain schedule ---------------------------------------------------------------------------
 
@@ -86,9 +99,7 @@ def pi_antiwindup(error, integral, leg, kp, ki, extra, period_s, u_max):
 # parameter vector
 (JP_T, JP_R_BASE, JP_R_GAIN, JP_V_REF, JP_LAMBDA, JP_P_MAX, JP_M_MAX, JP_RLS_WN, JP_RLS_ZETA,
  JP_D_WN, JP_D_ZETA, JP_KI_SCALE, JP_MASS_OFFSET, JP_PI_KP, JP_PI_KI, JP_KPL, JP_U_MAX,
- JP_MOVING_MASS, JP_AREA, JP_FF_SCALE, JP_KP_SCALE, JP_SIZE) = range(22)
-# inputs per leg
-(IN_Y, IN_FRESH, IN_FORCE, IN_YR, IN_VR, IN_AR, IN_G_AX, IN_TAU, IN_ACTIVE, IN_SIZE) = range(10)
+ JP_MOVING_MASS, JP_AREA, JP_FF_SCALE, JP_KP_SCALE, JP_OBSERVER_K, JP_SIZE) = range(23)
 # state and outputs per leg
 # (each 2nd-order filter keeps 3 columns: F u, s F u, the previous input)
 (ST_Z, ST_MASS, ST_RLS_P, ST_INTEGRAL, ST_ACCEL_D, ST_FRICTION, ST_PL, ST_PLR, ST_KP, ST_KI, ST_ERROR, ST_U,
@@ -96,21 +107,23 @@ def pi_antiwindup(error, integral, leg, kp, ki, extra, period_s, u_max):
 
 
 @njit(cache=True)
-def legs_update(mode, jp, inputs, st, kx, kp_mat, a, q, xp, pp, fp, rls_ad, rls_bd, d_ad, d_bd,
-                breaks, kp_coef, ki_coef, loads):
-    """Estimation and control of every leg for one cycle; writes st[:, ST_U] (volts)."""
+def legs_update(mode, jp, position, fresh_legs, force_n, yr, ar, g_axial, tau_n, active, st, kx, kp_mat, a, q,
+                xp, pp, fp, rls_ad, rls_bd, d_ad, d_bd, breaks, kp_coef, ki_coef, loads):
+    """Estimation and control of every leg for one cycle, from the measurements (position,
+    fresh, force), the reference (yr, ar), gravity along each leg and the model-based
+    actuator forces; writes st[:, ST_U] (volts) and the other ST_ columns."""
     period = jp[JP_T]
-    for leg in range(inputs.shape[0]):
+    for leg in range(position.shape[0]):
         x = kx[leg]
         p = kp_mat[leg]
-        fresh = inputs[leg, IN_FRESH] > 0.5
+        fresh = fresh_legs[leg]
         r = adaptive_r(jp[JP_R_BASE], jp[JP_R_GAIN], x[1], jp[JP_V_REF])              # eq. 7.50
-        kalman_step_into(x, p, a, q, inputs[leg, IN_Y], fresh, r, xp, pp)             # eq. 7.41-7.45
-        y = inputs[leg, IN_Y] if fresh else x[0]
-        error = inputs[leg, IN_YR] - y
-        g_ax = inputs[leg, IN_G_AX]
-        force = inputs[leg, IN_FORCE]
-        friction = lugre_observer_step(fp, st[leg], ST_Z, x[1], error, period)       # eq. 7.30-7.32
+        kalman_step_into(x, p, a, q, position[leg], fresh, r, xp, pp)                 # eq. 7.41-7.45
+        y = position[leg] if fresh else x[0]
+        error = yr[leg] - y
+        g_ax = g_axial[leg]
+        force = force_n[leg]
+        friction = lugre_observer_step(fp, jp[JP_OBSERVER_K], st[leg], ST_Z, x[1], error, period)   # eq. 7.30-7.32
         accel_d = filter_step(st[leg, ST_D:ST_D + 3], d_ad, d_bd, jp[JP_D_WN], jp[JP_D_ZETA], y)
         # eq. 7.37 (corrected): m_L F(s)[s^2 y + g_ax] = F(s) F_s
         phi = filter_step(st[leg, ST_FY:ST_FY + 3], rls_ad, rls_bd, jp[JP_RLS_WN], jp[JP_RLS_ZETA], y)
@@ -124,10 +137,9 @@ def legs_update(mode, jp, inputs, st, kx, kp_mat, a, q, xp, pp, fp, rls_ad, rls_
                             jp[JP_M_MAX])
         pl = load_pressure(force, friction, jp[JP_MOVING_MASS], accel_d, g_ax, jp[JP_AREA])   # eq. 7.39
         if mode == MODEL_BASED:                                                                 # eq. 11.5
-            plr = (jp[JP_FF_SCALE] * inputs[leg, IN_TAU] + friction) / jp[JP_AREA]
+            plr = (jp[JP_FF_SCALE] * tau_n[leg] + friction) / jp[JP_AREA]
         else:                                                                                   # eq. 7.40
-            plr = piston_inverse_dynamics(jp[JP_MOVING_MASS] + mass, inputs[leg, IN_AR], g_ax, friction,
-                                          jp[JP_AREA])
+            plr = piston_inverse_dynamics(jp[JP_MOVING_MASS] + mass, ar[leg], g_ax, friction, jp[JP_AREA])
         if mode == PI:
             kp, ki, extra = jp[JP_PI_KP], jp[JP_PI_KI], 0.0
         else:                                                                                   # eq. 7.29
@@ -135,7 +147,7 @@ def legs_update(mode, jp, inputs, st, kx, kp_mat, a, q, xp, pp, fp, rls_ad, rls_
             kp = jp[JP_KP_SCALE] * schedule_eval(breaks, kp_coef, loads, y, load)
             ki = jp[JP_KI_SCALE] * schedule_eval(breaks, ki_coef, loads, y, load)
             extra = jp[JP_KPL] * (plr - pl)
-        if inputs[leg, IN_ACTIVE] > 0.5:
+        if active:
             u = pi_antiwindup(error, st[:, ST_INTEGRAL], leg, kp, ki, extra, period, jp[JP_U_MAX])
         else:
             st[leg, ST_INTEGRAL] = 0.0
@@ -151,10 +163,10 @@ def legs_update(mode, jp, inputs, st, kx, kp_mat, a, q, xp, pp, fp, rls_ad, rls_
 
 
 class JointController:
-    """Every array of the per-leg pipeline, allocated once; `update()` runs one cycle.
+    """Every array of the per-leg pipeline, allocated once; `update(...)` runs one cycle.
 
-    Callers fill `inputs` (IN_* columns) and read `st` (ST_* columns) and `kalman_x`
-    (position, velocity, acceleration per leg).
+    Outputs: `u_v` (the valve input per leg, V), `error_m` (tracking error), `kalman_x`
+    (position, velocity, acceleration per leg) and the other ST_* columns of `st`.
     """
 
     def __init__(self, cfg: ControllerConfig, n_legs: int, period_s: float, *, moving_mass_kg: float,
@@ -184,6 +196,7 @@ class JointController:
         jp[JP_MOVING_MASS] = moving_mass_kg
         jp[JP_AREA] = cfg.piston_area_m2
         jp[JP_FF_SCALE] = cfg.feedforward_scale
+        jp[JP_OBSERVER_K] = cfg.observer_gain_per_s
         self.jp = jp
         self.a, self.q = kalman_model(period_s, cfg.jerk_psd)
         self.rls_ad, self.rls_bd = second_order_filter(period_s, cfg.rls_filter_hz, cfg.rls_filter_zeta)
@@ -193,10 +206,15 @@ class JointController:
         self.kp_coef = spline_coefficients(self.breaks, cfg.table_kp)
         self.ki_coef = spline_coefficients(self.breaks, cfg.table_ki)
         self.friction = cfg.friction
-        self.inputs = np.zeros((n_legs, IN_SIZE))
         self.st = np.zeros((n_legs, ST_SIZE))
+        self.u_v = self.st[:, ST_U]                   # views, made once
+        self.error_m = self.st[:, ST_ERROR]
+        self.mass_kg = self.st[:, ST_MASS]
+        self.integral = self.st[:, ST_INTEGRAL]
         self.kalman_x = np.zeros((n_legs, 3))
         self.kalman_p = np.zeros((n_legs, 3, 3))
+        self.position_estimate = self.kalman_x[:, 0]
+        self.velocity_estimate = self.kalman_x[:, 1]
         self._xp = np.zeros(3)
         self._pp = np.zeros((3, 3))
         self.reset(initial_position_m)
@@ -204,7 +222,7 @@ class JointController:
     def reset(self, position_m=0.0, gravity_axial=None) -> None:
         """Estimators at rest at `position_m` (scalar or per leg), mass at its initial value."""
         cfg = self.cfg
-        g = np.broadcast_to(9.81 if gravity_axial is None else gravity_axial, (self.n_legs,))
+        g = np.broadcast_to(GRAVITY_M_S2 if gravity_axial is None else gravity_axial, (self.n_legs,))
         self.kalman_x[:] = 0.0
         self.kalman_x[:, 0] = position_m
         self.kalman_p[:] = np.diag([self.jp[JP_R_BASE], 1e-4, 1e-2])
@@ -228,7 +246,8 @@ class JointController:
         """Switch controller; the integral carries over (bumpless for equal gains)."""
         self.mode = int(mode)
 
-    def update(self) -> None:
-        legs_update(self.mode, self.jp, self.inputs, self.st, self.kalman_x, self.kalman_p, self.a, self.q,
-                    self._xp, self._pp, self.friction, self.rls_ad, self.rls_bd, self.d_ad, self.d_bd,
-                    self.breaks, self.kp_coef, self.ki_coef, self.loads)
+    def update(self, position_m, fresh, force_n, yr, ar, g_axial, tau_n, active: bool) -> None:
+        """One cycle of every leg; `tau_n` is read by the model-based controller only."""
+        legs_update(self.mode, self.jp, position_m, fresh, force_n, yr, ar, g_axial, tau_n, active, self.st,
+                    self.kalman_x, self.kalman_p, self.a, self.q, self._xp, self._pp, self.friction, self.rls_ad,
+                    self.rls_bd, self.d_ad, self.d_bd, self.breaks, self.kp_coef, self.ki_coef, self.loads)

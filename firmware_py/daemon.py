@@ -65,14 +65,14 @@ def realtime_teardown() -> None:
 def run_daemon(args) -> int:
     from protocol.bus import open_bus
 
-    from .core import ControllerCore
+    from .controller import Controller
     from .loop import ActivationError, ControllerLoop
 
     cfg = load_config(args.config)
-    core = ControllerCore(cfg, args.rig, 1.0 / args.rate_hz, CONTROLLER_NAMES[args.controller])
+    controller = Controller(cfg, args.rig, 1.0 / args.rate_hz, CONTROLLER_NAMES[args.controller])
     stop = StopFlag()
     bus = open_bus(args.bus)
-    loop = ControllerLoop(bus, core, args.rate_hz, args.pacing, log=log)
+    loop = ControllerLoop(bus, controller, args.rate_hz, args.pacing, log=log)
     code = 0
     notes = realtime_setup(cfg, args.pacing == "realtime")
     if notes:
@@ -94,7 +94,8 @@ def run_daemon(args) -> int:
         with open(args.summary, "w") as handle:
             json.dump(summary, handle, indent=1)
     timing = summary["timing"].get("compute_us", {})
-    print(f"controller: rig={core.rig} controller={args.controller} pacing={args.pacing} cycles={summary['cycles']} "
+    print(f"controller: rig={controller.rig} controller={args.controller} pacing={args.pacing} "
+          f"cycles={summary['cycles']} "
           f"overruns={summary['overruns']} e2e_errors={summary['e2e_errors']} "
           f"missing_frames={summary['missing_frames']} faults={summary['faults']} "
           f"fault_code={summary['fault_code']} state={summary['state']} "

@@ -30,17 +30,7 @@ import numpy as np
 from numba import njit
 from scipy.linalg import expm
 
-# LuGre observer parameter vector (SI): steady-state set chosen by the sign of v,
-# bristle set by the sign of z (as Tables 6.1 and 6.2 are identified).
-(FP_A0_POS, FP_A1_POS, FP_VS_POS, FP_S2_POS, FP_A0_NEG, FP_A1_NEG, FP_VS_NEG, FP_S2_NEG,
- FP_S0_POS, FP_S1_POS, FP_S0_NEG, FP_S1_NEG, FP_K, FP_SIZE) = range(14)
-
-
-def pack_friction(a0p, a1p, vsp, s2p, a0n, a1n, vsn, s2n, s0p, s1p, s0n, s1n, k) -> np.ndarray:
-    fp = np.empty(FP_SIZE)
-    fp[:] = (a0p, a1p, vsp, s2p, a0n, a1n, vsn, s2n, s0p, s1p, s0n, s1n, k)
-    return fp
-
+from physics.lugre import bristle_coefficients, stribeck
 
 # -- adaptive Kalman filter (eq. 7.41-7.50) -------------------------------------------------
 
@@ -112,27 +102,21 @@ def kalman_step_into(x, p, a, q, z, has_z, r, xp, pp):
 # -- LuGre friction observer (eq. 7.30-7.32) ------------------------------------------------
 
 @njit(cache=True)
-def lugre_observer_step(fp, z_state, leg, velocity, position_error, period_s):
+def lugre_observer_step(fp, gain_k, z_state, leg, velocity, position_error, period_s):
     """Advance the bristle state z_state[leg] one period and return the friction estimate.
 
-    eq. 7.30 z' = v - sigma0 |v| / g(v) z - k e, eq. 7.31 g(v) = a0 + a1 exp(-(v/vs)^2),
-    eq. 7.32 Ff = sigma0 z + sigma1 z' + sigma2 v. The bristle dynamics are stiff (sigma0/g
-    ~ 1e4 1/m): z is advanced by implicit Euler, stable for any |v| and period.
+    eq. 7.30 z' = v - sigma0 |v| / g(v) z - k e, eq. 7.31 g(v) (eq. 6.3, physics.lugre),
+    eq. 7.32 Ff = sigma0 z + sigma1 z' + sigma2 v, `fp` the LuGre vector of physics.lugre.
+    The bristle dynamics are stiff (sigma0/g ~ 1e4 1/m): z is advanced by implicit Euler,
+    stable for any |v| and period.
     """
     v = velocity
-    if v >= 0.0:
-        g = abs(fp[FP_A0_POS] + fp[FP_A1_POS] * math.exp(-(v / fp[FP_VS_POS]) ** 2))
-        sigma2 = fp[FP_S2_POS]
-    else:
-        g = abs(fp[FP_A0_NEG] + fp[FP_A1_NEG] * math.exp(-(v / fp[FP_VS_NEG]) ** 2))
-        sigma2 = fp[FP_S2_NEG]
+    g, sigma2 = stribeck(v, fp)
+    g = abs(g)
     z = z_state[leg]
-    if z >= 0.0:
-        sigma0, sigma1 = fp[FP_S0_POS], fp[FP_S1_POS]
-    else:
-        sigma0, sigma1 = fp[FP_S0_NEG], fp[FP_S1_NEG]
+    sigma0, sigma1 = bristle_coefficients(z, fp)
     rate = sigma0 * abs(v) / max(g, 1e-9)
-    drive = v - fp[FP_K] * position_error
+    drive = v - gain_k * position_error
     z = (z + period_s * drive) / (1.0 + period_s * rate)
     z_dot = drive - rate * z
     z_state[leg] = z

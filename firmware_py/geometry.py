@@ -1,7 +1,8 @@
 """The 6-UPS mechanism as data: anchors, leg limits, joint cones, links, inertias.
 
-The numbers live in `data/geometry.toml` in thesis units (mm, deg, kg mm^2); `load_geometry`
-converts them once to SI and to the arrays the kinematics and dynamics kernels use.
+The numbers live in the rig's `geometry.toml` (physics/data, thesis units: mm, deg, kg mm^2);
+this module is the controller's reading of it, converted once to SI and to the arrays the
+kinematics and dynamics kernels use (the plant emulator reads the same file with its own code).
 Frames: the base frame O has its origin at the centre of the circle through the universal
 joint centres, z up; the platform frame P has its origin at the centre of the circle
 through the spherical joint centres, w (its z) normal to the platform.
@@ -17,12 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
+from physics.constants import GRAVITY_M_S2, KG_MM2, MM
 from protocol.errors import UserInputError
 
 N_LEGS = 6
-GRAVITY_M_S2 = 9.81
-MM = 1e-3
-KG_MM2 = 1e-6
 
 
 class GeometryError(UserInputError):
@@ -204,6 +203,6 @@ def load_geometry_file(path: str | Path) -> Geometry:
 
 @lru_cache(maxsize=1)
 def default_geometry() -> Geometry:
-    """The rig's geometry shipped with the package (data/geometry.toml)."""
-    text = resources.files("firmware_py").joinpath("data/geometry.toml").read_text()
-    return parse_geometry(tomllib.loads(text), "firmware_py/data/geometry.toml")
+    """The rig's geometry shipped with the project (physics/data/geometry.toml)."""
+    text = resources.files("physics").joinpath("data/geometry.toml").read_text()
+    return parse_geometry(tomllib.loads(text), "physics/data/geometry.toml")

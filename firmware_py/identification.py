@@ -1,5 +1,5 @@
 """The test bench's identification tests (HOST_TEST, chapter 6.4): the valve input of the
-leg while one runs. Pure, scalar, allocation-free: the core calls `output` once a cycle.
+leg while one runs. Pure, scalar, allocation-free: the controller calls `output` once a cycle.
 
 Experiment 1 (6.4.1.1, VALVE_STEP): a constant valve input, open loop, for DURATION: the
 piston settles at a constant velocity, the steady-state friction map's data (eq. 6.4-6.5).
@@ -18,14 +18,9 @@ from __future__ import annotations
 
 import math
 
-from protocol.values import TEST_ABORT, TEST_FORCE_SINE, TEST_VALVE_STEP
+from protocol.enums import TestMode
 
-TEST_MODES = (TEST_ABORT, TEST_VALVE_STEP, TEST_FORCE_SINE)
-
-
-def piston_force_n(pa_pa: float, pb_pa: float, area_m2: float, area_ratio: float) -> float:
-    """F_p = A_A (p_A - alpha p_B) (eq. 6.5; eq. 4.15), positive extending."""
-    return area_m2 * (pa_pa - area_ratio * pb_pa)
+TEST_MODES = frozenset(int(mode) for mode in TestMode)
 
 
 class IdentificationSignal:
@@ -33,7 +28,7 @@ class IdentificationSignal:
                  period_s: float):
         self.force_gain_v_n, self.stroke_guard_m, self.stroke_m = force_gain_v_n, stroke_guard_m, stroke_m
         self.saturation_v, self.period_s = saturation_v, period_s
-        self.mode = TEST_ABORT
+        self.mode = TestMode.ABORT
         self.valve_v = 0.0
         self.force_n = 0.0
         self.duration_s = 0.0
@@ -43,7 +38,7 @@ class IdentificationSignal:
 
     @property
     def running(self) -> bool:
-        return self.mode != TEST_ABORT
+        return self.mode != TestMode.ABORT
 
     def start(self, mode: int, valve_v: float, force_n: float, duration_s: float, cycle: int,
               piston_force: float, u0_v: float) -> None:
@@ -51,18 +46,18 @@ class IdentificationSignal:
         self.start_cycle, self.force0_n, self.u0_v = cycle, piston_force, u0_v
 
     def stop(self) -> None:
-        self.mode = TEST_ABORT
+        self.mode = TestMode.ABORT
 
     def output(self, cycle: int, y_m: float, piston_force: float) -> tuple[float, bool]:
         """(valve input V, whether the test is over after this cycle)."""
         t = (cycle - self.start_cycle) * self.period_s
         done = t + self.period_s >= self.duration_s - 1e-9     # the last cycle of DURATION
-        if self.mode == TEST_VALVE_STEP:
+        if self.mode == TestMode.VALVE_STEP:
             u = self.valve_v
             guard = self.stroke_guard_m
             if (u > 0.0 and y_m >= self.stroke_m - guard) or (u < 0.0 and y_m <= guard):
                 return 0.0, True
-        else:                                              # TEST_FORCE_SINE
+        else:                                              # FORCE_SINE
             reference = self.force0_n + self.force_n * math.sin(2.0 * math.pi * t / self.duration_s)
             u = self.u0_v + self.force_gain_v_n * (reference - piston_force)
         return min(max(u, -self.saturation_v), self.saturation_v), done

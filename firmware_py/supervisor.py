@@ -1,85 +1,29 @@
-"""Supervisor: the controller's state machine, its faults and the host's commands.
+"""The controller's state machine: its states, the one place its faults are latched, and
+the host's commands.
 
 States (CTRL_STATUS.STATE): BOOT -> IDLE (valves HOLD) -> READY (valves ACTIVE, holding
 position) -> HOMING / RUNNING / STOPPING -> READY; FAULT (valves HOLD) and ESTOP (valves
 DISABLED) from anywhere; only RESET leaves them, to IDLE. The first fault latches its code.
 
 HOST_CMD transitions (anything else is acknowledged BAD_STATE and changes nothing):
-  ENABLE   IDLE -> READY                       DISABLE  READY -> IDLE
+  ENABLE   IDLE -> READY (READY: no change)    DISABLE  IDLE, READY -> IDLE
   HOME     IDLE, READY -> HOMING -> READY       PARK     IDLE, READY -> HOMING -> IDLE
   START    READY (waypoints queued) -> RUNNING STOP     RUNNING, HOMING -> STOPPING -> READY
   ESTOP    any -> ESTOP (same cycle)           RESET    FAULT, ESTOP -> IDLE
-  SELECT_CONTROLLER (0 PI, 1 ADAPTIVE, 2 MODEL_BASED) in IDLE or READY
+  SELECT_CONTROLLER (a CTRL_STATUS.CONTROLLER value) in IDLE or READY
   CLEAR_WAYPOINTS outside RUNNING; NOP always.
-The supervisor decides; the core carries out the resulting `action` in the same cycle.
+The supervisor decides; the controller carries out the resulting `action` in the same cycle.
 """
 
 from __future__ import annotations
 
 from enum import IntEnum
 
-
-class State(IntEnum):
-    BOOT = 0
-    IDLE = 1
-    HOMING = 2
-    READY = 3
-    RUNNING = 4
-    STOPPING = 5
-    FAULT = 6
-    ESTOP = 7
+from protocol.enums import Ack, Command, ControllerKind, Fault, State
 
 
-class Fault(IntEnum):          # CTRL_STATUS.FAULT_CODE (DBC value table)
-    NONE = 0
-    SENSOR_TIMEOUT = 1
-    E2E_ERROR = 2
-    VALVE_FAULT = 3
-    POSITION_LIMIT = 4
-    FORCE_LIMIT = 5
-    DK_FAILURE = 6
-    SINGULARITY = 7
-    NOT_FINITE = 8
-    OVERRUN = 9
-    TRACKING_ERROR = 10
-    SUPPLY_PRESSURE = 11
-    ESTOP = 12
-    HEARTBEAT_LOST = 13
-    SENSOR_FAULT = 14
-    VELOCITY_LIMIT = 15
-    MOTION_PLAUSIBILITY = 16   # a valve driven hard that does not move its cylinder (plausibility.py)
-    ATTITUDE_MISMATCH = 17     # the encoders' platform attitude disagrees with the IMU's (plausibility.py)
-
-
-class Command(IntEnum):        # HOST_CMD.COMMAND
-    NOP = 0
-    ENABLE = 1
-    DISABLE = 2
-    HOME = 3
-    PARK = 4
-    ESTOP = 5
-    RESET = 6
-    SELECT_CONTROLLER = 7
-    START = 8
-    STOP = 9
-    CLEAR_WAYPOINTS = 10
-
-
-class Ack(IntEnum):            # CTRL_ACK.RESULT
-    ACCEPTED = 0
-    BAD_STATE = 1
-    OUTSIDE_WORKSPACE = 2
-    SINGULAR = 3
-    TOO_FAST = 4
-    NOT_FINITE = 5
-    SEQUENCE_GAP = 6
-    QUEUE_FULL = 7
-    INCOMPLETE = 8
-    UNKNOWN_COMMAND = 9
-    BAD_ARGUMENT = 10
-
-
-class Action(IntEnum):         # what the core must do this cycle
+class Action(IntEnum):
+    """What the controller must do this cycle after an accepted command."""
     NONE = 0
     ENABLE = 1
     HOME = 2
@@ -92,14 +36,15 @@ class Action(IntEnum):         # what the core must do this cycle
 
 MOVING = (State.HOMING, State.RUNNING, State.STOPPING)
 ACTIVE = (State.READY,) + MOVING          # valves ACTIVE, the joint controller runs
-N_CONTROLLERS = 3
+LATCHED = (State.FAULT, State.ESTOP)
+CONTROLLER_VALUES = frozenset(int(kind) for kind in ControllerKind)
 
 
 class Supervisor:
-    def __init__(self, controller: int = 0):
+    def __init__(self, controller: int = ControllerKind.PI):
         self.state = State.BOOT
         self.fault_code = Fault.NONE
-        self.controller = controller
+        self.controller = int(controller)
         self.action = Action.NONE
         self.parking = False
         self.faults = 0                    # faults latched since start
@@ -122,8 +67,8 @@ class Supervisor:
                 self.command(Command.ENABLE, 0)
 
     def fault(self, code: Fault) -> None:
-        """Latch a fault: FAULT (valves HOLD) unless already in FAULT or ESTOP."""
-        if self.state in (State.FAULT, State.ESTOP) or code is Fault.NONE:
+        """Latch a fault: FAULT (valves HOLD) unless already in FAULT or ESTOP; NONE is no fault."""
+        if self.state in LATCHED or code is Fault.NONE:
             return
         self.fault_code = code
         self.faults += 1
@@ -145,20 +90,22 @@ class Supervisor:
                 self._go(State.ESTOP)
             return Ack.ACCEPTED
         if command is Command.RESET:
-            if s not in (State.FAULT, State.ESTOP):
+            if s not in LATCHED:
                 return Ack.BAD_STATE
             self.fault_code = Fault.NONE
             self.action = Action.RESET
             self._go(State.IDLE)
             return Ack.ACCEPTED
         if command is Command.SELECT_CONTROLLER:
-            if not 0 <= argument < N_CONTROLLERS:
+            if argument not in CONTROLLER_VALUES:
                 return Ack.BAD_ARGUMENT
             if s not in (State.IDLE, State.READY):
                 return Ack.BAD_STATE
             self.controller = int(argument)
             return Ack.ACCEPTED
         if command is Command.ENABLE:
+            if s is State.READY:             # a harmless repeat: already enabled, nothing changes
+                return Ack.ACCEPTED
             if s is not State.IDLE:
                 return Ack.BAD_STATE
             self.action = Action.ENABLE
@@ -180,7 +127,7 @@ class Supervisor:
             if s is not State.READY:
                 return Ack.BAD_STATE
             self.action = Action.START
-            return Ack.ACCEPTED          # the core moves to RUNNING when the queue is not empty
+            return Ack.ACCEPTED          # the controller moves to RUNNING when the queue is not empty
         if command is Command.STOP:
             if s not in (State.RUNNING, State.HOMING):
                 return Ack.BAD_STATE

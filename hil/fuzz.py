@@ -12,10 +12,10 @@ Frames come from a seeded NumPy generator, so a run is reproducible from its see
 Targets:
 - `decoder`: a `FrameDecoder` of the whole DBC; counted = sum of its status counts plus
   its unknown frames;
-- `controller`: the hexapod controller's own `ControllerLoop.dispatch` and host work, the
-  core cycled every 64 frames with steady measurements (so accepted commands move it
-  through its states); counted as above on the loop's decoder, and the valve setpoints
-  must stay finite.
+- `controller`: the hexapod controller's own `ControllerLoop.dispatch`, the controller
+  updated every 64 frames with steady measurements (so the host frames queued meanwhile
+  are carried out and accepted commands move it through its states); counted as above on
+  the loop's decoder, and the valve setpoints must stay finite.
 """
 
 from __future__ import annotations
@@ -28,13 +28,14 @@ import numpy as np
 
 from firmware_py.config import load_config
 from firmware_py.control import CONTROLLER_NAMES
-from firmware_py.core import ControllerCore
+from firmware_py.controller import Controller
 from firmware_py.loop import ControllerLoop
 from protocol import e2e
 from protocol.codec import CODECS, FrameDecoder, RxStatus
+from protocol.enums import ValveState
 
 VALID_SHARE = 0.25
-CYCLE_EVERY = 64          # controller target: frames per core cycle
+CYCLE_EVERY = 64          # controller target: frames per controller update
 TARGETS = ("decoder", "controller")
 
 
@@ -126,7 +127,7 @@ def fuzz_decoder(count: int, seed: int) -> FuzzReport:
     for msg in frames(count, seed, list(CODECS)):
         try:
             decoder.receive_message(msg)
-        except Exception as error:       # noqa: BLE001 - the point is to count any
+        except Exception as error:
             exceptions += 1
             first = first or f"{type(error).__name__}: {error}"
     return _report("decoder", count, seed, decoder, exceptions, first, 0, 0, time.perf_counter() - start)
@@ -134,19 +135,23 @@ def fuzz_decoder(count: int, seed: int) -> FuzzReport:
 
 def fuzz_controller(count: int, seed: int, controller: str = "model-based") -> FuzzReport:
     cfg = load_config()
-    core = ControllerCore(cfg, "hexapod", 0.002, CONTROLLER_NAMES[controller])
-    loop = ControllerLoop(_QuietBus(), core, 500.0, "lockstep", log=lambda _: None)
-    home = core.home_strokes.copy()
+    ctl = Controller(cfg, "hexapod", 0.002, CONTROLLER_NAMES[controller])
+    loop = ControllerLoop(_QuietBus(), ctl, 500.0, "lockstep", log=lambda _: None)
+    home = ctl.home_strokes.copy()
+    meas, cmd = loop.meas, loop.cmd
 
     def cycle() -> None:
-        core.meas_y[:] = home
-        core.meas_force[:] = 0.0
-        core.meas_fresh[:] = True
-        core.valve_state[:] = 3                  # ACTIVE: the valves follow
-        core.update()
+        meas.position_m[:] = home
+        meas.force_n[:] = 0.0
+        meas.fresh[:] = True
+        meas.valve_state[:] = ValveState.ACTIVE          # the valves follow
+        meas.heartbeat_age_s[:] = 0.0
+        ctl.update(meas, cmd)
+        ctl.after_write()
+        ctl.host.acks.clear()
 
     cycle()
-    core.activated(True)
+    ctl.activated(True)
     names = list(loop.decoder.names)
     exceptions, first, non_finite = 0, "", 0
     start = time.perf_counter()
@@ -154,12 +159,10 @@ def fuzz_controller(count: int, seed: int, controller: str = "model-based") -> F
         try:
             loop.dispatch(msg)
             if i % CYCLE_EVERY == CYCLE_EVERY - 1:
-                loop.do_host_work()
-                loop.acks.clear()
                 cycle()
-                if not np.isfinite(core.spool).all():
+                if not np.isfinite(cmd.spool).all():
                     non_finite += 1
-        except Exception as error:       # noqa: BLE001
+        except Exception as error:
             exceptions += 1
             first = first or f"{type(error).__name__}: {error}"
     return _report("controller", count, seed, loop.decoder, exceptions, first, loop.stats.host_commands,

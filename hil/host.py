@@ -13,18 +13,20 @@ from collections.abc import Callable
 
 import can
 
-from firmware_py.supervisor import Ack, Command, State
 from protocol.codec import CODECS, EncodeStatus, FrameDecoder
 from protocol.e2e import RxStatus
+from protocol.enums import Ack, AckKind, Command, EmuCommand, State
+from protocol.nodes import CONTROLLER_NODE, NODE_IDS
 from protocol.outbox import Outbox
-from protocol.values import EMU_SET_LOAD, KIND_HOST_CMD, KIND_TEST, KIND_WAYPOINT
 
 CONTROLLER_MESSAGES = ["SYNC", "CTRL_STATUS", "CTRL_ACK"]    # what the host reads: all the controller's
 # ... and leg 1's encoder: the identification tests choose their next input from the last
 # one's velocity, as a lab's tool reading the sensor would (scenarios/friction.py)
 HOST_MESSAGES = CONTROLLER_MESSAGES + ["LEG_STATE_1"]
 TRACK_CYCLES = 2000                                             # leg 1's last positions kept
-HEARTBEAT_IDS = (0x701, 0x70F)                                  # the nodes' (the controller's is 0x710)
+# the nodes' heartbeats (not the controller's): the emulator is up when they come
+NODE_HEARTBEAT_IDS = frozenset(CODECS[f"HEARTBEAT_{node}"].frame_id for node in NODE_IDS.values()
+                               if node != CONTROLLER_NODE)
 
 
 class HostError(RuntimeError):
@@ -47,7 +49,7 @@ class Host:
         self.acks: dict[tuple[int, int], int] = {}
         self.frames_sent = 0
         self.frames_received = 0
-        self.node_heartbeats = 0                # CANopen heartbeats of the nodes (ids 0x701-0x70F)
+        self.node_heartbeats = 0                # CANopen heartbeats of the nodes
         self._cmd = Outbox("HOST_CMD")
         self._pos = Outbox("HOST_WAYPOINT_POS")
         self._rot = Outbox("HOST_WAYPOINT_ROT")
@@ -58,6 +60,7 @@ class Host:
         self._test_seq = 0
         self.waypoint_seq = 0
         self._last_watch = 0.0
+        self._sync_id = CODECS["SYNC"].frame_id
         self._status = CODECS["CTRL_STATUS"].index
         self._ack = CODECS["CTRL_ACK"].index
         self._leg1_id, self._leg1_position = CODECS["LEG_STATE_1"].frame_id, CODECS["LEG_STATE_1"].index["POSITION"]
@@ -81,11 +84,11 @@ class Host:
         msg.channel = None                     # BLF/ASC channel numbers, not the bus's name
         self.writer.on_message_received(msg)
         self.frames_received += 1
-        if HEARTBEAT_IDS[0] <= msg.arbitration_id <= HEARTBEAT_IDS[1]:
+        if msg.arbitration_id in NODE_HEARTBEAT_IDS:
             self.node_heartbeats += 1
         status = self.decoder.receive_message(msg)
         if status is RxStatus.OK:
-            if msg.arbitration_id == 0x080:
+            if msg.arbitration_id == self._sync_id:
                 self.syncs += 1
             elif msg.arbitration_id == CODECS["CTRL_STATUS"].frame_id:
                 v = self.decoder.values["CTRL_STATUS"]
@@ -154,7 +157,7 @@ class Host:
         v, i = self._cmd.values, self._cmd.index
         v[i["COMMAND"]], v[i["ARGUMENT"]], v[i["SEQ"]] = int(command), argument, self._cmd_seq
         self.send(self._cmd)
-        result = self._await_ack(KIND_HOST_CMD, self._cmd_seq, f"HOST_CMD {command.name}")
+        result = self._await_ack(AckKind.HOST_CMD, self._cmd_seq, f"HOST_CMD {command.name}")
         if expect_ok and result is not Ack.ACCEPTED:
             raise HostError(f"HOST_CMD {command.name} {argument} refused: {result.name}")
         return result
@@ -167,7 +170,7 @@ class Host:
         v[i["MODE"]], v[i["SEQ"]], v[i["VALVE"]] = mode, self._test_seq, valve_v
         v[i["FORCE"]], v[i["DURATION"]] = force_n, duration_s
         self.send(self._test)
-        result = self._await_ack(KIND_TEST, self._test_seq, f"HOST_TEST mode {mode}")
+        result = self._await_ack(AckKind.TEST, self._test_seq, f"HOST_TEST mode {mode}")
         if expect_ok and result is not Ack.ACCEPTED:
             raise HostError(f"HOST_TEST mode {mode} ({valve_v:g} V, {force_n:g} N, {duration_s:g} s) refused: "
                             f"{result.name}")
@@ -188,7 +191,7 @@ class Host:
         v[i["TAG"]], v[i["SEQ"]], v[i["FLAGS"]] = tag, seq, flags
         v[i["SEGMENT_TIME"]], v[i["ACCEL_TIME"]] = segment_time_s, accel_time_s
         self.send(self._time)
-        result = self._await_ack(KIND_WAYPOINT, seq, f"waypoint {seq}")
+        result = self._await_ack(AckKind.WAYPOINT, seq, f"waypoint {seq}")
         if result is Ack.ACCEPTED:
             self.waypoint_seq = (seq + 1) % 256
         elif expect_ok:
@@ -204,7 +207,7 @@ class Host:
         self.send(self._emu)
 
     def set_load(self, load_kg: float) -> None:
-        self.emulator(EMU_SET_LOAD, load_kg=load_kg)
+        self.emulator(EmuCommand.SET_LOAD, load_kg=load_kg)
 
     def close(self) -> None:
         self.writer.stop()

@@ -3,7 +3,8 @@
 Every scenario's metrics come from this alone, so a log recorded on the real rig is
 analysed exactly like one from the emulator. Cycle k starts at the k-th SYNC (k = 0 for the
 first; gaps in the SYNC counter count); a frame belongs to the cycle whose SYNC it answers
-(see `_assign_cycles` for the on-host bus). Frames before the first SYNC get cycle -1. Values are SI (the codecs' units).
+(see `_assign_cycles` for the on-host bus). Frames before the first SYNC get cycle -1. Values
+are SI (the codecs' units).
 """
 
 from __future__ import annotations
@@ -18,8 +19,8 @@ import numpy as np
 from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import E2E_REJECTED, RxStatus
+from protocol.enums import NmtCommand
 from protocol.errors import UserInputError
-from protocol.values import NMT_START
 
 LOG_SUFFIXES = (".blf", ".asc")
 
@@ -218,7 +219,7 @@ def read_log(path: str | Path) -> LogData:
                 rejected.setdefault(name_of_id[frame_id], []).append(int(cycles[i]))
             continue
         cycle = int(cycles[i])
-        if frame_id == nmt_id and decoder.values["NMT"][0] == NMT_START:
+        if frame_id == nmt_id and decoder.values["NMT"][0] == NmtCommand.START:
             decoder.restart_sender(CODECS["NMT"].schedule.sender)     # a (re)started controller
         if frame_id == sync_id:
             sync_times.append((cycle, timestamp))

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from firmware_py.supervisor import State
+from protocol.enums import State
 
 from .logdata import LogData
 

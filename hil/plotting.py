@@ -6,7 +6,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.pyplot as plt
 
 LOAD_COLOURS = {0.0: "tab:blue", 3.0: "tab:orange", 6.0: "tab:green"}
 

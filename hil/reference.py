@@ -1,7 +1,7 @@
 """The controller's joint reference rebuilt from a log's waypoints and acknowledgements.
 
 The controller does not transmit its reference; it follows a documented rule that a log
-makes reproducible (firmware_py/core.py):
+makes reproducible (firmware_py/reference.py and waypoints.py):
 - an accepted waypoint (CTRL_ACK, result 0) joins the queue; FLAGS bit 0 ends a trajectory,
   bit 1 starts it at once (or when the running motion ends), bit 2 makes it a step;
 - a trajectory starts from the reference it replaces: the end point of the previous one;
@@ -10,7 +10,7 @@ makes reproducible (firmware_py/core.py):
   or the cycle after the one in which the previous trajectory reached its end.
 The same codec decodes the same frames into the same floats and the same trajectory code
 builds the same segments, so the rebuilt reference equals the controller's bit for bit
-(tests/test_hil_reference.py checks it against the core).
+(tests/test_hil_reference.py checks it against the controller).
 HOME, PARK and STOP moves start from wherever the reference was; cycles after them until
 the next rebuilt trajectory are NaN (unknown), as are cycles after a FAULT or ESTOP.
 """
@@ -22,9 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from firmware_py.supervisor import Ack, Command, State
 from firmware_py.trajectory import JointTrajectory, hold_at, through_points
-from protocol.values import FLAG_LAST, FLAG_START, FLAG_STEP, KIND_HOST_CMD, KIND_WAYPOINT
+from protocol.enums import Ack, AckKind, Command, State, WaypointFlag
 
 from .logdata import LogData
 
@@ -33,7 +32,7 @@ from .logdata import LogData
 class Motion:
     """One trajectory the controller played."""
     seqs: list[int]
-    start: int                 # core cycle count when it started (see the module docstring)
+    start: int                 # the controller's cycle count when it started (module docstring)
     end_cycle: int             # log cycle of the update in which it reached its end
     trajectory: JointTrajectory
     step: bool
@@ -71,7 +70,7 @@ class StrokeMap:
 def _end_cycle(trajectory: JointTrajectory, start: int, period_s: float) -> int:
     """The log cycle whose update first sees t >= the trajectory's end (same float test)."""
     seg = trajectory.segments[-1, 0]
-    end_t = np.add(seg[4], seg[6])                  # T_START + TM, as the core computes it
+    end_t = np.add(seg[4], seg[6])                  # T_START + TM, as the controller computes it
     k = start - 1 + max(int(math.ceil(end_t / period_s)) - 1, 0)
     while (k + 1 - start) * period_s >= end_t:
         k -= 1
@@ -98,17 +97,17 @@ def rebuild(log: LogData, rig: str, period_s: float, initial_position=None) -> R
         nonlocal queue, running, last_point
         if not queue:
             return
-        take = next((k + 1 for k, w in enumerate(queue) if w["flags"] & FLAG_LAST), len(queue))
+        take = next((k + 1 for k, w in enumerate(queue) if w["flags"] & WaypointFlag.LAST), len(queue))
         chosen, queue = queue[:take], queue[take:]
         origin = last_point if last_point is not None else positions[min(max(log_cycle, 0), len(positions) - 1)]
-        if chosen[0]["flags"] & FLAG_STEP:
+        if chosen[0]["flags"] & WaypointFlag.STEP:
             trajectory = hold_at(chosen[0]["strokes"], chosen[0]["segment_time"])
         else:
             points = np.array([origin] + [w["strokes"] for w in chosen])
             trajectory = through_points(points, [w["accel_time"] for w in chosen],
                                         [w["segment_time"] for w in chosen])
         running = Motion([w["seq"] for w in chosen], cycle_start, _end_cycle(trajectory, cycle_start, period_s),
-                         trajectory, bool(chosen[0]["flags"] & FLAG_STEP), [w["pose"] for w in chosen])
+                         trajectory, bool(chosen[0]["flags"] & WaypointFlag.STEP), [w["pose"] for w in chosen])
         motions.append(running)
 
     def advance(to_cycle: int):
@@ -118,7 +117,7 @@ def rebuild(log: LogData, rig: str, period_s: float, initial_position=None) -> R
             finished = running
             running = None
             last_point = finished.trajectory.sample([1e9])[0][0]
-            if queue and queue[0]["flags"] & FLAG_START:
+            if queue and queue[0]["flags"] & WaypointFlag.START:
                 start(finished.end_cycle + 1, finished.end_cycle)
 
     unknown_from: list[int] = []
@@ -139,13 +138,13 @@ def rebuild(log: LogData, rig: str, period_s: float, initial_position=None) -> R
             pending[-1000 - int(v["SEQ"])] = {"command": int(v["COMMAND"])}
         elif event.name == "CTRL_ACK" and int(v["RESULT"]) == Ack.ACCEPTED:
             kind, seq = int(v["KIND"]), int(v["SEQ"])
-            if kind == KIND_WAYPOINT and seq in pending:
+            if kind == AckKind.WAYPOINT and seq in pending:
                 w = pending.pop(seq)
                 w["strokes"] = strokes_of(w["pose"])
                 queue.append(w)
-                if w["flags"] & FLAG_START and running is None:
+                if w["flags"] & WaypointFlag.START and running is None:
                     start(event.cycle, event.cycle)
-            elif kind == KIND_HOST_CMD and (-1000 - seq) in pending:
+            elif kind == AckKind.HOST_CMD and (-1000 - seq) in pending:
                 command = pending.pop(-1000 - seq)["command"]
                 if command == Command.START and running is None:
                     start(event.cycle, event.cycle)

@@ -46,10 +46,16 @@ def _plain(value):
 def format_checks(doc: dict) -> str:
     rows = ["| check | expected | measured | pass |", "|---|---|---|---|"]
     rows += [f"| {c['name']} | {c['expected']} | {c['measured']} | "
-             f"{('yes' if c['passed'] else '**no**') if c['required'] else ('matches' if c['passed'] else 'deviates (reported)')}"
+             f"{_verdict(c)}"
              f"{' (benchmark)' if c.get('benchmark') else ''} |"
              for c in doc["checks"]]
     return "\n".join(rows)
+
+
+def _verdict(check: dict) -> str:
+    if check["required"]:
+        return "yes" if check["passed"] else "**no**"
+    return "matches" if check["passed"] else "deviates (reported)"
 
 
 def format_report(scenario: Scenario, doc: dict, analysis) -> str:
@@ -62,7 +68,8 @@ def format_report(scenario: Scenario, doc: dict, analysis) -> str:
     for table in analysis.tables:
         lines += [table, ""]
     for figure in analysis.figures:
-        lines += [f"### {figure.caption}", "", f"Beside: {figure.thesis}", "", f"![{figure.caption}]({figure.file})", ""]
+        lines += [f"### {figure.caption}", "", f"Beside: {figure.thesis}", "",
+                  f"![{figure.caption}]({figure.file})", ""]
     t = doc["ctrl_status_timing"]
     lines += ["## Bus and timing (from the log)", "",
               f"- frames {doc['log']['frames']}, cycles {doc['log']['cycles']}, E2E errors {doc['e2e_errors']}, "

@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from firmware_py.control import CONTROLLER_NAMES
-from firmware_py.supervisor import Ack, Command, Fault, State
 from protocol.bus import BusSpec, default_bus_spec, open_bus, parse_bus_spec
+from protocol.enums import Ack, Command, Fault, State
 from protocol.errors import UserInputError
 
 from .host import Host, HostError
@@ -106,20 +106,19 @@ class Run:
         return self.options.valve_watchdog_periods or REALTIME_EMULATOR_SYNC_TIMEOUT_PERIODS
 
     def start_emulator(self) -> None:
-        overrides = {section: dict(values) for section, values in self.scenario.emulator_overrides.items()}
-        nodes = overrides.setdefault("nodes", {})
         if self.pacing == "lockstep":
-            nodes["sync_timeout_periods"] = LOCKSTEP_EMULATOR_SYNC_TIMEOUT_PERIODS
+            watchdog = LOCKSTEP_EMULATOR_SYNC_TIMEOUT_PERIODS
         else:
-            nodes["sync_timeout_periods"] = self.valve_watchdog_periods()
+            watchdog = self.valve_watchdog_periods()
             self.notes.append(f"emulated valves' SYNC watchdog and the controller's stall fault: "
-                              f"{nodes['sync_timeout_periods']:g} periods (--valve-watchdog-periods; README 'Timing')")
+                              f"{watchdog:g} periods (--valve-watchdog-periods; docs/TIMING.md)")
         name = self._child_name("emulator")
         config = self.out / f"{name}.toml"
-        config.write_text(_toml(overrides))
+        config.write_text(_toml(self.scenario.emulator_overrides))
         child = Child(name, ["-m", "plant_emulator", "--bus", str(self.spec), "--rig", self.scenario.rig,
-                                   "--rate-hz", str(self.options.rate_hz), "--load-kg", str(self.scenario.load_kg),
-                                   "--config", str(config), "--summary", str(self.out / f"{name}.json")], self.out)
+                             "--rate-hz", str(self.options.rate_hz), "--load-kg", str(self.scenario.load_kg),
+                             "--sync-watchdog-periods", f"{watchdog:g}", "--config", str(config),
+                             "--summary", str(self.out / f"{name}.json")], self.out)
         heartbeats = self.host.node_heartbeats
         self.notes += child.start(realtime_priority=70 if self.pacing == "realtime" else None)
         self.children.append(child)

@@ -1,6 +1,4 @@
-"""The plant emulator: hydraulics, friction, mechanism, sensors and CiA 408 node behaviour
-on the bus, fault injection. Physics is pure; node behaviour is frames. (Built by the
-later issues.)
+"""The plant emulator: hydraulics, mechanism (MuJoCo), sensors and CiA 408 node behaviour
+on the bus, fault injection. Physics is pure; node behaviour is frames. It imports only
+`physics` and `protocol`: what it simulates is its own, independent of the controller.
 """
-
-import firmware_py  # noqa: F401  (sets numba's cache directory before any kernel compiles)

@@ -1,7 +1,24 @@
-"""`python -m plant_emulator ...` is `hydrapod emulator ...`."""
+"""`python -m plant_emulator [options]`: the emulator process, as `hydrapod emulator`."""
 
 import sys
 
-from plant_emulator.commands import main
+from physics.numba_cache import configure
 
-sys.exit(main())
+configure()     # before any kernel is defined (see physics/numba_cache.py)
+
+from plant_emulator.cli import configure_parser  # noqa: E402
+from protocol.cliutil import OneLineArgumentParser, run  # noqa: E402
+
+PROG = "python -m plant_emulator"
+
+
+def main(argv=None) -> int:
+    parser = OneLineArgumentParser(prog=PROG, description="hydrapod plant emulator: the valve-driver and sensor "
+                                                          "nodes of a rig on a bus, until SIGTERM/SIGINT")
+    configure_parser(parser)
+    args = parser.parse_args(argv)
+    return run(args.handler, args, PROG)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

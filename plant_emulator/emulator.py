@@ -25,45 +25,33 @@ from dataclasses import dataclass, field
 
 import can
 import numpy as np
+from scipy.spatial.transform import Rotation
 
-from firmware_py.rotation import quat_to_rpy
-from protocol.cliutil import StopFlag  # noqa: F401  (re-exported: the emulator's process uses it)
 from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import E2E_REJECTED, RxStatus
+from protocol.enums import EmuCommand, EmuFault, NmtCommand, NmtState
+from protocol.nodes import CONTROLLER_NODE, IMU_NODE, rig_nodes
 from protocol.outbox import Outbox
-from protocol.values import (
-    EMU_CLEAR,
-    EMU_CLEAR_ALL,
-    EMU_INJECT,
-    EMU_SET_LOAD,
-    NMT_BOOTUP,
-    NMT_ENTER_PREOP,
-    NMT_OPERATIONAL,
-    NMT_PRE_OPERATIONAL,
-    NMT_RESET_COMM,
-    NMT_RESET_NODE,
-    NMT_START,
-    NMT_STOP,
-    NMT_STOPPED,
-)
 
 from . import hydraulics as hy
 from .params import EmulatorConfig
 from .valve_node import Emergency, ValveDriver, ValveState
 
-IMU_NODE = 7
 BABBLE_ID = 0x601                    # not in the DBC (an SDO request id of node 1)
-# EMU_CTRL.FAULT (DBC value table). REPEAT: the node re-sends its previous frame (a frozen
-# alive counter); LEG_JAM: the cylinder's rod seized (mechanical; the valve still works).
-FAULT_NAMES = {1: "DROP", 2: "DELAY", 3: "DUPLICATE", 4: "CORRUPT", 5: "STUCK", 6: "OUT_OF_RANGE",
-               7: "SILENT", 8: "VALVE_JAM", 9: "SUPPLY_LOSS", 10: "REORDER", 11: "BABBLE", 12: "REPEAT",
-               13: "LEG_JAM"}
 FREE_RUN_CATCH_UP_STEPS = 25         # free run: periods of physics per poll at most (a late wake-up)
-FAULT_CODES = {name: code for code, name in FAULT_NAMES.items()}
-VALUE_PARAM_FAULTS = {"BABBLE", "OUT_OF_RANGE"}   # FAULT_PARAM is the fault's value: until cleared
-CONTROLLER_TARGET = 16
+# EMU_CTRL.FAULT (the DBC's value table). REPEAT: the node re-sends its previous frame (a
+# frozen alive counter); LEG_JAM: the cylinder's rod seized (mechanical; the valve still works).
+# FAULT_PARAM is the fault's value for these (until cleared), its duration in SYNCs for the others
+VALUE_PARAM_FAULTS = (EmuFault.BABBLE, EmuFault.OUT_OF_RANGE)
+KNOWN_FAULTS = frozenset(int(kind) for kind in EmuFault if kind is not EmuFault.NONE)
 SYNC_TIMEOUT_EVENT = "emulator: event sync_timeout"   # a stderr line per SYNC-watchdog trip (JSON after it)
+
+
+def attitude_rpy(quat_wxyz) -> np.ndarray:
+    """(roll, pitch, yaw) of the bus's convention R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    yaw, pitch, roll = Rotation.from_quat(quat_wxyz, scalar_first=True).as_euler("ZYX")
+    return np.array([roll, pitch, yaw])
 
 
 @dataclass
@@ -100,10 +88,10 @@ class Emulator:
         rig.warm_up()                     # kernels loaded before the first SYNC, not in it
         self.legs = range(1, rig.n_legs + 1)
         self.has_imu = rig.n_legs == 6
-        self.nodes = list(self.legs) + ([IMU_NODE] if self.has_imu else [])
+        self.nodes = rig_nodes(rig.n_legs)
         self.valves = {n: ValveDriver(cfg.command_timeout_syncs, cfg.spool_jam_threshold, cfg.spool_jam_syncs)
                        for n in self.legs}
-        self.nmt = {n: NMT_BOOTUP for n in self.nodes}
+        self.nmt = {n: NmtState.BOOTUP for n in self.nodes}
         names = ["NMT", "SYNC", "EMU_CTRL"] + [f"VALVE_CMD_{n}" for n in self.legs]
         self.decoder = FrameDecoder(names)
         self._cmd_slot = {CODECS[f"VALVE_CMD_{n}"].frame_id: n for n in self.legs}
@@ -150,33 +138,33 @@ class Emulator:
                 return                      # a full queue drops the frame, as a controller would
         self.counters.frames_out += 1
 
-    def _fault(self, target: int, kind: str):
+    def _fault(self, target: int, kind: EmuFault):
         """The active injected fault `kind` on `target` ([remaining, param]) or None."""
-        return self.faults.get((target, FAULT_CODES[kind]))
+        return self.faults.get((target, kind))
 
     def _emit(self, node: int, name: str) -> None:
         """Encode and send a node's frame through the injected frame faults."""
         box = self.out[name]
         if not box.encode():
             return
-        if self._fault(node, "SILENT") or self._fault(node, "DROP"):
+        if self._fault(node, EmuFault.SILENT) or self._fault(node, EmuFault.DROP):
             return
         message = box.message
-        if self._fault(node, "REPEAT"):
+        if self._fault(node, EmuFault.REPEAT):
             last = self._last_sent.get(name)
             if last is not None:               # the frame before the fault again, counter and all
                 message = can.Message(arbitration_id=message.arbitration_id, data=last, is_extended_id=False)
         else:
             self._last_sent[name] = bytes(message.data)
-        if self._fault(node, "CORRUPT"):
+        if self._fault(node, EmuFault.CORRUPT):
             message = can.Message(arbitration_id=message.arbitration_id, data=bytearray(message.data),
                                   is_extended_id=False)
             message.data[-1] ^= 0x01          # after the CRC: the receiver sees a CRC error
-        if self._fault(node, "DELAY"):
+        if self._fault(node, EmuFault.DELAY):
             self._delayed.append(can.Message(arbitration_id=message.arbitration_id, data=bytes(message.data),
                                              is_extended_id=False))
             return
-        if self._fault(node, "REORDER"):
+        if self._fault(node, EmuFault.REORDER):
             held = self._held.pop(name, None)
             if held is None:                   # hold this one; the next goes out before it
                 self._held[name] = bytes(message.data)
@@ -185,7 +173,7 @@ class Emulator:
             self._send(can.Message(arbitration_id=message.arbitration_id, data=held, is_extended_id=False))
             return
         self._send(message)
-        if self._fault(node, "DUPLICATE"):
+        if self._fault(node, EmuFault.DUPLICATE):
             self._send(message)
 
     def _emergency(self, node: int, emergency: Emergency) -> None:
@@ -195,13 +183,13 @@ class Emulator:
         self.counters.emergencies += 1
         if emergency.error_code:
             self.counters.valve_faults += 1
-        if not self._fault(node, "SILENT") and box.encode():
+        if not self._fault(node, EmuFault.SILENT) and box.encode():
             self._send(box.message)
 
     def _heartbeat(self, node: int) -> None:
         box = self.out[f"HEARTBEAT_{node}"]
         box.values[0] = self.nmt[node]
-        if not self._fault(node, "SILENT") and box.encode():
+        if not self._fault(node, EmuFault.SILENT) and box.encode():
             self._send(box.message)
 
     def _heartbeats(self) -> None:
@@ -214,10 +202,10 @@ class Emulator:
         for valve in self.valves.values():
             valve.boot()
         for n in self.nodes:
-            self.nmt[n] = NMT_BOOTUP
+            self.nmt[n] = NmtState.BOOTUP
         self._heartbeats()
         for n in self.nodes:
-            self.nmt[n] = NMT_OPERATIONAL if self.cfg.nmt_autostart else NMT_PRE_OPERATIONAL
+            self.nmt[n] = NmtState.OPERATIONAL if self.cfg.nmt_autostart else NmtState.PRE_OPERATIONAL
         self.next_heartbeat = self.clock() + self.cfg.heartbeat_s
 
     def poll(self, now: float | None = None) -> float:
@@ -300,7 +288,7 @@ class Emulator:
             return
         node = self._cmd_slot.get(frame_id)
         if node is not None:
-            if self._ignore_commands or self.nmt[node] != NMT_OPERATIONAL:
+            if self._ignore_commands or self.nmt[node] != NmtState.OPERATIONAL:
                 return
             _, _, d, h, m, r, setpoint = self.decoder.values[f"VALVE_CMD_{node}"]
             self.valves[node].receive(bool(d), bool(h), bool(m), bool(r), float(setpoint))
@@ -308,57 +296,57 @@ class Emulator:
             self._emu_ctrl(*(self.decoder.values["EMU_CTRL"][2:]))
 
     def _nmt(self, command: int, node: int) -> None:
-        if command == NMT_START:      # the NMT master (re)started: its alive counters start afresh
+        if command == NmtCommand.START:      # the NMT master (re)started: its alive counters start afresh
             self.decoder.restart_sender(CODECS["NMT"].schedule.sender)
         targets = self.nodes if node == 0 else [node] if node in self.nmt else []
         for n in targets:
-            if command == NMT_START:
-                self.nmt[n] = NMT_OPERATIONAL
-            elif command == NMT_STOP:
-                self.nmt[n] = NMT_STOPPED
-            elif command == NMT_ENTER_PREOP:
-                self.nmt[n] = NMT_PRE_OPERATIONAL
-            elif command in (NMT_RESET_NODE, NMT_RESET_COMM):
-                if command == NMT_RESET_NODE and n in self.valves:
+            if command == NmtCommand.START:
+                self.nmt[n] = NmtState.OPERATIONAL
+            elif command == NmtCommand.STOP:
+                self.nmt[n] = NmtState.STOPPED
+            elif command == NmtCommand.ENTER_PREOPERATIONAL:
+                self.nmt[n] = NmtState.PRE_OPERATIONAL
+            elif command in (NmtCommand.RESET_NODE, NmtCommand.RESET_COMMUNICATION):
+                if command == NmtCommand.RESET_NODE and n in self.valves:
                     self.valves[n] = ValveDriver(self.cfg.command_timeout_syncs, self.cfg.spool_jam_threshold,
                                                  self.cfg.spool_jam_syncs)
                     self.valves[n].boot()
-                self.nmt[n] = NMT_BOOTUP
+                self.nmt[n] = NmtState.BOOTUP
                 self._heartbeat(n)
-                self.nmt[n] = NMT_PRE_OPERATIONAL
+                self.nmt[n] = NmtState.PRE_OPERATIONAL
 
     def _emu_ctrl(self, command: float, target: float, kind: float, load_kg: float, param: float) -> None:
         command, target, kind, param = int(command), int(target), int(kind), int(param)
-        if command == EMU_SET_LOAD:
+        if command == EmuCommand.SET_LOAD:
             self.rig.set_load(load_kg)
-        elif command == EMU_INJECT and kind in FAULT_NAMES:
-            lasts = param if param > 0 and FAULT_NAMES[kind] not in VALUE_PARAM_FAULTS else -1
+        elif command == EmuCommand.INJECT_FAULT and kind in KNOWN_FAULTS:
+            kind = EmuFault(kind)
+            lasts = param if param > 0 and kind not in VALUE_PARAM_FAULTS else -1
             self.faults[(target, kind)] = [lasts, param]
-            self.counters.injected[FAULT_NAMES[kind]] = self.counters.injected.get(FAULT_NAMES[kind], 0) + 1
+            self.counters.injected[kind.name] = self.counters.injected.get(kind.name, 0) + 1
             self._apply_state_fault(target, kind, True)
-        elif command == EMU_CLEAR:
+        elif command == EmuCommand.CLEAR_FAULT:
             if self.faults.pop((target, kind), None) is not None:
                 self._apply_state_fault(target, kind, False)
-        elif command == EMU_CLEAR_ALL:
+        elif command == EmuCommand.CLEAR_ALL:
             for key in list(self.faults):
                 self.faults.pop(key)
                 self._apply_state_fault(*key, False)
 
     def _apply_state_fault(self, target: int, kind: int, on: bool) -> None:
-        name = FAULT_NAMES[kind]
-        if name == "VALVE_JAM" and 1 <= target <= self.rig.n_legs:
+        if kind == EmuFault.VALVE_JAM and 1 <= target <= self.rig.n_legs:
             self.rig.jammed[target - 1] = on
-        elif name == "LEG_JAM" and 1 <= target <= self.rig.n_legs:
+        elif kind == EmuFault.LEG_JAM and 1 <= target <= self.rig.n_legs:
             self.rig.set_rod_seized(target - 1, on)
-        elif name == "REPEAT" and not on:
+        elif kind == EmuFault.REPEAT and not on:
             self._last_sent.clear()
-        elif name == "SUPPLY_LOSS":
+        elif kind == EmuFault.SUPPLY_LOSS:
             self.rig.set_supply_lost(on)
-        elif name == "STUCK" and not on:
+        elif kind == EmuFault.STUCK and not on:
             self._stuck.pop(target, None)
-        elif name == "DROP" and target == CONTROLLER_TARGET:
+        elif kind == EmuFault.DROP and target == CONTROLLER_NODE:
             self._ignore_commands = on
-        elif name == "DELAY" and not on:
+        elif kind == EmuFault.DELAY and not on:
             self._flush_delayed()
 
     def _flush_delayed(self) -> None:
@@ -379,7 +367,7 @@ class Emulator:
         self._free_run_next = None
         self._flush_delayed()
         for n, valve in self.valves.items():
-            if self.nmt[n] != NMT_OPERATIONAL:
+            if self.nmt[n] != NmtState.OPERATIONAL:
                 continue
             emergency = valve.on_sync()
             if emergency is None:
@@ -400,7 +388,7 @@ class Emulator:
 
     def _count_down_faults(self) -> None:
         for key, entry in list(self.faults.items()):
-            if FAULT_NAMES[key[1]] == "BABBLE":
+            if key[1] == EmuFault.BABBLE:
                 babble = can.Message(arbitration_id=BABBLE_ID, data=bytes(8), is_extended_id=False)
                 for _ in range(max(entry[1], 1)):
                     self._send(babble)
@@ -419,16 +407,16 @@ class Emulator:
     def _sample_and_send(self, counter: int) -> None:
         rig, cfg, rng = self.rig, self.cfg, self.rng
         for n in self.legs:
-            if self.nmt[n] != NMT_OPERATIONAL:
+            if self.nmt[n] != NmtState.OPERATIONAL:
                 continue
             i = n - 1
             valve = self.valves[n]
             position = round(rig.state[i, hy.S_Y] / cfg.encoder_resolution_m) * cfg.encoder_resolution_m
             force = rig.rod_force_n[i] + cfg.load_cell_noise_n * rng.standard_normal()
-            if self._fault(n, "STUCK"):
+            if self._fault(n, EmuFault.STUCK):
                 position, force = self._stuck.setdefault(n, (position, force))
-            if self._fault(n, "OUT_OF_RANGE"):
-                param = self.faults[(n, FAULT_CODES["OUT_OF_RANGE"])][1]
+            if self._fault(n, EmuFault.OUT_OF_RANGE):
+                param = self.faults[(n, EmuFault.OUT_OF_RANGE)][1]
                 force = float(param) if param else 1e9         # saturates at the DBC's maximum
             box = self.out[f"LEG_STATE_{n}"]
             box.values[box.index["VALVE_STATE"]] = int(valve.state)
@@ -449,12 +437,12 @@ class Emulator:
                 box.values[box.index["SPOOL_ACTUAL"]] = rig.state[i, hy.S_SPOOL]
                 box.values[box.index["FAULT_REASON"]] = int(valve.fault_reason)
                 self._emit(n, name)
-        if self.has_imu and self.nmt[IMU_NODE] == NMT_OPERATIONAL:
+        if self.has_imu and self.nmt[IMU_NODE] == NmtState.OPERATIONAL:
             if self._due("IMU_ATTITUDE", counter):
                 _, quat = rig.platform_pose()
                 box = self.out["IMU_ATTITUDE"]
                 box.values[box.index["ROLL"]:box.index["YAW"] + 1] = (
-                    quat_to_rpy(quat) + cfg.imu_angle_noise_rad * rng.standard_normal(3))
+                    attitude_rpy(quat) + cfg.imu_angle_noise_rad * rng.standard_normal(3))
                 self._emit(IMU_NODE, "IMU_ATTITUDE")
             if self._due("IMU_RATE", counter):
                 box = self.out["IMU_RATE"]

@@ -38,7 +38,8 @@ import math
 import numba
 import numpy as np
 
-ATMOSPHERE_PA = 101325.0
+from physics import actuator
+from physics.constants import ATMOSPHERE_PA
 
 # -- parameter vector (filled by params.ActuatorParams.packed) ------------------------------
 HP_AREA_A = 0          # piston area Ap [m^2]
@@ -127,7 +128,7 @@ def chamber_volumes(y: float, hp: np.ndarray):
 @numba.njit(cache=True, inline="always")
 def piston_force(pa: float, pb: float, hp: np.ndarray) -> float:
     """eq. 4.15 / 4.24: hydraulic force on the piston, positive extending."""
-    return hp[HP_AREA_A] * (pa - hp[HP_ALPHA] * pb)
+    return actuator.piston_force(pa, pb, hp[HP_AREA_A], hp[HP_ALPHA])
 
 
 @numba.njit(cache=True)

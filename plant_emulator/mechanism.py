@@ -9,8 +9,8 @@ a site at the rod's end and a site at the platform's spherical joint (a ball joi
 the loop). Inertias of Table 10.1 in the link frames [u4, u2, u3]. Contacts are off (the
 workspace test handles collisions). The slide joints carry the actuator forces.
 
-Only the geometry file is shared with the controller; positions, Jacobians, mass matrices,
-bias forces and constraint Jacobians here are MuJoCo's own.
+Only the geometry file is shared with the controller (read here by `rig_geometry`);
+positions, Jacobians, mass matrices, bias forces and constraint Jacobians are MuJoCo's own.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from firmware_py.geometry import Geometry
+from .rig_geometry import RigGeometry
 
 TIMESTEP_S = 0.0005
 # Equality constraints nearly hard: impedance 0.9999 and a 2 ms reference time constant
@@ -59,7 +59,7 @@ class LegHome:
     length_m: float             # d at home
 
 
-def build_mjcf(geometry: Geometry, timestep_s: float = TIMESTEP_S,
+def build_mjcf(geometry: RigGeometry, timestep_s: float = TIMESTEP_S,
                stroke_limits: bool = False) -> tuple[str, list[LegHome]]:
     home = geometry.home_position_m
     legs_home = []
@@ -81,11 +81,13 @@ def build_mjcf(geometry: Geometry, timestep_s: float = TIMESTEP_S,
       <joint name="u1_{i}" type="hinge" axis="{_fmt(axis1_local)}"/>
       <joint name="u2_{i}" type="hinge" axis="0 1 0"/>
       <inertial pos="{_fmt(cyl.com_m)}" mass="{cyl.mass_kg:.12g}" fullinertia="{_full_inertia(cyl.inertia_kg_m2)}"/>
-      <geom type="capsule" fromto="0 0 0 0 0 {geometry.cylinder_length_m:.6g}" size="{geometry.cylinder_radius_m:.6g}" mass="0"/>
+      <geom type="capsule" fromto="0 0 0 0 0 {geometry.cylinder_length_m:.6g}"
+            size="{geometry.cylinder_radius_m:.6g}" mass="0"/>
       <body name="rod{i}" pos="0 0 {length:.12g}">
         <joint name="slide{i}" type="slide" axis="0 0 1"{slide_range}/>
         <inertial pos="{_fmt(rod.com_m)}" mass="{rod.mass_kg:.12g}" fullinertia="{_full_inertia(rod.inertia_kg_m2)}"/>
-        <geom type="capsule" fromto="0 0 0 0 0 {-geometry.rod_length_m:.6g}" size="{geometry.rod_radius_m:.6g}" mass="0"/>
+        <geom type="capsule" fromto="0 0 0 0 0 {-geometry.rod_length_m:.6g}"
+              size="{geometry.rod_radius_m:.6g}" mass="0"/>
         <site name="rod_end{i}" pos="0 0 0"/>
       </body>
     </body>""")
@@ -121,7 +123,7 @@ def build_mjcf(geometry: Geometry, timestep_s: float = TIMESTEP_S,
 class Mechanism:
     """The MuJoCo 6-UPS: set a platform state, step with actuator forces, inverse dynamics."""
 
-    def __init__(self, geometry: Geometry, timestep_s: float = TIMESTEP_S, stroke_limits: bool = False):
+    def __init__(self, geometry: RigGeometry, timestep_s: float = TIMESTEP_S, stroke_limits: bool = False):
         self.geometry = geometry
         self.xml, self.legs_home = build_mjcf(geometry, timestep_s, stroke_limits)
         self.model = mujoco.MjModel.from_xml_string(self.xml)
@@ -129,7 +131,10 @@ class Mechanism:
         m = self.model
         self.free_qpos = m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "platform")]
         self.free_dof = m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "platform")]
-        joint = lambda name: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)
+
+        def joint(name):
+            return mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)
+
         self.u1_qpos = np.array([m.jnt_qposadr[joint(f"u1_{i}")] for i in range(6)])
         self.u2_qpos = np.array([m.jnt_qposadr[joint(f"u2_{i}")] for i in range(6)])
         self.slide_qpos = np.array([m.jnt_qposadr[joint(f"slide{i}")] for i in range(6)])

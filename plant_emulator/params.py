@@ -15,16 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
+from physics import lugre
+from physics.actuator import cylinder_areas
+from physics.constants import BAR, CM3, L_MIN, MM
 from protocol.errors import UserInputError
 from protocol.tomlconfig import load_layered
 from protocol.tomlconfig import merge as _merge
 
 from . import hydraulics as hy
-from .friction import pack_lugre
-
-MM, BAR, CM3 = 1e-3, 1e5, 1e-6
-L_MIN = 1e-3 / 60.0
-GRAVITY_M_S2 = 9.81
 
 # (low, high) per key; ints are declared with int bounds. Lists are checked separately.
 RANGES: dict[str, dict[str, tuple]] = {
@@ -112,7 +110,7 @@ class GuideParams:
         # eq. 6.12: sigma1 = 2 zeta sqrt(sigma0 m) - sigma2, for a well-behaved stick-slip
         sigma1 = max(2.0 * self.damping_ratio * math.sqrt(self.bristle_n_m * mass) - self.viscous_ns_m, 0.0)
         fc = self.coulomb_n
-        return pack_lugre(fc, fs - fc, vs, self.viscous_ns_m, -fc, -(fs - fc), vs, self.viscous_ns_m,
+        return lugre.pack(fc, fs - fc, vs, self.viscous_ns_m, -fc, -(fs - fc), vs, self.viscous_ns_m,
                           self.bristle_n_m, sigma1, self.bristle_n_m, sigma1, self.exponent)
 
 
@@ -163,13 +161,11 @@ class EmulatorConfig:
 
 def pack_hydraulics(raw: dict) -> np.ndarray:
     a, v, c = raw["actuator"], raw["valve"], raw["chambers"]
-    bore, rod = a["bore_radius_mm"] * MM, a["rod_radius_mm"] * MM
-    if rod >= bore:
+    if a["rod_radius_mm"] >= a["bore_radius_mm"]:
         raise ConfigError(f"config: [actuator].rod_radius_mm = {a['rod_radius_mm']} must be below "
                           f"bore_radius_mm = {a['bore_radius_mm']}")
     hp = np.zeros(hy.HP_SIZE)
-    hp[hy.HP_AREA_A] = math.pi * bore ** 2
-    hp[hy.HP_ALPHA] = (bore ** 2 - rod ** 2) / bore ** 2
+    hp[hy.HP_AREA_A], hp[hy.HP_ALPHA] = cylinder_areas(a["bore_radius_mm"] * MM, a["rod_radius_mm"] * MM)
     hp[hy.HP_STROKE] = a["stroke_mm"] * MM
     hp[hy.HP_VA0] = c["dead_volume_a_cm3"] * CM3
     hp[hy.HP_VB0] = c["dead_volume_b_cm3"] * CM3
@@ -192,13 +188,8 @@ def pack_hydraulics(raw: dict) -> np.ndarray:
 
 
 def pack_friction(raw: dict) -> np.ndarray:
-    f = raw["friction"]
     try:
-        return pack_lugre(
-            f["alpha0_pos_n"], f["alpha1_pos_n"], f["vs_pos_mm_s"] * MM, f["sigma2_pos_ns_mm"] / MM,
-            f["alpha0_neg_n"], f["alpha1_neg_n"], f["vs_neg_mm_s"] * MM, f["sigma2_neg_ns_mm"] / MM,
-            f["sigma0_pos_n_mm"] / MM, f["sigma1_pos_ns_mm"] / MM, f["sigma0_neg_n_mm"] / MM,
-            f["sigma1_neg_ns_mm"] / MM)
+        return lugre.from_table(raw["friction"])
     except ValueError as error:
         raise ConfigError(f"config: [friction]: {error}") from None
 
@@ -231,7 +222,8 @@ def build(raw: dict) -> EmulatorConfig:
         imu_rate_noise_rad_s=s["imu_rate_noise_rad_s"], seed=s["seed"],
         sync_period_s=n["sync_period_ms"] * 1e-3, command_timeout_syncs=n["command_timeout_syncs"],
         sync_timeout_periods=n["sync_timeout_periods"], heartbeat_s=n["heartbeat_ms"] * 1e-3,
-        nmt_autostart=n["nmt_autostart"], hold_blocks_ports=n["hold_blocks_ports"], spool_jam_threshold=n["spool_jam_threshold_pct"] / 100.0,
+        nmt_autostart=n["nmt_autostart"], hold_blocks_ports=n["hold_blocks_ports"],
+        spool_jam_threshold=n["spool_jam_threshold_pct"] / 100.0,
         spool_jam_syncs=n["spool_jam_syncs"], leg_pressure_divisor=n["leg_pressure_divisor"],
         imu_divisor=n["imu_divisor"], valve_status_divisor=n["valve_status_divisor"],
     )

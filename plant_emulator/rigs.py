@@ -32,12 +32,13 @@ import mujoco
 import numba
 import numpy as np
 
-from firmware_py.geometry import Geometry, default_geometry
+from physics.constants import GRAVITY_M_S2
+from physics.lugre import force_split, z_step
 
 from . import hydraulics as hy
-from .friction import lugre_split, lugre_z_step
 from .mechanism import Mechanism
-from .params import GRAVITY_M_S2, EmulatorConfig
+from .params import EmulatorConfig
+from .rig_geometry import RigGeometry, read_rig_geometry
 
 SUPPLY_LOSS_TIME_CONSTANT_S = 0.05    # supply pressure decay when the power unit is lost
 SEIZED_FRICTION_N = 1e5               # LEG_JAM on the hexapod: dry friction of a seized slide,
@@ -60,10 +61,10 @@ def testbench_advance(st: np.ndarray, command: float, jammed: bool, seized: bool
         if not jammed:
             st[hy.S_SPOOL] = hy.spool_step(st[hy.S_SPOOL], command, h, hp)
         drive = hy.piston_force(st[hy.S_PA], st[hy.S_PB], hp)            # eq. 4.15
-        seal_z, seal_c = lugre_split(st[hy.S_Z], v, fp)                  # eq. 6.1-6.3
-        guide_z, guide_c = lugre_split(st[hy.S_ZG], v, gp)               # eq. D.3
+        seal_z, seal_c = force_split(st[hy.S_Z], v, fp)                  # eq. 6.1-6.3
+        guide_z, guide_c = force_split(st[hy.S_ZG], v, gp)               # eq. D.3
         # m dv/dt = drive - F_seal - F_guide - m g, the friction's v-slope implicit
-        v_new = (mass * v + h * (drive - seal_z - guide_z - mass * 9.81)) / (mass + h * (seal_c + guide_c))
+        v_new = (mass * v + h * (drive - seal_z - guide_z - mass * GRAVITY_M_S2)) / (mass + h * (seal_c + guide_c))
         if seized:                                                       # the rod does not move
             v_new = 0.0
         y_new = y + h * v_new
@@ -75,8 +76,8 @@ def testbench_advance(st: np.ndarray, command: float, jammed: bool, seized: bool
             v_new = min(v_new, 0.0)
         seal = seal_z + seal_c * v_new
         guide = guide_z + guide_c * v_new
-        st[hy.S_Z] = lugre_z_step(st[hy.S_Z], v_new, h, fp)
-        st[hy.S_ZG] = lugre_z_step(st[hy.S_ZG], v_new, h, gp)
+        st[hy.S_Z] = z_step(st[hy.S_Z], v_new, h, fp)
+        st[hy.S_ZG] = z_step(st[hy.S_ZG], v_new, h, gp)
         hy.chamber_step(st, y_new, v_new, ps, h, hp, ports)
         accel = (v_new - v) / h
         y, v = y_new, v_new
@@ -89,7 +90,7 @@ def legs_drive_into(st: np.ndarray, velocity: np.ndarray, hp: np.ndarray, fp: np
                     force: np.ndarray, damping: np.ndarray) -> None:
     """Per leg: hydraulic force minus the bristle force (explicit) and the friction's slope."""
     for i in range(st.shape[0]):
-        z_force, slope = lugre_split(st[i, hy.S_Z], velocity[i], fp)
+        z_force, slope = force_split(st[i, hy.S_Z], velocity[i], fp)
         force[i] = hy.piston_force(st[i, hy.S_PA], st[i, hy.S_PB], hp) - z_force
         damping[i] = slope
 
@@ -105,7 +106,7 @@ def legs_hydraulics(st: np.ndarray, stroke: np.ndarray, velocity: np.ndarray, co
         for _ in range(n):
             if not jammed[i]:
                 st[i, hy.S_SPOOL] = hy.spool_step(st[i, hy.S_SPOOL], command[i], h, hp)
-            st[i, hy.S_Z] = lugre_z_step(st[i, hy.S_Z], velocity[i], h, fp)
+            st[i, hy.S_Z] = z_step(st[i, hy.S_Z], velocity[i], h, fp)
             hy.chamber_step(st[i], stroke[i], velocity[i], ps, h, hp, ports[i])
 
 
@@ -187,7 +188,8 @@ class TestbenchRig(_RigBase):
     def warm_up(self) -> None:
         """Load the compiled kernels now: their first call costs 0.2-0.25 s (numba's cache),
         which in the first SYNC made the nodes miss ~45 realtime cycles. Scratch copies only."""
-        testbench_advance(self.state[0].copy(), 0.0, False, False, 1.0, 1, self.cfg.substep_s, self.cfg.supply_pressure_pa,
+        testbench_advance(self.state[0].copy(), 0.0, False, False, 1.0, 1, self.cfg.substep_s,
+                          self.cfg.supply_pressure_pa,
                           self.cfg.hp, self.cfg.friction, self.guide_friction, self.cfg.piston_rod_mass_kg,
                           self.load_mass_kg, np.zeros(3))
 
@@ -206,9 +208,9 @@ class HexapodRig(_RigBase):
     n_legs = 6
     name = "hexapod"
 
-    def __init__(self, cfg: EmulatorConfig, geometry: Geometry | None = None):
+    def __init__(self, cfg: EmulatorConfig, geometry: RigGeometry | None = None):
         super().__init__(cfg)
-        self.geometry = geometry or default_geometry()
+        self.geometry = geometry or read_rig_geometry()
         self.mechanism = Mechanism(self.geometry, timestep_s=cfg.mujoco_timestep_s, stroke_limits=True)
         mech, model = self.mechanism, self.mechanism.model
         self._home_length = np.array([leg.length_m for leg in mech.legs_home])

@@ -22,38 +22,21 @@ FAULT_DISABLED (the DBC's VALVE_STATE values).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import IntEnum
 
+from protocol.enums import VALVE_FAULT_STATES as FAULT_STATES
+from protocol.enums import EmcyCode, ValveState
+from protocol.enums import ValveFaultReason as FaultReason
 
-class ValveState(IntEnum):
-    INIT = 0
-    DISABLED = 1
-    HOLD = 2
-    ACTIVE = 3
-    FAULT_HOLD = 4
-    FAULT_DISABLED = 5
-
-
-class FaultReason(IntEnum):
-    NONE = 0
-    COMMAND_TIMEOUT = 1
-    SYNC_TIMEOUT = 2
-    E2E_ERROR = 3
-    SPOOL_JAM = 4
-    SUPPLY_LOW = 5
-    INTERNAL = 6
-
-
-# CiA 301 emergency error codes (error register bit 0 generic, bit 4 communication).
+# CiA 301 error register bits: 0 generic error, 4 communication error
+GENERIC, COMMUNICATION = 0x01, 0x10
 EMCY_CODES = {
-    FaultReason.COMMAND_TIMEOUT: (0x8250, 0x11),    # RPDO timeout
-    FaultReason.SYNC_TIMEOUT: (0x8100, 0x11),       # communication: SYNC lost
-    FaultReason.E2E_ERROR: (0x8200, 0x11),          # protocol error
-    FaultReason.SPOOL_JAM: (0xFF01, 0x01),          # device specific: control deviation
-    FaultReason.SUPPLY_LOW: (0xFF02, 0x01),
-    FaultReason.INTERNAL: (0x6000, 0x01),           # internal software
+    FaultReason.COMMAND_TIMEOUT: (EmcyCode.RPDO_TIMEOUT, GENERIC | COMMUNICATION),
+    FaultReason.SYNC_TIMEOUT: (EmcyCode.COMMUNICATION, GENERIC | COMMUNICATION),     # SYNC lost
+    FaultReason.E2E_ERROR: (EmcyCode.PROTOCOL, GENERIC | COMMUNICATION),
+    FaultReason.SPOOL_JAM: (EmcyCode.CONTROL_DEVIATION, GENERIC),
+    FaultReason.SUPPLY_LOW: (EmcyCode.SUPPLY_LOW, GENERIC),
+    FaultReason.INTERNAL: (EmcyCode.SOFTWARE, GENERIC),
 }
-FAULT_STATES = (ValveState.FAULT_HOLD, ValveState.FAULT_DISABLED)
 POWERED_STATES = (ValveState.HOLD, ValveState.ACTIVE)
 
 
@@ -114,7 +97,7 @@ class ValveDriver:
                 self.fault_reason = FaultReason.NONE
                 self._jam_count = 0
                 self.setpoint = 0.0
-                return Emergency(0x0000, 0x00, self.state, FaultReason.NONE, 0)
+                return Emergency(EmcyCode.NO_ERROR, 0x00, self.state, FaultReason.NONE, 0)
             if self.state is ValveState.FAULT_HOLD and not d:
                 self.state = ValveState.FAULT_DISABLED
             self.setpoint = 0.0

@@ -1,8 +1,12 @@
 """Suite-wide settings: a deterministic Hypothesis profile, and a record of what pytest
 collected so `test_suite_integrity` can prove nothing was silently left out."""
 
-import pytest
-from hypothesis import HealthCheck, settings
+from physics.numba_cache import configure
+
+configure()     # before any kernel is defined (see physics/numba_cache.py)
+
+import pytest  # noqa: E402
+from hypothesis import HealthCheck, settings  # noqa: E402
 
 # Fixed seed (derandomize) so CI is reproducible; no deadline: timing is not behaviour.
 settings.register_profile(

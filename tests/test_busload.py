@@ -12,7 +12,8 @@ from protocol.busload import (
 from protocol.dbc import schedules, sync_counter_overflow
 
 
-@pytest.mark.parametrize("n_bytes, worst, nominal", [(8, 135, 111), (6, 115, 95), (4, 95, 79), (1, 65, 55), (0, 55, 47)])
+@pytest.mark.parametrize("n_bytes, worst, nominal",
+                         [(8, 135, 111), (6, 115, 95), (4, 95, 79), (1, 65, 55), (0, 55, 47)])
 def test_frame_bits(n_bytes, worst, nominal):
     assert frame_bits_worst(n_bytes) == worst
     assert frame_bits_nominal(n_bytes) == nominal

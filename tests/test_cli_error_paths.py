@@ -152,7 +152,7 @@ FILE_ERRORS = [
                          ids=lambda v: v if isinstance(v, str) else " ".join(v))
 def test_bad_files_are_one_line_and_exit_2(argv, text, culprit, tmp_path, capsys):
     from importlib import resources
-    good = resources.files("firmware_py").joinpath("data/geometry.toml").read_text()
+    good = resources.files("physics").joinpath("data/geometry.toml").read_text()
     path = tmp_path / "bad.toml"
     path.write_text(text.replace("{geometry}", good))
     try:
@@ -165,7 +165,7 @@ def test_bad_files_are_one_line_and_exit_2(argv, text, culprit, tmp_path, capsys
 
 def test_a_misspelt_geometry_key_is_refused(tmp_path, capsys):
     from importlib import resources
-    good = resources.files("firmware_py").joinpath("data/geometry.toml").read_text()
+    good = resources.files("physics").joinpath("data/geometry.toml").read_text()
     path = tmp_path / "g.toml"
     path.write_text(good.replace("stroke_mm = 290.0", "stroke_mm = 290.0\nstrok_mm = 300.0"))
     assert main(["kinematics", "workspace", "--geometry", str(path)]) == 2

@@ -6,9 +6,17 @@ import pytest
 from scipy.interpolate import CubicSpline
 
 from firmware_py.config import load_config
-from firmware_py.control import (ADAPTIVE, IN_ACTIVE, IN_FORCE, IN_FRESH, IN_G_AX, IN_Y, IN_YR, PI, ST_KI, ST_KP,
-                                 ST_MASS, ST_U, JointController, pi_antiwindup, schedule_eval,
-                                 spline_coefficients)
+from firmware_py.control import (
+    ADAPTIVE,
+    PI,
+    ST_KI,
+    ST_KP,
+    ST_MASS,
+    JointController,
+    pi_antiwindup,
+    schedule_eval,
+    spline_coefficients,
+)
 from tests.linear_plant import LOADS, TABLE_A3, LinearPlant, step_metrics
 
 T = 0.002
@@ -70,23 +78,21 @@ def closed_loop_step(cfg, mode, position_mm, load_index, step_mm=10.0, seconds=2
     jc = JointController(cfg, 1, T, moving_mass_kg=cfg.moving_mass_kg, mass_offset_kg=cfg.slide_mass_kg)
     jc.reset(y0)
     jc.set_mode(mode)
-    jc.inputs[0, IN_FRESH] = 1.0
-    jc.inputs[0, IN_ACTIVE] = 1.0
-    jc.inputs[0, IN_G_AX] = 9.81
-    jc.inputs[0, IN_YR] = y0
+    position, force, fresh = np.zeros(1), np.zeros(1), np.ones(1, dtype=bool)
+    yr, ar, g_axial, tau = np.full(1, y0), np.zeros(1), np.full(1, 9.81), np.zeros(1)
+
+    def cycle():
+        position[0], force[0] = plant.measure()
+        jc.update(position, fresh, force, yr, ar, g_axial, tau, True)
+        plant.advance(jc.u_v[0])
+
     for _ in range(1500):                    # settle the estimators at rest first
-        y, force = plant.measure()
-        jc.inputs[0, IN_Y], jc.inputs[0, IN_FORCE] = y, force
-        jc.update()
-        plant.advance(jc.st[0, ST_U])
+        cycle()
     y0 = plant.x[0]
-    jc.inputs[0, IN_YR] = y0 + step_mm * 1e-3
+    yr[0] = y0 + step_mm * 1e-3
     t, ys = [], []
     for k in range(int(seconds / T)):
-        y, force = plant.measure()
-        jc.inputs[0, IN_Y], jc.inputs[0, IN_FORCE] = y, force
-        jc.update()
-        plant.advance(jc.st[0, ST_U])
+        cycle()
         t.append(k * T)
         ys.append(plant.x[0])
     return np.array(t), np.array(ys), y0, jc

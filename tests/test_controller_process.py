@@ -10,11 +10,11 @@ import sys
 import time
 
 import can
+from test_bus import GROUP, free_port
 
 from protocol.bus import open_bus
 from protocol.codec import CODECS, FrameDecoder
 from protocol.e2e import RxStatus
-from test_bus import GROUP, free_port
 
 CYCLES = 2500
 

@@ -10,11 +10,13 @@ import pytest
 from firmware_py.dynamics import InverseDynamics
 from firmware_py.geometry import GeometryError, default_geometry, parse_geometry
 from firmware_py.rotation import rpy_to_quat
+from hil.tools.validate_dynamics import forward_run, table_10_2, validate
 from plant_emulator.mechanism import Mechanism
-from plant_emulator.validation import forward_run, table_10_2, validate
+from plant_emulator.rig_geometry import read_rig_geometry
 
 GEOMETRY = default_geometry()
-RAW = tomllib.loads(resources.files("firmware_py").joinpath("data/geometry.toml").read_text())
+RIG = read_rig_geometry()            # the plant's own reading of the same file
+RAW = tomllib.loads(resources.files("physics").joinpath("data/geometry.toml").read_text())
 
 
 def _statics_by_hand(geometry, position, quat):
@@ -33,19 +35,19 @@ def _statics_by_hand(geometry, position, quat):
     for i in range(6):
         a = geometry.base_anchor_m[i]
         b_world = rot @ geometry.platform_anchor_m[i]
-        l = position + b_world - a
-        u3 = l / np.linalg.norm(l)
+        leg = position + b_world - a
+        u3 = leg / np.linalg.norm(leg)
         u1 = geometry.universal_axis[i]
         u2 = np.cross(u3, u1)
         u2 /= np.linalg.norm(u2)
         u4 = np.cross(u2, u3)
         frame = np.column_stack([u4, u2, u3])
         rho1 = frame @ geometry.cylinder.com_m
-        rho2 = l + frame @ geometry.rod.com_m
+        rho2 = leg + frame @ geometry.rod.com_m
         weight_moment = np.cross(rho1, geometry.cylinder.mass_kg * g) + np.cross(rho2, geometry.rod.mass_kg * g)
         for axis in (u1, u2):            # (l x F) . axis = -(weight moment) . axis
             row = np.zeros(18)
-            row[3 * i:3 * i + 3] = np.cross(axis, l)     # (l x F).axis = F.(axis x l)
+            row[3 * i:3 * i + 3] = np.cross(axis, leg)     # (leg x F).axis = F.(axis x leg)
             rows.append(row)
             rhs.append(-weight_moment @ axis)
         legs.append((u3, b_world))
@@ -97,7 +99,7 @@ def test_wrench_is_mass_matrix_times_acceleration_plus_bias():
 @pytest.mark.parametrize("name", ["Tx", "Ty", "Tz", "Ry"])
 def test_forces_match_mujoco_on_table_10_2(name):
     traj = next(t for t in table_10_2() if t.name == name)
-    result = validate(GEOMETRY, traj, sample_dt_s=0.05)
+    result = validate(GEOMETRY, RIG, traj, sample_dt_s=0.05)
     assert result.max_abs_error_n < 1e-6, result
     assert result.forward_max_closure_um <= 10.0, result
     assert result.forward_max_leg_error_mm < 0.01, result
@@ -105,7 +107,7 @@ def test_forces_match_mujoco_on_table_10_2(name):
 
 def test_mujoco_closure_error_stays_below_10_um_under_load():
     """Forward simulation with the model's forces and a PD loop: the loop closure holds."""
-    mech = Mechanism(GEOMETRY)
+    mech = Mechanism(RIG)
     traj = next(t for t in table_10_2() if t.name == "Tx")
     leg_error, closure = forward_run(GEOMETRY, traj, mech, InverseDynamics(GEOMETRY))
     assert closure <= 10e-6
@@ -125,3 +127,16 @@ def test_bad_geometry_values_are_one_line_errors():
     raw["inertia"]["platform"]["inertia_kg_mm2"] = [[1, 0, 0], [0, -1, 0], [0, 0, 1]]
     with pytest.raises(GeometryError, match="positive definite"):
         parse_geometry(raw)
+
+
+def test_the_plant_reads_the_geometry_file_as_the_controller_does():
+    """Two independent readings of one file: every anchor, axis, length and inertia agrees."""
+    for name in ("base_anchor_m", "platform_anchor_m", "universal_axis", "home_position_m", "gravity_m_s2"):
+        np.testing.assert_allclose(getattr(RIG, name), getattr(GEOMETRY, name), atol=1e-15, err_msg=name)
+    for name in ("leg_min_m", "stroke_m", "cylinder_length_m", "cylinder_radius_m", "rod_length_m", "rod_radius_m"):
+        assert getattr(RIG, name) == pytest.approx(getattr(GEOMETRY, name), rel=1e-15), name
+    for body in ("platform", "cylinder", "rod"):
+        mine, theirs = getattr(RIG, body), getattr(GEOMETRY, body)
+        assert mine.mass_kg == theirs.mass_kg
+        np.testing.assert_allclose(mine.com_m, theirs.com_m, atol=1e-15)
+        np.testing.assert_allclose(mine.inertia_kg_m2, theirs.inertia_kg_m2, atol=1e-15)

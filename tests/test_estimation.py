@@ -9,9 +9,18 @@ from filterpy.kalman import KalmanFilter
 from scipy import signal
 
 from firmware_py.config import load_config
-from firmware_py.estimation import (adaptive_r, filter_step, kalman_model, kalman_step_into, load_pressure,
-                                    lugre_observer_step, pack_friction, piston_inverse_dynamics,
-                                    quantisation_variance, rls_step, second_order_filter)
+from firmware_py.estimation import (
+    adaptive_r,
+    filter_step,
+    kalman_model,
+    kalman_step_into,
+    load_pressure,
+    lugre_observer_step,
+    piston_inverse_dynamics,
+    quantisation_variance,
+    rls_step,
+    second_order_filter,
+)
 
 T = 0.002
 
@@ -103,11 +112,8 @@ def test_filter_matches_scipy_lsim():
     assert np.max(np.abs(second[300:450] + 9.0 * out[300:450])) < 0.05      # of amplitudes ~9
 
 
-def lugre_vector(k=0.0):
-    cfg = load_config()
-    fp = cfg.friction.copy()
-    fp[-1] = k
-    return fp
+def lugre_vector():
+    return load_config().friction.copy()
 
 
 def test_lugre_observer_steady_state_is_the_static_map():
@@ -117,7 +123,7 @@ def test_lugre_observer_steady_state_is_the_static_map():
                                 (-0.03, (-15.0, -5.3903, -0.020, 75.3))):
         z = np.zeros(1)
         for _ in range(2000):
-            ff = lugre_observer_step(fp, z, 0, v, 0.0, T)
+            ff = lugre_observer_step(fp, 0.0, z, 0, v, 0.0, T)
         g = a0 + a1 * math.exp(-(v / vs) ** 2)
         assert ff == pytest.approx(abs(g) * math.copysign(1.0, v) + s2 * v, rel=1e-6)
 
@@ -128,7 +134,7 @@ def test_lugre_observer_presliding_is_a_spring():
     z = np.zeros(1)
     v = 1e-5
     for _ in range(5):
-        ff = lugre_observer_step(fp, z, 0, v, 0.0, T)
+        ff = lugre_observer_step(fp, 0.0, z, 0, v, 0.0, T)
     displacement = 5 * v * T
     assert ff == pytest.approx(238970.9 * displacement + 1894.4 * v + 131.6 * v, rel=0.02)
 
@@ -136,8 +142,8 @@ def test_lugre_observer_presliding_is_a_spring():
 def test_lugre_observer_gain_term():
     """eq. 7.30's -k e term pulls z against the position error."""
     z0, z1 = np.zeros(1), np.zeros(1)
-    lugre_observer_step(lugre_vector(0.0), z0, 0, 0.0, 0.001, T)
-    lugre_observer_step(lugre_vector(50.0), z1, 0, 0.0, 0.001, T)
+    lugre_observer_step(lugre_vector(), 0.0, z0, 0, 0.0, 0.001, T)
+    lugre_observer_step(lugre_vector(), 50.0, z1, 0, 0.0, 0.001, T)
     assert z0[0] == 0.0 and z1[0] == pytest.approx(-50.0 * 0.001 * T)
 
 
@@ -181,7 +187,3 @@ def test_load_pressure_and_inverse_dynamics_are_the_free_body_balances():
     plr = piston_inverse_dynamics(3.6, 1.0, 9.81, 4.0, area)
     assert plr * area == pytest.approx(3.6 * 10.81 + 4.0)
 
-
-def test_pack_friction_order():
-    fp = pack_friction(*range(13))
-    assert list(fp) == list(range(13))

@@ -11,7 +11,6 @@ import sys
 import numpy as np
 import pytest
 
-from firmware_py.geometry import GRAVITY_M_S2
 from hil.design.friction import (
     SteadySide,
     bristle_forces,
@@ -21,9 +20,10 @@ from hil.design.friction import (
     presliding_damping,
     presliding_stiffness,
 )
+from physics import lugre
+from physics.constants import GRAVITY_M_S2, MM
 
 HYDRAPOD = [sys.executable, "-m", "hil.cli"]
-MM = 1e-3
 # Table 6.1 (the emulator's seal) in SI
 TRUE = {"+": SteadySide(12.1994, 10.6468, 10.0 * MM, 0.1316 / MM),
         "-": SteadySide(-15.0, -5.3903, -20.0 * MM, 0.0753 / MM)}
@@ -114,21 +114,19 @@ def test_friction_presliding_recovers_the_seals_stiffness_through_the_bus(tmp_pa
 
 
 def test_the_bristle_model_is_the_emulators_lugre_state_at_rest():
-    """`bristle_forces` (the analysis's model) against the emulator's own kernel
-    (plant_emulator.friction.lugre_z_step) along the same displacement, guide stiffness 0."""
-    from plant_emulator.friction import lugre_z_step, pack_lugre
-    fp = pack_lugre(12.1994, 10.6468, 10.0 * MM, 131.6, -15.0, -5.3903, -20.0 * MM, 75.3,
+    """`bristle_forces` (the analysis's model) against the law the emulator integrates
+    (physics.lugre.z_step, time-stepped) along the same displacement, guide stiffness ~0."""
+    fp = lugre.pack(12.1994, 10.6468, 10.0 * MM, 131.6, -15.0, -5.3903, -20.0 * MM, 75.3,
                     238970.9, 1894.4, 81580.8, 1091.1)
     t = np.arange(0.0, 6.0, 0.002)
     y = 0.01 * np.minimum(t, 1.0) + 0.05 * MM * np.sin(2 * np.pi * np.maximum(t - 2.0, 0.0) / 2.0)
     dy = np.diff(y, prepend=y[0])
     v = dy / 0.002
     ours = np.empty(len(t))
-    bristle_forces(dy, v, np.array([12.1994, 10.6468]), np.array([15.0, 5.3903]), 10.0 * MM, -20.0 * MM,
-                   238970.9, 81580.8, 10.9, 1.0, 0.0, 0.0, ours)
+    bristle_forces(dy, v, fp, 10.9, 1.0, 0.0, 0.0, ours)
     z, theirs = 0.0, np.empty(len(t))
     for i in range(len(t)):
-        z = lugre_z_step(z, v[i], 0.002, fp)
+        z = lugre.z_step(z, v[i], 0.002, fp)
         theirs[i] = (238970.9 if z >= 0 else 81580.8) * z
     # the guide term of `ours` is at most 1 N/m x 10 mm here
     assert np.max(np.abs(theirs)) > 15.0 and np.allclose(ours, theirs, atol=0.02)
@@ -141,8 +139,8 @@ def test_the_presliding_fit_recovers_known_stiffnesses():
         y = y + np.where((t >= t0) & (t < t0 + 8.0), amplitude * np.sin(2 * np.pi * (t - t0) / 8.0), 0.0)
     dy = np.diff(y, prepend=y[0])
     truth = np.empty(len(t))
-    g_pos, g_neg = np.array([12.1994, 10.6468]), np.array([15.0, 5.3903])
-    bristle_forces(dy, dy / 0.002, g_pos, g_neg, 10.0 * MM, -20.0 * MM, 239e3, 81.6e3, 10.9, 100e3, 0.0, 0.0, truth)
+    seal = lugre.pack(12.1994, 10.6468, 10.0 * MM, 131.6, -15.0, -5.3903, -20.0 * MM, 75.3, 239e3, 0.0, 81.6e3, 0.0)
+    bristle_forces(dy, dy / 0.002, seal, 10.9, 100e3, 0.0, 0.0, truth)
     at = np.flatnonzero(t >= 3.0)[::16]
     measured = truth[at] + 4.0 + np.random.default_rng(3).normal(0.0, 0.2, len(at))
     fit = fit_presliding(dy, dy / 0.002, at, measured, TRUE, 10.9)

@@ -6,12 +6,11 @@ import numpy as np
 import pytest
 
 from firmware_py.config import load_config
-from firmware_py.control import (CONTROLLER_NAMES, IN_ACTIVE, IN_Y, JP_KI_SCALE, JP_KP_SCALE, JP_PI_KI,
-                                 JP_PI_KP, ST_KP)
-from firmware_py.core import ControllerCore
-from firmware_py.supervisor import State
+from firmware_py.control import CONTROLLER_NAMES, JP_KI_SCALE, JP_KP_SCALE, JP_PI_KI, JP_PI_KP, ST_KP
+from firmware_py.controller import Controller
 from plant_emulator.params import load_config as load_emulator_config
 from plant_emulator.rigs import HexapodRig
+from protocol.enums import State
 
 PERIOD_S = 0.002
 ENCODER_M = 0.125e-3
@@ -22,35 +21,36 @@ def hold_after_kick(factors: dict, seconds: float = 4.0, kick_m: float = 0.005):
     returns (final state, peak |xy| mm)."""
     cfg = load_config(overrides={"hexapod": factors})
     rig = HexapodRig(load_emulator_config())
-    core = ControllerCore(cfg, "hexapod", PERIOD_S, CONTROLLER_NAMES["adaptive"])
+    ctl = Controller(cfg, "hexapod", PERIOD_S, CONTROLLER_NAMES["adaptive"])
+    meas, cmd = ctl.new_interfaces()
 
     def measure():
-        core.meas_y[:] = np.round(rig.stroke_m / ENCODER_M) * ENCODER_M
-        core.meas_force[:] = rig.rod_force_n
-        core.meas_fresh[:] = True
-        core.valve_state[:] = 3
+        meas.position_m[:] = np.round(rig.stroke_m / ENCODER_M) * ENCODER_M
+        meas.force_n[:] = rig.rod_force_n
+        meas.fresh[:] = True
+        meas.valve_state[:] = 3
 
     measure()
-    core.update()
-    core.activated(True)
-    assert core.state is State.READY
-    core.hold_position[0] += kick_m
+    ctl.update(meas, cmd)
+    ctl.activated(True)
+    assert ctl.state is State.READY
+    ctl.reference.hold_position[0] += kick_m
     peak = 0.0
     for _ in range(int(seconds / PERIOD_S)):
         measure()
-        core.update()
-        rig.command[:] = core.spool
+        ctl.update(meas, cmd)
+        rig.command[:] = cmd.spool
         rig.advance(PERIOD_S)
         peak = max(peak, float(np.hypot(*rig.platform_pose()[0][:2])) * 1e3)
-        if core.state is State.FAULT:
+        if ctl.state is State.FAULT:
             break
-    return core.state, peak
+    return ctl.state, peak
 
 
 def test_gain_factors_scale_every_controllers_gains_on_the_hexapod_only():
     cfg = load_config(overrides={"hexapod": {"kp_factor": 3.0, "ki_factor": 0.25}})
-    hexapod = ControllerCore(cfg, "hexapod", PERIOD_S)
-    bench = ControllerCore(cfg, "testbench", PERIOD_S)
+    hexapod = Controller(cfg, "hexapod", PERIOD_S)
+    bench = Controller(cfg, "testbench", PERIOD_S)
     assert hexapod.joint.jp[JP_PI_KP] == pytest.approx(3.0 * cfg.pi_kp)
     assert hexapod.joint.jp[JP_KP_SCALE] == 3.0
     assert hexapod.joint.jp[JP_PI_KI] == pytest.approx(0.25 * cfg.pi_ki)
@@ -62,12 +62,12 @@ def test_gain_factors_scale_every_controllers_gains_on_the_hexapod_only():
 def test_scheduled_kp_is_scaled_by_the_hexapod_kp_factor():
     scaled = {}
     for factor in (1.0, 2.0):
-        core = ControllerCore(load_config(overrides={"hexapod": {"kp_factor": factor}}), "hexapod", PERIOD_S,
-                              CONTROLLER_NAMES["adaptive"])
-        core.joint.inputs[:, IN_Y] = 0.1
-        core.joint.inputs[:, IN_ACTIVE] = 1.0
-        core.joint.update()
-        scaled[factor] = core.joint.st[:, ST_KP].copy()
+        ctl = Controller(load_config(overrides={"hexapod": {"kp_factor": factor}}), "hexapod", PERIOD_S,
+                         CONTROLLER_NAMES["adaptive"])
+        n, ref = ctl.n, ctl.reference
+        ctl.joint.update(np.full(n, 0.1), np.ones(n, dtype=bool), np.zeros(n), ref.yr, ref.ar, ctl.gravity_axial,
+                         ctl.tau_n, True)
+        scaled[factor] = ctl.joint.st[:, ST_KP].copy()
     assert np.all(scaled[1.0] > 0.0) and np.allclose(scaled[2.0], 2.0 * scaled[1.0])
 
 

@@ -128,9 +128,9 @@ SCENARIO_RUNS = {
                      and set(m["sync_interval_error_us"]) >= {"p50", "p99", "max"}),
     "rt-hexapod": (["--duration-s", "30"], lambda m: m["seconds"] >= 28.5
                    and set(m["ctrl_status"]["period_error_us"]) >= {"p50", "p99", "max"}),
-    "sha-identification": (["--short"], lambda m: {(r["set_point_mm"], r["load_kg"], tuple(r["gains_v_mm"]))
-                                                   for r in m["points"]} == {(p, load, (0.25, 0.3)) for p in (60.0, 210.0)
-                                                                             for load in (0.0, 6.0)}),
+    "sha-identification": (["--short"], lambda m: (
+        {(r["set_point_mm"], r["load_kg"], tuple(r["gains_v_mm"])) for r in m["points"]}
+        == {(p, load, (0.25, 0.3)) for p in (60.0, 210.0) for load in (0.0, 6.0)})),
 }
 
 

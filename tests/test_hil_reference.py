@@ -1,14 +1,13 @@
-"""The reference the HIL analysis rebuilds from a log equals the controller core's own,
-cycle by cycle: a move started at once, a step queued to start when it ends, then a
-multi-point trajectory queued the same way (the rules of firmware_py/core.py)."""
+"""The reference the HIL analysis rebuilds from a log equals the controller's own, cycle by
+cycle: a move started at once, a step queued to start when it ends, then a multi-point
+trajectory queued the same way (the rules of firmware_py/reference.py and waypoints.py)."""
 
 import numpy as np
 
-from firmware_py.supervisor import Ack
 from hil.logdata import Event, LogData, Series
 from hil.reference import rebuild
-from protocol.values import FLAG_LAST, FLAG_START, FLAG_STEP, KIND_WAYPOINT
-from tests.test_controller_alloc import make_loop
+from protocol.enums import Ack, AckKind, Command, WaypointFlag
+from tests.rig_loop import make_loop, send_waypoint
 
 
 def _events(cycle, seq, z, segment, accel, flags, result):
@@ -16,29 +15,29 @@ def _events(cycle, seq, z, segment, accel, flags, result):
             Event(cycle, 0.0, "HOST_WAYPOINT_ROT", {"TAG": seq & 15, "ROLL": 0.0, "PITCH": 0.0, "YAW": 0.0}),
             Event(cycle, 0.0, "HOST_WAYPOINT_TIME", {"TAG": seq & 15, "SEQ": seq, "SEGMENT_TIME": segment,
                                                      "ACCEL_TIME": accel, "FLAGS": flags}),
-            Event(cycle, 0.0, "CTRL_ACK", {"KIND": KIND_WAYPOINT, "SEQ": seq, "RESULT": int(result), "QUEUE_FREE": 0})]
+            Event(cycle, 0.0, "CTRL_ACK", {"KIND": AckKind.WAYPOINT, "SEQ": seq, "RESULT": int(result),
+                                           "QUEUE_FREE": 0})]
 
 
-def test_rebuilt_reference_equals_the_cores():
-    loop, core, bus = make_loop("testbench", "pi")
+def test_rebuilt_reference_equals_the_controllers():
+    loop, ctl, bus = make_loop("testbench", "pi")
     period = loop.period_s
     plan = {                 # cycle -> waypoints sent before that cycle's update (seq, z, segment, accel, flags)
-        20: [(0, 0.160, 0.001 * 500, 0.001 * 100, FLAG_LAST | FLAG_START)],
-        120: [(1, 0.170, 0.001 * 300, 0.001 * 150, FLAG_LAST | FLAG_START | FLAG_STEP)],
-        130: [(2, 0.180, 0.001 * 250, 0.001 * 50, FLAG_START), (3, 0.150, 0.001 * 370, 0.001 * 100, FLAG_LAST)],
+        20: [(0, 0.160, 0.001 * 500, 0.001 * 100, WaypointFlag.LAST | WaypointFlag.START)],
+        120: [(1, 0.170, 0.001 * 300, 0.001 * 150, WaypointFlag.LAST | WaypointFlag.START | WaypointFlag.STEP)],
+        130: [(2, 0.180, 0.001 * 250, 0.001 * 50, WaypointFlag.START),
+              (3, 0.150, 0.001 * 370, 0.001 * 100, WaypointFlag.LAST)],
     }
     events, yr, initial = [], [], None
     for cycle in range(900):
         for seq, z, segment, accel, flags in plan.get(cycle, []):
             if initial is None:
-                initial = core.yr.copy()
-            core.waypoint_position(seq & 15, 0.0, 0.0, z)
-            core.waypoint_rotation(seq & 15, 0.0, 0.0, 0.0)
-            result = core.waypoint_time(seq & 15, seq, segment, accel, flags)
+                initial = ctl.reference.yr.copy()
+            result = send_waypoint(ctl, seq, 0.0, 0.0, z, segment=segment, accel=accel, flags=flags)
             assert result is Ack.ACCEPTED
             events += _events(cycle, seq, z, segment, accel, flags, result)
         loop.cycle()
-        yr.append(core.yr[0])
+        yr.append(ctl.reference.yr[0])
     n = len(yr)
     log = LogData("synthetic", n, np.zeros(n), {"LEG_STATE_1": Series(
         "LEG_STATE_1", np.arange(n), np.zeros(n), np.full((n, 6), 0.15), {"POSITION": 4})}, events, 0, {}, {}, 0)
@@ -48,3 +47,29 @@ def test_rebuilt_reference_equals_the_cores():
     rebuilt = ref.yr[20:, 0]
     assert np.isfinite(rebuilt).all()
     np.testing.assert_array_equal(rebuilt, np.array(yr[20:]))
+
+
+def test_rebuilt_reference_of_a_host_start_equals_the_controllers():
+    """A waypoint queued without START, then HOST_CMD START through the host link: carried out
+    in the next update, its trajectory's clock is the rule's (t = T in that cycle)."""
+    loop, ctl, bus = make_loop("testbench", "pi")
+    events, yr = [], []
+    initial = ctl.reference.yr.copy()
+    for cycle in range(400):
+        if cycle == 10:
+            assert send_waypoint(ctl, 0, 0.0, 0.0, 0.170, segment=0.4, accel=0.1,
+                                 flags=WaypointFlag.LAST) is Ack.ACCEPTED
+            events += _events(cycle, 0, 0.170, 0.4, 0.1, WaypointFlag.LAST, Ack.ACCEPTED)
+        if cycle == 30:
+            ctl.host.command(int(Command.START), 0, 7)          # as the loop queues a received frame
+            events += [Event(cycle, 0.0, "HOST_CMD", {"COMMAND": int(Command.START), "ARGUMENT": 0, "SEQ": 7}),
+                       Event(cycle, 0.0, "CTRL_ACK", {"KIND": AckKind.HOST_CMD, "SEQ": 7,
+                                                      "RESULT": int(Ack.ACCEPTED), "QUEUE_FREE": 0})]
+        loop.cycle()
+        yr.append(ctl.reference.yr[0])
+    n = len(yr)
+    log = LogData("synthetic", n, np.zeros(n), {"LEG_STATE_1": Series(
+        "LEG_STATE_1", np.arange(n), np.zeros(n), np.full((n, 6), 0.15), {"POSITION": 4})}, events, 0, {}, {}, 0)
+    ref = rebuild(log, "testbench", loop.period_s, initial_position=initial)
+    assert [m.seqs for m in ref.motions] == [[0]]
+    np.testing.assert_array_equal(ref.yr[30:, 0], np.array(yr[30:]))

@@ -7,44 +7,48 @@ import math
 import pytest
 
 from firmware_py.config import load_config
-from firmware_py.control import CONTROLLER_NAMES, ST_U
-from firmware_py.core import ControllerCore
-from firmware_py.identification import IdentificationSignal, piston_force_n
-from firmware_py.loop import ControllerLoop
-from firmware_py.supervisor import Ack, Fault, State
-from protocol.values import TEST_ABORT, TEST_FORCE_SINE, TEST_VALVE_STEP
+from firmware_py.control import CONTROLLER_NAMES
+from firmware_py.controller import Controller
+from firmware_py.identification import IdentificationSignal
+from physics.actuator import piston_force
+from protocol.enums import Ack, Command, Fault, State, TestMode
 from tests.alloc_probe import allocations
-from tests.fake_bus import FakeBus
+from tests.rig_loop import make_loop
 
 PERIOD = 0.002
 
 
-def ready_core(rig: str = "testbench", y_m: float = 0.150) -> ControllerCore:
-    core = ControllerCore(load_config(), rig, PERIOD, CONTROLLER_NAMES["pi"])
-    core.meas_y[:] = y_m
-    core.meas_fresh[:] = True
-    core.valve_state[:] = 3
-    core.activated(auto_enable=True)
-    core.update()
-    assert core.state is State.READY
-    return core
+class Driven:
+    """A controller updated by hand with set measurements (no bus)."""
 
+    def __init__(self, rig: str = "testbench", y_m: float = 0.150):
+        self.ctl = Controller(load_config(), rig, PERIOD, CONTROLLER_NAMES["pi"])
+        self.meas, self.cmd = self.ctl.new_interfaces()
+        self.meas.position_m[:] = y_m
+        self.meas.fresh[:] = True
+        self.meas.valve_state[:] = 3
+        self.ctl.activated(auto_enable=True)
+        self.update()
+        assert self.ctl.state is State.READY
 
-def with_pressures(core: ControllerCore, pa_pa: float = 12e5, pb_pa: float = 10e5) -> ControllerCore:
-    core.meas_pa[:] = pa_pa
-    core.meas_pb[:] = pb_pa
-    core.pressure_seen[:] = True
-    return core
+    def update(self) -> None:
+        self.ctl.update(self.meas, self.cmd)
+
+    def with_pressures(self, pa_pa: float = 12e5, pb_pa: float = 10e5) -> "Driven":
+        self.meas.pa_pa[:] = pa_pa
+        self.meas.pb_pa[:] = pb_pa
+        self.meas.pressure_valid[:] = True
+        return self
 
 
 def test_piston_force_is_eq_6_5():
     area = math.pi * 0.006 ** 2
-    assert piston_force_n(20e5, 10e5, area, 0.75) == pytest.approx(area * (20e5 - 0.75 * 10e5))
+    assert piston_force(20e5, 10e5, area, 0.75) == pytest.approx(area * (20e5 - 0.75 * 10e5))
 
 
 def test_a_valve_step_holds_its_input_for_its_duration_then_ends():
     signal = IdentificationSignal(0.004, 0.020, 0.304, 10.0, PERIOD)
-    signal.start(TEST_VALVE_STEP, 0.3, 0.0, 1.2, cycle=100, piston_force=50.0, u0_v=0.1)
+    signal.start(TestMode.VALVE_STEP, 0.3, 0.0, 1.2, cycle=100, piston_force=50.0, u0_v=0.1)
     outputs = [signal.output(100 + k, 0.150, 50.0) for k in range(600)]
     assert all(u == 0.3 for u, _ in outputs)
     assert [done for _, done in outputs].index(True) == 599          # 1.2 s at 500 Hz: 600 cycles
@@ -53,14 +57,14 @@ def test_a_valve_step_holds_its_input_for_its_duration_then_ends():
 @pytest.mark.parametrize("u, y_m", [(0.5, 0.285), (-0.5, 0.019)])
 def test_a_valve_step_ends_at_the_stroke_guard(u, y_m):
     signal = IdentificationSignal(0.004, 0.020, 0.304, 10.0, PERIOD)
-    signal.start(TEST_VALVE_STEP, u, 0.0, 1.2, cycle=0, piston_force=0.0, u0_v=0.0)
+    signal.start(TestMode.VALVE_STEP, u, 0.0, 1.2, cycle=0, piston_force=0.0, u0_v=0.0)
     assert signal.output(10, y_m, 0.0) == (0.0, True)
     assert signal.output(10, 0.150, 0.0) == (u, False)             # away from the guard it goes on
 
 
 def test_a_force_sine_is_bumpless_and_proportional_to_the_force_error():
     signal = IdentificationSignal(0.004, 0.020, 0.304, 10.0, PERIOD)
-    signal.start(TEST_FORCE_SINE, 0.0, 10.0, 4.0, cycle=0, piston_force=50.0, u0_v=0.12)
+    signal.start(TestMode.FORCE_SINE, 0.0, 10.0, 4.0, cycle=0, piston_force=50.0, u0_v=0.12)
     assert signal.output(0, 0.150, 50.0)[0] == pytest.approx(0.12)            # at its start: the hold's input
     # a quarter period in: the reference is 60 N; at 55 N measured the valve opens 4 mV/N x 5 N more
     assert signal.output(500, 0.150, 55.0)[0] == pytest.approx(0.12 + 0.004 * 5.0)
@@ -68,66 +72,65 @@ def test_a_force_sine_is_bumpless_and_proportional_to_the_force_error():
 
 
 def test_a_test_is_accepted_only_when_it_can_run():
-    assert ready_core().test_command(TEST_VALVE_STEP, 0.3, 0.0, 1.2) is Ack.BAD_STATE         # no pressure yet
-    core = with_pressures(ready_core())
-    assert core.test_command(7, 0.3, 0.0, 1.2) is Ack.BAD_ARGUMENT                            # unknown mode
-    assert core.test_command(TEST_VALVE_STEP, 0.3, 0.0, 0.0) is Ack.BAD_ARGUMENT               # no duration
-    assert core.test_command(TEST_VALVE_STEP, 30.0, 0.0, 1.0) is Ack.BAD_ARGUMENT              # beyond saturation
-    assert core.test_command(TEST_VALVE_STEP, math.nan, 0.0, 1.0) is Ack.BAD_ARGUMENT
-    assert core.test_command(TEST_ABORT, 0.0, 0.0, 0.0) is Ack.BAD_STATE                       # nothing to abort
-    core.sup.command(2, 0)                                                                     # DISABLE: IDLE
-    assert core.test_command(TEST_VALVE_STEP, 0.3, 0.0, 1.0) is Ack.BAD_STATE
-    hexapod = ControllerCore(load_config(), "hexapod", PERIOD, CONTROLLER_NAMES["pi"])
-    assert hexapod.test_command(TEST_VALVE_STEP, 0.3, 0.0, 1.0) is Ack.BAD_ARGUMENT
+    assert Driven().ctl.test_command(TestMode.VALVE_STEP, 0.3, 0.0, 1.2) is Ack.BAD_STATE         # no pressure yet
+    ctl = Driven().with_pressures().ctl
+    assert ctl.test_command(7, 0.3, 0.0, 1.2) is Ack.BAD_ARGUMENT                            # unknown mode
+    assert ctl.test_command(TestMode.VALVE_STEP, 0.3, 0.0, 0.0) is Ack.BAD_ARGUMENT               # no duration
+    assert ctl.test_command(TestMode.VALVE_STEP, 30.0, 0.0, 1.0) is Ack.BAD_ARGUMENT              # beyond saturation
+    assert ctl.test_command(TestMode.VALVE_STEP, math.nan, 0.0, 1.0) is Ack.BAD_ARGUMENT
+    assert ctl.test_command(TestMode.ABORT, 0.0, 0.0, 0.0) is Ack.BAD_STATE                       # nothing to abort
+    ctl.sup.command(Command.DISABLE, 0)                                                       # IDLE
+    assert ctl.test_command(TestMode.VALVE_STEP, 0.3, 0.0, 1.0) is Ack.BAD_STATE
+    hexapod = Controller(load_config(), "hexapod", PERIOD, CONTROLLER_NAMES["pi"])
+    assert hexapod.test_command(TestMode.VALVE_STEP, 0.3, 0.0, 1.0) is Ack.BAD_ARGUMENT
 
 
 def test_a_valve_step_drives_the_valve_then_the_leg_holds_where_it_stopped():
-    core = with_pressures(ready_core())
-    assert core.test_command(TEST_VALVE_STEP, 0.25, 0.0, 0.4) is Ack.ACCEPTED
-    assert core.state is State.RUNNING
+    rig = Driven().with_pressures()
+    ctl = rig.ctl
+    assert ctl.test_command(TestMode.VALVE_STEP, 0.25, 0.0, 0.4) is Ack.ACCEPTED
+    assert ctl.state is State.RUNNING
     for k in range(200):
-        core.meas_y[:] = 0.150 + 0.00005 * k                  # the leg moving up
-        core.update()
+        rig.meas.position_m[:] = 0.150 + 0.00005 * k            # the leg moving up
+        rig.update()
         if k < 199:
-            assert core.joint.st[0, ST_U] == 0.25 and core.spool[0] == pytest.approx(0.025)
-    assert core.state is State.READY and not core.test.running
-    core.update()
-    assert core.yr[0] == pytest.approx(core.joint.kalman_x[0, 0], abs=1e-3)     # held near where it ended
-    assert core.sup.fault_code is Fault.NONE
+            assert ctl.joint.u_v[0] == 0.25 and rig.cmd.spool[0] == pytest.approx(0.025)
+    assert ctl.state is State.READY and not ctl.test.running
+    rig.update()
+    assert ctl.reference.yr[0] == pytest.approx(ctl.joint.kalman_x[0, 0], abs=1e-3)   # held near where it ended
+    assert ctl.sup.fault_code is Fault.NONE
 
 
 def test_abort_stop_and_a_fault_each_end_a_test():
-    core = with_pressures(ready_core())
-    core.test_command(TEST_FORCE_SINE, 0.0, 10.0, 5.0)
-    core.update()
-    assert core.test_command(TEST_ABORT, 0.0, 0.0, 0.0) is Ack.ACCEPTED
-    assert core.state is State.READY and not core.test.running
-    core.test_command(TEST_FORCE_SINE, 0.0, 10.0, 5.0)
-    assert core.host_command(9, 0) is Ack.ACCEPTED                       # STOP
-    assert not core.test.running and core.state is State.STOPPING
-    core = with_pressures(ready_core())
-    core.test_command(TEST_VALVE_STEP, 0.25, 0.0, 1.0)
-    core.fault(Fault.SENSOR_TIMEOUT)
-    core.update()
-    assert not core.test.running and core.cw_m[0] == 0.0                 # valves hold
+    rig = Driven().with_pressures()
+    ctl = rig.ctl
+    ctl.test_command(TestMode.FORCE_SINE, 0.0, 10.0, 5.0)
+    rig.update()
+    assert ctl.test_command(TestMode.ABORT, 0.0, 0.0, 0.0) is Ack.ACCEPTED
+    assert ctl.state is State.READY and not ctl.test.running
+    ctl.test_command(TestMode.FORCE_SINE, 0.0, 10.0, 5.0)
+    assert ctl.host_command(Command.STOP, 0) is Ack.ACCEPTED
+    assert not ctl.test.running and ctl.state is State.STOPPING
+    rig = Driven().with_pressures()
+    rig.ctl.test_command(TestMode.VALVE_STEP, 0.25, 0.0, 1.0)
+    rig.ctl.sup.fault(Fault.SENSOR_TIMEOUT)
+    rig.update()
+    assert not rig.ctl.test.running and rig.cmd.active[0] == 0.0         # valves hold
 
 
 def test_a_cycle_with_a_test_running_allocates_no_numpy_memory():
-    cfg = load_config(overrides={"timing": {"heartbeat_timeout_ms": 60000.0}})
-    core = ControllerCore(cfg, "testbench", PERIOD, CONTROLLER_NAMES["pi"])
-    bus = FakeBus(1, core.home_strokes.copy(), nodes=[1])
-    loop = ControllerLoop(bus, core, 500.0, "lockstep", log=lambda _: None)
-    loop.activate()
-    with_pressures(core, 15e5, 12e5)            # the fake bus sends no LEG_PRESSURE: they stay
+    loop, ctl, bus = make_loop("testbench", "pi", {"timing": {"heartbeat_timeout_ms": 60000.0}})
+    loop.meas.pa_pa[:], loop.meas.pb_pa[:] = 15e5, 12e5    # the fake bus sends no LEG_PRESSURE: they stay
+    loop.meas.pressure_valid[:] = True
 
     def run(n):
         for _ in range(n):
-            if not core.test.running:                # an event between cycles, as HOST_TEST is
-                assert core.test_command(TEST_FORCE_SINE, 0.0, 5.0, 1.0) is Ack.ACCEPTED
+            if not ctl.test.running:                # an event between cycles, as HOST_TEST is
+                assert ctl.test_command(TestMode.FORCE_SINE, 0.0, 5.0, 1.0) is Ack.ACCEPTED
             loop.cycle()
 
     run(600)
     grown, gained = allocations(lambda: run(5000))
     assert grown == []
     assert gained < 8192, f"traced memory grew by {gained} bytes"
-    assert core.sup.fault_code is Fault.NONE and core.test.running
+    assert ctl.sup.fault_code is Fault.NONE and ctl.test.running

@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-from firmware_py.dk_eval import sample_workspace
 from firmware_py.geometry import default_geometry
 from firmware_py.kinematics import (
     DirectKinematics,
@@ -24,6 +23,7 @@ from firmware_py.rotation import (
     rpy_to_quat,
 )
 from firmware_py.workspace import MIN_CONDITION_INDEX, check_poses, segment_distance
+from hil.tools.dk_eval import sample_workspace
 
 GEOMETRY = default_geometry()
 

@@ -76,7 +76,7 @@ def test_bad_input_is_one_line_and_exit_2(args, culprit):
 
 def test_bad_geometry_file_is_one_line_and_exit_2(tmp_path):
     from importlib import resources
-    good = resources.files("firmware_py").joinpath("data/geometry.toml").read_text()
+    good = resources.files("physics").joinpath("data/geometry.toml").read_text()
     bad = tmp_path / "g.toml"
     bad.write_text(good.replace("base_radius_mm = 95.0", "base_radius_mm = -1"))
     proc = run("kinematics", "workspace", "--geometry", str(bad), check=False)

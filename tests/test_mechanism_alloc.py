@@ -5,7 +5,7 @@ import numpy as np
 from firmware_py.dynamics import InverseDynamics
 from firmware_py.geometry import default_geometry
 from firmware_py.kinematics import DirectKinematics, ik_batch
-from firmware_py.trajectory import diagonal_motion
+from hil.motions import diagonal_motion
 from tests.alloc_probe import allocations
 
 GEOMETRY = default_geometry()

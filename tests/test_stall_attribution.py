@@ -6,14 +6,9 @@ other fault fails them. Synthetic CTRL_STATUS logs, every 16th cycle as the cont
 import numpy as np
 import pytest
 
-from firmware_py.supervisor import Fault, State
 from hil.logdata import LogData, Series
-from hil.metrics import (
-    STALL_WINDOW_CYCLES,
-    after_machine_stall,
-    fault_transitions,
-    overrun_counts,
-)
+from hil.metrics import STALL_WINDOW_CYCLES, after_machine_stall, fault_transitions, overrun_counts
+from protocol.enums import Fault, State
 
 PERIOD_S = 0.002
 N = 1600

@@ -7,8 +7,9 @@ from hypothesis import strategies as st
 
 from firmware_py.geometry import default_geometry
 from firmware_py.kinematics import DirectKinematics
-from firmware_py.trajectory import MOTIONS, sls_coefficients, through_points
+from firmware_py.trajectory import sls_coefficients, through_points
 from firmware_py.workspace import MIN_CONDITION_INDEX, check_poses
+from hil.motions import MOTIONS
 
 GEOMETRY = default_geometry()
 finite = st.floats(-0.3, 0.3)

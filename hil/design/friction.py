@@ -8,16 +8,14 @@ alpha0 + alpha1 exp(-(v/vs)^2) + sigma2 v on each side, the alphas carrying the 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numba
 import numpy as np
 from scipy.optimize import least_squares
 
-from firmware_py.geometry import GRAVITY_M_S2
-
-MM = 1e-3
+from physics import lugre
+from physics.constants import GRAVITY_M_S2
 
 
 @dataclass(frozen=True)
@@ -30,15 +28,15 @@ class SteadySide:
     def force(self, v_m_s: np.ndarray) -> np.ndarray:
         """Eq. 6.4."""
         v = np.asarray(v_m_s, float)
-        return self.alpha0_n + self.alpha1_n * np.exp(-(v / self.vs_m_s) ** 2) + self.sigma2_ns_m * v
+        return lugre.stribeck_curve(v, self.alpha0_n, self.alpha1_n, self.vs_m_s, 2.0) + self.sigma2_ns_m * v
 
 
 def steady_sides(f: dict) -> dict[str, SteadySide]:
     """Both sides of eq. 6.4 from a section in Table 6.1's keys and units (the controller's and
-    the emulator's [friction], the project's Table 6.1 copy): alpha in N, vs in mm/s, sigma2
-    in N s/mm."""
-    return {side: SteadySide(f[f"alpha0_{key}_n"], f[f"alpha1_{key}_n"], f[f"vs_{key}_mm_s"] * MM,
-                             f[f"sigma2_{key}_ns_mm"] / MM) for side, key in (("+", "pos"), ("-", "neg"))}
+    the emulator's [friction], the project's Table 6.1 copy)."""
+    steady = slice(lugre.A0_POS, lugre.S2_NEG + 1)           # the steady-state set's keys, in SI
+    values = [f[key] * scale for key, scale in zip(lugre.TABLE_KEYS[steady], lugre.TABLE_TO_SI[steady])]
+    return {"+": SteadySide(*values[:4]), "-": SteadySide(*values[4:])}
 
 
 def cylinder_friction(piston_force_n, accel_m_s2, velocity_m_s, moving_mass_kg: float, guide_coulomb_n: float,
@@ -69,7 +67,7 @@ def fit_steady_side(v_m_s: np.ndarray, f_n: np.ndarray, sign: float) -> tuple[St
 
     def residual(q):
         a0, a1, vs, s2 = q
-        return a0 + a1 * np.exp(-(v / vs) ** 2) + s2 * v - f
+        return lugre.stribeck_curve(v, a0, a1, vs, 2.0) + s2 * v - f
 
     result = least_squares(residual, guess, bounds=(lower, upper), x_scale=[f_max, f_max, v_max, f_max / v_max])
     a0, a1, vs, s2 = result.x
@@ -93,28 +91,23 @@ def presliding_damping(sigma0_n_m: float, mass_kg: float, sigma2_ns_m: float, ze
 
 # -- pre-sliding by the bristle model --------------------------------------------------------------
 @numba.njit(cache=True)
-def bristle_forces(dy_m, v_m_s, seal_g_pos, seal_g_neg, seal_vs_pos, seal_vs_neg, sigma0_pos, sigma0_neg,
-                   guide_g, guide_k, z_seal0, z_guide0, out_n):
+def bristle_forces(dy_m, v_m_s, seal, guide_g, guide_k, z_seal0, z_guide0, out_n):
     """The bristle forces at the piston along a measured displacement: the seal's LuGre state
-    (eq. 6.2, sigma0 by the sign of z as Table 6.2's two slopes) and the guide's (the same
-    equation with its Coulomb level and one stiffness), each advanced exactly over every
-    displacement increment dy at the velocity v of that cycle; out_n[i] = sigma0 z_s + k_g z_g
-    (eq. 6.1 at rest: the sigma1 and sigma2 terms vanish with v). Starts from the given
-    deflections (a move makes both states forget them within ~0.1 mm)."""
+    (eq. 6.2, `seal` a physics.lugre vector: g(v) of the side of motion, sigma0 by the sign of
+    z as Table 6.2's two slopes) and the guide's (the same equation with its Coulomb level and
+    one stiffness), each advanced exactly over every displacement increment dy at the velocity
+    v of that cycle; out_n[i] = sigma0 z_s + k_g z_g (eq. 6.1 at rest: the sigma1 and sigma2
+    terms vanish with v). Starts from the given deflections (a move makes both states forget
+    them within ~0.1 mm)."""
     z_s, z_g = z_seal0, z_guide0
     for i in range(dy_m.shape[0]):
         d, v = dy_m[i], v_m_s[i]
-        if d != 0.0:
-            if d > 0.0:                             # |g(v)| of the side of motion (eq. 6.3)
-                g = seal_g_pos[0] + seal_g_pos[1] * math.exp(-(v / seal_vs_pos) ** 2)
-            else:
-                g = seal_g_neg[0] + seal_g_neg[1] * math.exp(-(v / seal_vs_neg) ** 2)
-            sigma0 = sigma0_pos if z_s >= 0.0 else sigma0_neg
-            z_ss = g / sigma0 if d > 0.0 else -g / sigma0
-            z_s = z_ss + (z_s - z_ss) * math.exp(-sigma0 * abs(d) / g)
-            z_gs = guide_g / guide_k if d > 0.0 else -guide_g / guide_k
-            z_g = z_gs + (z_g - z_gs) * math.exp(-guide_k * abs(d) / guide_g)
-        out_n[i] = (sigma0_pos if z_s >= 0.0 else sigma0_neg) * z_s + guide_k * z_g
+        g, _ = lugre.stribeck_side(d > 0.0, v, seal)
+        sigma0, _ = lugre.bristle_coefficients(z_s, seal)
+        z_s = lugre.bristle_relax(z_s, d, abs(g), sigma0)
+        z_g = lugre.bristle_relax(z_g, d, guide_g, guide_k)
+        sigma0, _ = lugre.bristle_coefficients(z_s, seal)
+        out_n[i] = sigma0 * z_s + guide_k * z_g
 
 
 def fit_presliding(dy_m: np.ndarray, v_m_s: np.ndarray, at: np.ndarray, friction_n: np.ndarray,
@@ -125,17 +118,19 @@ def fit_presliding(dy_m: np.ndarray, v_m_s: np.ndarray, at: np.ndarray, friction
     weight's and the mass's error) and both states' deflections at the record's start.
     `steady` gives the seal's g(v) (Table 6.1's map)."""
     pos, neg = steady["+"], steady["-"]
-    g_pos = np.array([pos.alpha0_n, pos.alpha1_n])
-    g_neg = np.array([-neg.alpha0_n, -neg.alpha1_n])            # magnitudes: the side's sign is applied
+    # the seal's law with the steady map given and sigma0 to be fitted (sigma1 plays no part at rest)
+    seal = lugre.pack(pos.alpha0_n, pos.alpha1_n, pos.vs_m_s, pos.sigma2_ns_m, neg.alpha0_n, neg.alpha1_n,
+                      neg.vs_m_s, neg.sigma2_ns_m, guess_n_m, 0.0, guess_n_m, 0.0)
+    g_pos, g_neg = pos.alpha0_n + pos.alpha1_n, -(neg.alpha0_n + neg.alpha1_n)      # |g(0)| of each side
     out = np.empty(len(dy_m))
 
     def model(q):
         s0p, s0n, kg = np.exp(q[:3])
+        seal[lugre.S0_POS], seal[lugre.S0_NEG] = s0p, s0n
         # the initial deflections as fractions of their steady values (the record's start
         # state is unknown: after power-up, or after whatever moved the leg last)
-        z_s0 = q[4] * (g_pos.sum() / s0p if q[4] >= 0 else g_neg.sum() / s0n)
-        bristle_forces(dy_m, v_m_s, g_pos, g_neg, pos.vs_m_s, neg.vs_m_s, s0p, s0n, guide_coulomb_n, kg,
-                       z_s0, q[5] * guide_coulomb_n / kg, out)
+        z_s0 = q[4] * (g_pos / s0p if q[4] >= 0 else g_neg / s0n)
+        bristle_forces(dy_m, v_m_s, seal, guide_coulomb_n, kg, z_s0, q[5] * guide_coulomb_n / kg, out)
         return out[at] + q[3]
 
     q0 = np.array([np.log(guess_n_m), np.log(guess_n_m), np.log(guess_n_m / 2), 0.0, 0.0, 0.0])

@@ -18,14 +18,14 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
-from plant_emulator.calibration import LOADS_KG, linearise, table_a3
+from physics.constants import MM
 from plant_emulator.params import load_config as load_emulator_config
 from protocol.errors import UserInputError
 
 from ..identification import fit_index
+from .calibration import LOADS_KG, linearise, table_a3
 from .thesis import thesis_data
 
-MM = 1e-3
 SOURCES = ("table-a3", "emulator")       # or a sha-identification metrics.json
 # The identification registers of eq. 7.10-7.11, synthesised (the thesis's are not
 # published): each plant's closed-loop response to a 10 mm reference step under the
@@ -74,7 +74,7 @@ def table_a3_plants() -> list[Plant]:
 
 
 def emulator_plants(config: str | None = None) -> list[Plant]:
-    """The emulator's linearisation (plant_emulator.calibration) at Table A.3's set points."""
+    """The emulator's linearisation (hil.design.calibration) at Table A.3's set points."""
     cfg = load_emulator_config(config)
     plants = []
     for load in LOADS_KG:

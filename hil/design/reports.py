@@ -117,8 +117,9 @@ def format_robustness(doc: dict) -> str:
     n, pi, u, perf = doc["nominal"], doc["pi"], doc["uncertainty"], doc["performance"]
     lines = [f"# Robustness of the position PI (chapters 7.3-7.4), plants: {doc['plants']}", "",
              "## Nominal plant (eq. 7.10-7.13)", "",
-             f"- {n['plant']} ({n['selected_by']}; {n['plants']} plants): b0 {n['b0']:.0f} 1/s^2, b1 {n['b1']:.2f} 1/s, "
-             f"k01 {n['k01_mm_s_v']:.1f} (mm/s)/V; P0 = {n['numerator_mm'][0]:.4g} / (s^3 + {n['denominator'][1]:.2f} s^2 "
+             f"- {n['plant']} ({n['selected_by']}; {n['plants']} plants): b0 {n['b0']:.0f} 1/s^2, "
+             f"b1 {n['b1']:.2f} 1/s, k01 {n['k01_mm_s_v']:.1f} (mm/s)/V; "
+             f"P0 = {n['numerator_mm'][0]:.4g} / (s^3 + {n['denominator'][1]:.2f} s^2 "
              f"+ {n['denominator'][2]:.0f} s) mm/V",
              f"- best by eq. 7.10: {n['best_by_eq_7_10']}; {n['criterion']}",
              f"- thesis: {n['thesis']}; in this set it ranks {n['thesis_plant_rank']} "
@@ -210,6 +211,7 @@ def format_schedule(doc: dict, path: str) -> str:
                   f"Ki = ({doc['thesis_ki_tu_over_kp'][0]}-{doc['thesis_ki_tu_over_kp'][1]}) Kp / Tu on this set's "
                   f"plants (the classical rule: 0.45 Ku, 1.2 Kp / Tu)"]
     n = doc["nominal_plant"]
-    lines.append(f"  nominal plant (eq. 7.13): Kp {n['kp_v_mm']:.4f} V/mm, Ki {n['ki_v_mm_s']:.3f} (x{doc['rule']['ki_scale']:g}: "
+    lines.append(f"  nominal plant (eq. 7.13): Kp {n['kp_v_mm']:.4f} V/mm, Ki {n['ki_v_mm_s']:.3f} "
+                 f"(x{doc['rule']['ki_scale']:g}: "
                  f"{n['detuned_ki_v_mm_s']:.3f}) V/(mm s); thesis Kp {n['thesis_kp_v_mm']}, Ki {n['thesis_ki_v_mm_s']}")
     return "\n".join(lines)

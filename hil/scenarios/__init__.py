@@ -11,7 +11,6 @@ from .sha_step import ShaStep
 from .sha_tracking import ShaPerturbation, ShaTracking
 from .soak import Soak
 
-SCENARIOS: dict[str, Scenario] = {s.name: s for s in (ShaStep(), ShaTracking(), ShaPerturbation(), ShaIdentification(), PmDiagonal(),
-                                                      PmCircle(),
-                                                      RealtimeTestbench(), RealtimeHexapod(), Soak(),
-                                                      FrictionSteady(), FrictionPresliding())}
+SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
+    ShaStep(), ShaTracking(), ShaPerturbation(), ShaIdentification(), PmDiagonal(), PmCircle(),
+    RealtimeTestbench(), RealtimeHexapod(), Soak(), FrictionSteady(), FrictionPresliding())}

@@ -5,13 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 from firmware_py.control import CONTROLLER_NAMES
-from protocol.values import EMU_SET_LOAD, FLAG_LAST, FLAG_START, FLAG_STEP
+from protocol.enums import EmuCommand, WaypointFlag
 
 from ..logdata import LogData
 from ..metrics import last_value_before
 
 NAME_OF_CONTROLLER = {v: k for k, v in CONTROLLER_NAMES.items()}
-MM = 1e-3
 
 
 def controller_at(log: LogData, cycle: int) -> str | None:
@@ -27,7 +26,7 @@ def load_at(log: LogData, cycle: int) -> float | None:
     for event in log.events_named("EMU_CTRL"):
         if event.cycle > cycle:
             break
-        if int(event.values["COMMAND"]) == EMU_SET_LOAD:
+        if int(event.values["COMMAND"]) == EmuCommand.SET_LOAD:
             load = round(event.values["LOAD_MASS"], 3)
     return load
 
@@ -48,12 +47,12 @@ def move_stroke(run, stroke_m: float, speed_m_s: float = 0.1, accel_s: float = 0
     duration = max(distance / speed_m_s + accel_s, 2.0 * accel_s + 0.1)
     duration = round(duration, 3)
     run.host.waypoint((0.0, 0.0, stroke_m), segment_time_s=duration, accel_time_s=accel_s,
-                      flags=FLAG_LAST | FLAG_START)
+                      flags=WaypointFlag.LAST | WaypointFlag.START)
     run.wait_s(duration + settle_s)
 
 
 def step_stroke(run, stroke_m: float, hold_s: float) -> None:
     """Test bench: a step reference to `stroke_m`, held `hold_s`."""
     run.host.waypoint((0.0, 0.0, stroke_m), segment_time_s=hold_s, accel_time_s=hold_s / 2,
-                      flags=FLAG_LAST | FLAG_START | FLAG_STEP)
+                      flags=WaypointFlag.LAST | WaypointFlag.START | WaypointFlag.STEP)
     run.wait_s(hold_s + 0.05)

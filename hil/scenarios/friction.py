@@ -25,10 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from firmware_py.config import load_config
-from firmware_py.geometry import GRAVITY_M_S2
-from firmware_py.identification import piston_force_n
+from physics.actuator import piston_force
+from physics.constants import GRAVITY_M_S2, MM
 from plant_emulator.params import load_config as load_emulator_config
-from protocol.values import KIND_TEST, TEST_FORCE_SINE, TEST_VALVE_STEP
+from protocol.enums import AckKind, TestMode
 
 from ..design.friction import (
     SteadySide,
@@ -43,7 +43,7 @@ from ..design.thesis import thesis_data
 from ..logdata import LogData
 from ..plotting import colour_for_load, plt, save
 from ..scenario import Analysis, Check, Figure, Scenario
-from .common import MM, each_controller_and_load, load_at, move_stroke
+from .common import each_controller_and_load, load_at, move_stroke
 
 STEP_S = 1.2                       # each valve step: the 0.5-1 s window and a margin (DURATION LSB 0.2 s)
 WINDOW_S = (0.5, 1.0)              # eq. 6.5's steady window (chapter 6.4.1.1)
@@ -101,16 +101,17 @@ def _input_for(velocity: float, seen: list[tuple[float, float]]) -> float:
 def _tests(log: LogData, mode: int) -> list[dict]:
     """The accepted HOST_TEST frames of `mode`: cycle, valve, force, duration."""
     accepted = {int(e.values["SEQ"]) for e in log.events_named("CTRL_ACK")
-                if int(e.values["KIND"]) == KIND_TEST and int(e.values["RESULT"]) == 0}
+                if int(e.values["KIND"]) == AckKind.TEST and int(e.values["RESULT"]) == 0}
     return [{"cycle": e.cycle, "valve_v": e.values["VALVE"], "force_n": e.values["FORCE"],
              "duration_s": e.values["DURATION"]}
-            for e in log.events_named("HOST_TEST") if int(e.values["MODE"]) == mode and int(e.values["SEQ"]) in accepted]
+            for e in log.events_named("HOST_TEST")
+            if int(e.values["MODE"]) == mode and int(e.values["SEQ"]) in accepted]
 
 
 def _pressure_force(log: LogData, cfg) -> tuple[np.ndarray, np.ndarray]:
     """(cycle, F_p) at every LEG_PRESSURE_1 frame (eq. 6.5's F_p)."""
     p = log.get("LEG_PRESSURE_1")
-    return p.cycle, piston_force_n(p["PA"], p["PB"], cfg.piston_area_m2, cfg.area_ratio)
+    return p.cycle, piston_force(p["PA"], p["PB"], cfg.piston_area_m2, cfg.area_ratio)
 
 
 def _moving_mass(cfg, load_kg: float | None) -> float:
@@ -170,7 +171,7 @@ class FrictionSteady(Scenario):
         room = abs(u) * GAIN_GUESS_MM_S_V * MM * STEP_S + 0.005
         if (u > 0 and here + room > TOP_M + 0.020) or (u < 0 and here - room < BOTTOM_M - 0.020):
             move_stroke(run, BOTTOM_M if u > 0 else TOP_M, settle_s=0.5)
-        run.host.test(TEST_VALVE_STEP, valve_v=u, duration_s=STEP_S)
+        run.host.test(TestMode.VALVE_STEP, valve_v=u, duration_s=STEP_S)
         start = run.host.syncs
         run.wait_motion_done(STEP_S + 1.0)
         run.wait_s(0.3)
@@ -187,7 +188,7 @@ class FrictionSteady(Scenario):
         spool = log.get("VALVE_CMD_1").per_cycle(log.n_cycles, "SPOOL_SETPOINT") * cfg.valve_full_scale_v
         p_cycle, fp = _pressure_force(log, cfg)
         points, skipped, stuck = [], 0, 0
-        for test in _tests(log, TEST_VALVE_STEP):
+        for test in _tests(log, TestMode.VALVE_STEP):
             u = test["valve_v"]
             on = np.flatnonzero(np.abs(spool[test["cycle"]:test["cycle"] + int(test["duration_s"] / period) + 20] - u)
                                 < 1.5e-3) + test["cycle"]
@@ -233,10 +234,11 @@ class FrictionSteady(Scenario):
                 error = abs(got - true) / abs(true)
                 tolerance = STEADY_TOLERANCE[key]
                 checks.append(Check(f"{key}{side} against the emulator's", error <= tolerance,
-                                    f"{got:.4g} vs {true:.4g} ({error * 100:.0f} %)", f"within {tolerance * 100:.0f} %"))
+                                    f"{got:.4g} vs {true:.4g} ({error * 100:.0f} %)",
+                                    f"within {tolerance * 100:.0f} %"))
                 rows.append(f"| {key}{side} | {got:.4g} | {true:.4g} | {fits[side]['table_6_1'][unit_key]:.4g} | "
                             f"{error * 100:.0f} % |")
-        steps = len(_tests(log, TEST_VALVE_STEP))
+        steps = len(_tests(log, TestMode.VALVE_STEP))
         loads = sorted({p["load_kg"] for p in points if p["load_kg"] is not None})
         per_side = {f"{load:g} kg {side}": sum(1 for p in points if p["load_kg"] == load
                                                and np.sign(p["velocity_mm_s"]) == sign)
@@ -302,7 +304,7 @@ class FrictionPresliding(Scenario):
             move_stroke(run, 0.150, settle_s=1.0, from_m=0.160)
             here = 0.150
             for amplitude in amplitudes:
-                run.host.test(TEST_FORCE_SINE, force_n=amplitude, duration_s=period_s)
+                run.host.test(TestMode.FORCE_SINE, force_n=amplitude, duration_s=period_s)
                 run.wait_motion_done(period_s + 2.0)
                 run.wait_s(0.5)
 
@@ -316,7 +318,7 @@ class FrictionPresliding(Scenario):
         y = log.leg_positions(1)[:, 0]
         p_cycle, fp = _pressure_force(log, cfg)
         charts = []
-        for test in _tests(log, TEST_FORCE_SINE):
+        for test in _tests(log, TestMode.FORCE_SINE):
             k0, k1 = test["cycle"], test["cycle"] + int(test["duration_s"] / period)
             at = (p_cycle >= k0) & (p_cycle <= k1)
             k = p_cycle[at]
@@ -357,13 +359,16 @@ class FrictionPresliding(Scenario):
             error = abs(sigma0 * MM - combined) / combined
             # reported, not asserted: a secant over the chart is not eq. 6.2's small-signal sigma0
             # (README "Friction identification")
-            checks.append(Check(f"sigma0{side} beside the emulator's seal + guide bristles", error <= PRESLIDING_TOLERANCE,
+            checks.append(Check(f"sigma0{side} beside the emulator's seal + guide bristles",
+                                error <= PRESLIDING_TOLERANCE,
                                 f"{sigma0 * MM:.1f} vs {combined:.1f} N/mm ({error * 100:.0f} %)",
                                 f"within {PRESLIDING_TOLERANCE * 100:.0f} %", required=False))
-            rows.append(f"| sigma0{side} N/mm | {sigma0 * MM:.1f} | {seal[f'sigma0_{key}_n_mm']:.1f} seal + {bristle:.0f} guide | "
+            rows.append(f"| sigma0{side} N/mm | {sigma0 * MM:.1f} | "
+                        f"{seal[f'sigma0_{key}_n_mm']:.1f} seal + {bristle:.0f} guide | "
                         f"{results[side]['table_6_2_sigma0_n_mm']:.1f} |")
             rows.append(f"| sigma1{side} Ns/mm (eq. 6.12, 3 kg) | {sigma1 * MM:.3f} | "
-                        f"{results[side]['emulator_sigma1_ns_mm']:.3f} | {results[side]['table_6_2_sigma1_ns_mm']:.3f} |")
+                        f"{results[side]['emulator_sigma1_ns_mm']:.3f} | "
+                        f"{results[side]['table_6_2_sigma1_ns_mm']:.3f} |")
         if model is not None:
             truths = {"sigma0+": (model["sigma0_pos_n_m"] * MM, seal["sigma0_pos_n_mm"]),
                       "sigma0-": (model["sigma0_neg_n_m"] * MM, seal["sigma0_neg_n_mm"]),
@@ -380,11 +385,14 @@ class FrictionPresliding(Scenario):
                 model[f"sigma1_{key}_ns_mm"] = presliding_damping(
                     sigma0, mass, sigma2[side], c6["experiments"]["presliding_damping_ratio"]) * MM
             rows.append(f"| sigma0+ / sigma0- N/mm (bristle model fit) | {model['sigma0_pos_n_m'] * MM:.1f} / "
-                        f"{model['sigma0_neg_n_m'] * MM:.1f} | {seal['sigma0_pos_n_mm']:.1f} / {seal['sigma0_neg_n_mm']:.1f} | "
+                        f"{model['sigma0_neg_n_m'] * MM:.1f} | "
+                        f"{seal['sigma0_pos_n_mm']:.1f} / {seal['sigma0_neg_n_mm']:.1f} | "
                         f"{c6['table_6_2']['sigma0_pos_n_mm']:.1f} / {c6['table_6_2']['sigma0_neg_n_mm']:.1f} |")
-            rows.append(f"| guide bristles N/mm (bristle model fit) | {model['guide_n_m'] * MM:.1f} | {bristle:.1f} | - |")
+            rows.append(f"| guide bristles N/mm (bristle model fit) | {model['guide_n_m'] * MM:.1f} | "
+                        f"{bristle:.1f} | - |")
             rows.append(f"| sigma1+ / sigma1- Ns/mm (eq. 6.12 on the fit, 3 kg) | {model['sigma1_pos_ns_mm']:.3f} / "
-                        f"{model['sigma1_neg_ns_mm']:.3f} | {seal['sigma1_pos_ns_mm']:.3f} / {seal['sigma1_neg_ns_mm']:.3f} | "
+                        f"{model['sigma1_neg_ns_mm']:.3f} | "
+                        f"{seal['sigma1_pos_ns_mm']:.3f} / {seal['sigma1_neg_ns_mm']:.3f} | "
                         f"{c6['table_6_2']['sigma1_pos_ns_mm']:.3f} / {c6['table_6_2']['sigma1_neg_ns_mm']:.3f} |")
         else:
             checks.append(Check("bristle model fit", False, "no sine with pressure samples", "a fit"))
@@ -424,7 +432,7 @@ class FrictionPresliding(Scenario):
         # minimum may creep when it started at breakaway, and those samples are left out
         speed = np.abs(np.convolve(dy, np.ones(REST_CYCLES) / (REST_CYCLES * period), mode="same"))
         at, friction, samples = [], [], 0
-        for test in _tests(log, TEST_FORCE_SINE):
+        for test in _tests(log, TestMode.FORCE_SINE):
             k0, k1 = test["cycle"], test["cycle"] + int(test["duration_s"] / period)
             inside = (p_cycle >= k0) & (p_cycle <= k1) & (p_cycle < log.n_cycles)
             samples += int(inside.sum())

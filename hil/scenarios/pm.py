@@ -11,11 +11,11 @@ import numpy as np
 
 from firmware_py.geometry import default_geometry
 from firmware_py.kinematics import DirectKinematics
-from firmware_py.trajectory import Motion, circle_motion, diagonal_motion
-from protocol.values import FLAG_LAST, FLAG_START
+from protocol.enums import WaypointFlag
 
 from ..logdata import LogData
 from ..metrics import fault_codes, iae
+from ..motions import Motion, circle_motion, diagonal_motion
 from ..plotting import plt, save
 from ..reference import rebuild
 from ..scenario import Analysis, Check, Figure, Scenario
@@ -62,12 +62,12 @@ class PlatformMovement(Scenario):
             run.select(controller)
             # to the exact home pose first, so the movement starts from a known reference
             run.host.waypoint(home, segment_time_s=RETURN_TIME_S, accel_time_s=RETURN_ACCEL_S,
-                              flags=FLAG_LAST | FLAG_START)
+                              flags=WaypointFlag.LAST | WaypointFlag.START)
             run.wait_s(RETURN_TIME_S + 0.3)
             duration = 0.0
             for p, part in enumerate(motion.parts):
                 for k, point in enumerate(part[1:]):
-                    flags = (FLAG_START if k == 0 else 0) | (FLAG_LAST if k == len(part) - 2 else 0)
+                    flags = (WaypointFlag.START if k == 0 else 0) | (WaypointFlag.LAST if k == len(part) - 2 else 0)
                     tm = segment_time(motion, p, part[k], point)
                     run.host.waypoint(point, segment_time_s=tm, accel_time_s=motion.ta_s, flags=flags)
                     duration += tm
@@ -123,7 +123,8 @@ class PlatformMovement(Scenario):
                 pi_p, mb = results["adaptive"][basis], results["model-based"][basis]
                 better = [a for a in AXES if mb[a] < pi_p[a]]
                 incomplete = [c for c in ("adaptive", "model-based") if not results[c]["complete"]]
-                checks.append(Check(f"model-based IAE < PI+P on every axis ({'ground truth' if 'truth' in basis else 'controller DK'})",
+                source = "ground truth" if "truth" in basis else "controller DK"
+                checks.append(Check(f"model-based IAE < PI+P on every axis ({source})",
                                     len(better) == 3 and not incomplete,
                                     ", ".join(f"{a} {mb[a]:.4g} vs {pi_p[a]:.4g}" for a in AXES)
                                     + (f" (movement cut short: {', '.join(incomplete)})" if incomplete else ""),

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from firmware_py.geometry import default_geometry
-from firmware_py.supervisor import Fault, State
-from protocol.values import FLAG_LAST, FLAG_START
+from physics.constants import MM
+from protocol.enums import Fault, State, WaypointFlag
 
 from ..host import HostError
 from ..logdata import LogData
@@ -31,7 +31,6 @@ from ..metrics import (
 )
 from ..plotting import plt, save
 from ..scenario import Analysis, Check, Figure, Scenario
-from .common import MM
 
 DEFAULT_S, SHORT_S = 60.0, 10.0
 LEG_S = 2.0                         # one move of the back-and-forth
@@ -73,7 +72,7 @@ class Realtime(Scenario):
                 run.recover_from_fault()
             try:
                 host.waypoint(b if k % 2 == 0 else a, segment_time_s=LEG_S, accel_time_s=0.3,
-                              flags=FLAG_LAST | FLAG_START)
+                              flags=WaypointFlag.LAST | WaypointFlag.START)
             except HostError as error:
                 if "BAD_STATE" not in str(error):
                     raise

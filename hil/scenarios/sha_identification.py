@@ -7,7 +7,7 @@ step waypoints). The analysis (log only) takes the 150 ms after every level chan
 identifies K, Gcl(s), G(s) = k01 b0 / (s (s^2 + b1 s + b0)) (eq. 5.5) and m, sigma, Fe
 (eq. 5.7): `hil/identification.py`. For each set point and load it keeps the G(s) whose
 closed loops fit every window of that point best (mean eq. 5.12), as the thesis does, and
-compares it with the emulator's linearisation (`plant_emulator.calibration`) and Table A.3.
+compares it with the emulator's linearisation (`hil.design.calibration`) and Table A.3.
 
 Deviations: levels are held 0.3-0.6 s, not 1-6 s (only the first 150 ms are used); the
 derivatives use a 50 Hz zero-phase filter, not 200 Hz (the loop samples at 500 Hz, not the
@@ -21,16 +21,17 @@ from pathlib import Path
 import numpy as np
 
 from firmware_py.config import load_config as load_controller_config
-from plant_emulator.calibration import LOADS_KG, linearise, moving_mass_kg, table_a3
+from physics.constants import MM
 from plant_emulator.params import load_config as load_emulator_config
-from protocol.values import FLAG_LAST, FLAG_START, FLAG_STEP
+from protocol.enums import WaypointFlag
 
 from .. import identification as ident
+from ..design.calibration import LOADS_KG, linearise, moving_mass_kg, table_a3
 from ..logdata import LogData
 from ..plotting import colour_for_load, plt, save
 from ..reference import rebuild
 from ..scenario import Analysis, Check, Figure, Scenario
-from .common import MM, load_at, move_stroke
+from .common import load_at, move_stroke
 
 LEVELS_MM = (-10.0, -5.0, 0.0, 5.0, 10.0)
 HOLD_S = (0.3, 0.6)
@@ -103,7 +104,7 @@ class ShaIdentification(Scenario):
                     for level, hold in prms(rng, changes, levels):
                         here = (position + level) * MM
                         run.host.waypoint((0.0, 0.0, here), segment_time_s=hold, accel_time_s=hold / 2,
-                                          flags=FLAG_LAST | FLAG_START | FLAG_STEP)
+                                          flags=WaypointFlag.LAST | WaypointFlag.START | WaypointFlag.STEP)
                         total += hold
                     run.wait_s(total + 0.3)
 
@@ -171,13 +172,14 @@ class ShaIdentification(Scenario):
                 if own:
                     by_direction[name] = {"windows": len(own),
                                           "fit_median": float(np.median([w["gcl"]["fit"] for w in own])),
-                                          **{k: float(np.median([w["plant"][k] for w in own])) * (1.0 / MM if k == "k01" else 1.0)
-                                             for k in ("b0", "b1", "k01")}}
+                                          **{k: float(np.median([w["plant"][k] for w in own]))
+                                             * (1.0 / MM if k == "k01" else 1.0) for k in ("b0", "b1", "k01")}}
             motion = [w["motion"] for w in mine if w["motion"] is not None]
             emu = linearise(ecfg, set_point, load or 0.0)
             column = {0.0: 1, 3.0: 4, 6.0: 7}.get(load)
             thesis = None if column is None else {
-                key: float(np.interp(set_point, a3[:, 0], a3[:, column + i])) for i, key in enumerate(("b0", "b1", "k01"))}
+                key: float(np.interp(set_point, a3[:, 0], a3[:, column + i]))
+                for i, key in enumerate(("b0", "b1", "k01"))}
             row = {"set_point_mm": set_point, "load_kg": load, "windows": len(mine),
                    "gains_v_mm": sorted({round(w["k_v_m"] * MM, 3) for w in mine}),
                    "window_fit_median": float(np.median([w["gcl"]["fit"] for w in mine])),
@@ -236,20 +238,22 @@ class ShaIdentification(Scenario):
     @staticmethod
     def _table(rows: list[dict]) -> str:
         lines = ["| Po mm | load kg | windows | K V/mm | fit (windows / one model) | b0 up / down / emu / A.3 | "
-                 "b1 up / down / emu / A.3 | k01 (mm/s)/V up / down / emu / A.3 | m kg id / emu | sigma N s/mm | Fe N |",
+                 "b1 up / down / emu / A.3 | k01 (mm/s)/V up / down / emu / A.3 | m kg id / emu | "
+                 "sigma N s/mm | Fe N |",
                  "|" + "---|" * 11]
         for r in rows:
             up, down = r["by_direction"].get("up", {}), r["by_direction"].get("down", {})
             e, t = r["emulator"], r["table_a3"] or {}
 
-            def four(key, fmt):
+            def four(key, fmt, up=up, down=down, e=e, t=t):
                 return " / ".join(format(v, fmt) if v is not None else "-"
                                   for v in (up.get(key), down.get(key), e[key], t.get(key)))
             m = r.get("motion", {})
             lines.append(f"| {r['set_point_mm']:.0f} | {r['load_kg']:g} | {r['windows']} | "
                          f"{', '.join(str(g) for g in r['gains_v_mm'])} | {r['window_fit_median']:.3f} / "
                          f"{r['fit_best']:.3f} | {four('b0', '.0f')} | {four('b1', '.1f')} | {four('k01', '.1f')} | "
-                         f"{m.get('m_kg', float('nan')):.2f} / {e['m']:.2f} | {m.get('sigma_ns_mm', float('nan')):.3f} | "
+                         f"{m.get('m_kg', float('nan')):.2f} / {e['m']:.2f} | "
+                         f"{m.get('sigma_ns_mm', float('nan')):.3f} | "
                          f"{m.get('fe_n', float('nan')):.1f} |")
         return "\n".join(lines)
 

@@ -6,12 +6,14 @@ from pathlib import Path
 
 import numpy as np
 
+from physics.constants import MM
+
 from ..logdata import LogData
 from ..metrics import step_response
 from ..plotting import colour_for_load, plt, save
 from ..reference import rebuild
 from ..scenario import Analysis, Check, Figure, Scenario
-from .common import MM, controller_at, each_controller_and_load, load_at, move_stroke, step_stroke
+from .common import controller_at, each_controller_and_load, load_at, move_stroke, step_stroke
 
 THESIS = {"step_mm": 10, "pi_overshoot_pct": 25, "pi_settling_s": 0.5, "adaptive_overshoot_pct_max": 14,
           "adaptive_settling_s": 1.0, "figure": "Fig. 7.16"}
@@ -107,7 +109,8 @@ class ShaStep(Scenario):
                                 required=False))
         if "adaptive" in summary:
             s = summary["adaptive"]
-            checks.append(Check("adaptive settling (5 %), median step", s["settling_s_median"] <= ADAPTIVE_SETTLING_MAX_S,
+            checks.append(Check("adaptive settling (5 %), median step",
+                                s["settling_s_median"] <= ADAPTIVE_SETTLING_MAX_S,
                                 f"{s['settling_s_median']:.2f} s (max {s['settling_s_max']:.2f})",
                                 f"thesis ~{THESIS['adaptive_settling_s']} s; <= {ADAPTIVE_SETTLING_MAX_S} s"))
             checks.append(Check("adaptive overshoot, every step", s["overshoot_pct_max"] < ADAPTIVE_OVERSHOOT_MAX_PCT,
@@ -116,7 +119,8 @@ class ShaStep(Scenario):
         if "pi" in summary and "adaptive" in summary:
             checks.append(Check("adaptive overshoots less than PI (mean)",
                                 summary["adaptive"]["overshoot_pct_mean"] < summary["pi"]["overshoot_pct_mean"],
-                                f"{summary['adaptive']['overshoot_pct_mean']:.1f} vs {summary['pi']['overshoot_pct_mean']:.1f} %",
+                                f"{summary['adaptive']['overshoot_pct_mean']:.1f} vs "
+                                f"{summary['pi']['overshoot_pct_mean']:.1f} %",
                                 "thesis: adaptive < PI", required=False))
         if not rows:
             checks.append(Check("steps found in the log", False, "0", ">= 1"))

@@ -16,16 +16,16 @@ from pathlib import Path
 
 import numpy as np
 
-from firmware_py.supervisor import Fault, State
-from plant_emulator.calibration import table_a3
-from protocol.values import EMU_SET_LOAD, FLAG_LAST, FLAG_START
+from physics.constants import MM
+from protocol.enums import EmuCommand, Fault, State, WaypointFlag
 
+from ..design.calibration import table_a3
 from ..host import HostError
 from ..logdata import LogData
 from ..plotting import colour_for_load, plt, save
 from ..reference import rebuild
 from ..scenario import Analysis, Check, Figure, Scenario
-from .common import MM, controller_at, each_controller_and_load, load_at, move_stroke
+from .common import controller_at, each_controller_and_load, load_at, move_stroke
 
 CENTRE_MM, AMPLITUDE_MM = 150.0, 125.0
 # The thesis's robust PI (eq. 7.13) on the thesis's own plant at the sine's centre (Table A.3,
@@ -48,7 +48,7 @@ def sine_waypoints(run, w_rad_s: float, periods: int = 1) -> float:
     n = POINTS_PER_PERIOD * periods
     for k in range(1, n + 1):
         y = CENTRE_MM - AMPLITUDE_MM * math.cos(2 * math.pi * k / POINTS_PER_PERIOD)
-        flags = FLAG_START | FLAG_LAST if k == n else 0
+        flags = WaypointFlag.START | WaypointFlag.LAST if k == n else 0
         run.host.waypoint((0.0, 0.0, y * MM), segment_time_s=tm, accel_time_s=round(tm / 2, 3), flags=flags)
     return tm * n
 
@@ -158,7 +158,8 @@ class ShaTracking(Scenario):
                                 rms_light <= self.LOW_W_RMS_ERROR_MM, f"{rms_light:.2f} mm",
                                 f"thesis: |error| <= {self.thesis['max_error_low_w_mm']:g} mm; rms <= "
                                 f"{self.LOW_W_RMS_ERROR_MM} mm"))
-            checks.append(Check(f"{controller}: rms error at the lowest w, every load", rms_all <= self.LOW_W_RMS_ERROR_MM,
+            checks.append(Check(f"{controller}: rms error at the lowest w, every load",
+                                rms_all <= self.LOW_W_RMS_ERROR_MM,
                                 f"{rms_all:.2f} mm", f"<= {self.LOW_W_RMS_ERROR_MM} mm", required=False))
             checks.append(Check(f"{controller}: max |error| at the lowest w ({low:g} rad/s), every load",
                                 worst <= self.thesis["max_error_low_w_mm"], f"{worst:.2f} mm",
@@ -181,7 +182,8 @@ class ShaTracking(Scenario):
                                 all(0.7 <= e / n <= 1.4 for *_, e, n in pairs),
                                 ", ".join(f"{m:g} kg w {w:.3g}: {e:.1f} / {n:.1f}" for m, w, e, n in pairs),
                                 "0.7-1.4; at w = 10, 0 kg that loop gives "
-                                f"{thesis_pi_error_mm(10.0, 0.0, centre):.0f} mm, Fig. 7.19 shows <= 30", required=False))
+                                f"{thesis_pi_error_mm(10.0, 0.0, centre):.0f} mm, Fig. 7.19 shows <= 30",
+                                required=False))
         cut = [f"{r['controller']} {r['load_kg']:g} kg w {r['w_rad_s']:g} ({fault_name(r['fault'])})"
                for r in runs if r["fault"]]
         checks.append(Check("no sine cut short by a fault", not cut, "; ".join(cut) or "none", "none",
@@ -246,7 +248,7 @@ class ShaPerturbation(Scenario):
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
         period_s = 1.0 / rate_hz
         runs = sine_runs(log, period_s)
-        changes = [e for e in log.events_named("EMU_CTRL") if int(e.values["COMMAND"]) == EMU_SET_LOAD]
+        changes = [e for e in log.events_named("EMU_CTRL") if int(e.values["COMMAND"]) == EmuCommand.SET_LOAD]
         checks, results = [], {}
         for r in runs:
             inside = [e for e in changes if r["start"] <= e.cycle < r["start"] + len(r["_t"])]

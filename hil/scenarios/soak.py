@@ -23,16 +23,14 @@ from pathlib import Path
 import numpy as np
 
 from firmware_py.geometry import default_geometry
-from firmware_py.supervisor import Fault, State
-from plant_emulator.emulator import FAULT_CODES, FAULT_NAMES
-from protocol.values import EMU_CLEAR_ALL, EMU_INJECT, FLAG_LAST, FLAG_START
+from physics.constants import MM
+from protocol.enums import EmuCommand, EmuFault, Fault, State, WaypointFlag
 
-from ..faults import LogView
 from ..host import HostError
 from ..logdata import LogData, frames_by_sender, frames_counted_by_senders
+from ..logquery import LogView
 from ..metrics import after_machine_stall, fault_transitions, late_sensor_frames
 from ..scenario import Analysis, Check, Scenario
-from .common import MM
 from .realtime import loop_timing
 
 DEFAULT_SEED = 20161
@@ -118,7 +116,7 @@ class Soak(Scenario):
             k += 1
             try:
                 host.waypoint(position, rpy_rad=rpy, segment_time_s=MOVE_S, accel_time_s=MOVE_ACCEL_S,
-                              flags=FLAG_LAST | FLAG_START)
+                              flags=WaypointFlag.LAST | WaypointFlag.START)
             except HostError as error:          # a fault between the check and the waypoint
                 self.notes.append(f"move {k}: {error}")
                 continue
@@ -128,18 +126,19 @@ class Soak(Scenario):
             kind = kinds[int(rng.integers(len(kinds)))]
             param = int(rng.integers(kind.params[0], kind.params[1] + 1))
             target = int(rng.integers(1, 7))
-            host.emulator(EMU_INJECT, target=target, fault=FAULT_CODES[kind.fault], param=param)
+            host.emulator(EmuCommand.INJECT_FAULT, target=target, fault=EmuFault[kind.fault], param=param)
             run.wait_s(MOVE_S - into + 0.1)
         host.wait_until(lambda: host.state not in moving, run.cycles(1.0), what=None)
         if host.state is not State.READY:
             self._recover(run, "at the end")
         # home: the last recovery's move, and a clean end
-        host.waypoint(poses[-1][0], segment_time_s=MOVE_S, accel_time_s=MOVE_ACCEL_S, flags=FLAG_LAST | FLAG_START)
+        host.waypoint(poses[-1][0], segment_time_s=MOVE_S, accel_time_s=MOVE_ACCEL_S,
+                      flags=WaypointFlag.LAST | WaypointFlag.START)
         run.wait_motion_done(MOVE_S + 2.0)
 
     def _recover(self, run, why: str) -> None:
         """RESET + ENABLE after a fault; RECOVERY_TRIES failures in a row end the soak."""
-        run.host.emulator(EMU_CLEAR_ALL)
+        run.host.emulator(EmuCommand.CLEAR_ALL)
         try:
             run.recover_from_fault()
             ok = run.host.state is State.READY
@@ -258,9 +257,9 @@ def _injections(log: LogData) -> list[tuple[float, int, SoakFault, int]]:
     """Every soak injection in the log: (time, target leg, kind, param)."""
     out = []
     for e in log.events_named("EMU_CTRL"):
-        if int(e.values["COMMAND"]) != EMU_INJECT:
+        if int(e.values["COMMAND"]) != EmuCommand.INJECT_FAULT:
             continue
-        kind = classify(FAULT_NAMES.get(int(e.values["FAULT"]), ""), int(e.values["FAULT_PARAM"]))
+        kind = classify(_fault_name(int(e.values["FAULT"])), int(e.values["FAULT_PARAM"]))
         if kind is not None:
             out.append((e.time_s, int(e.values["TARGET"]), kind, int(e.values["FAULT_PARAM"])))
     return out
@@ -276,3 +275,11 @@ def _recoveries(log: LogData, transitions: list) -> dict:
         if len(ready) and np.any(after[ready[0]:] == State.RUNNING):
             recovered += 1
     return {"faults": len(transitions), "recovered": recovered}
+
+
+def _fault_name(code: int) -> str:
+    """EMU_CTRL.FAULT's name ("" for a code the DBC does not know)."""
+    try:
+        return EmuFault(code).name
+    except ValueError:
+        return ""

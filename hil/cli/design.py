@@ -21,7 +21,7 @@ THESIS_KP_V_MM, THESIS_KI_V_MM_S = 0.085, 0.46      # chapter 7.4.2
 
 def _plants(text: str) -> str:
     """argparse `type=`: a known source, or a file that exists (read later, errors one line)."""
-    from .plants import SOURCES
+    from ..design.plants import SOURCES
     if text in SOURCES or Path(text).is_file():
         return text
     raise argparse.ArgumentTypeError(f"{text!r} is neither {' nor '.join(SOURCES)} nor an existing file")
@@ -46,8 +46,8 @@ def _out_dir(text: str | None, default: str) -> Path:
 
 
 def _robustness(args) -> int:
-    from .plants import plant_set
-    from .reports import find_plant, format_robustness, plot_uncertainty, robustness_doc
+    from ..design.plants import plant_set
+    from ..design.reports import find_plant, format_robustness, plot_uncertainty, robustness_doc
     out = _out_dir(args.out, "hil-out/design-robustness")
     plants = plant_set(args.plants)
     if args.nominal is not None and find_plant(plants, *args.nominal) is None:
@@ -66,9 +66,9 @@ def _robustness(args) -> int:
 
 
 def _schedule(args) -> int:
-    from .plants import plant_set
-    from .reports import format_schedule, schedule_doc
-    from .schedule import schedule_toml, write_schedule
+    from ..design.plants import plant_set
+    from ..design.reports import format_schedule, schedule_doc
+    from ..design.schedule import schedule_toml, write_schedule
     out = Path(args.out)
     plants = plant_set(args.plants)
     doc, tunings = schedule_doc(plants, args.plants, args.kp_fraction, args.ti_fraction, args.ki_scale)

@@ -11,7 +11,7 @@ from protocol.errors import UserInputError
 
 
 def _scenario(name: str):
-    from .scenarios import SCENARIOS
+    from ..scenarios import SCENARIOS
     if name not in SCENARIOS:
         raise UserInputError(f"unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")
     return SCENARIOS[name]
@@ -30,13 +30,13 @@ def _controllers(text: str | None) -> tuple[str, ...] | None:
 
 
 def _finish(args, doc: dict) -> int:
-    from .report import format_terminal
+    from ..report import format_terminal
     print(json.dumps(doc, indent=1, default=str) if args.json else format_terminal(doc))
     return 0 if doc["passed"] else 1
 
 
 def _run(args) -> int:
-    from .runner import RunOptions, run_scenario
+    from ..runner import RunOptions, run_scenario
     scenario = _scenario(args.scenario)
     out = Path(args.out) if args.out else Path("hil-out") / scenario.name
     options = RunOptions(out_dir=out, bus=args.bus, pacing=args.pacing, rate_hz=500.0, short=args.short,
@@ -61,7 +61,7 @@ def _controller_config(path: str | None) -> dict:
 
 
 def _faults(args) -> int:
-    from .faults import format_terminal, run_matrix
+    from ..faults import format_terminal, run_matrix
     out = Path(args.out) if args.out else Path("hil-out") / "faults"
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -73,8 +73,8 @@ def _faults(args) -> int:
 
 
 def _soak(args) -> int:
-    from .runner import RunOptions, run_scenario
-    from .scenarios.soak import Soak
+    from ..runner import RunOptions, run_scenario
+    from ..scenarios.soak import Soak
     scenario = Soak(seconds=args.minutes * 60.0, seed=args.seed)
     out = Path(args.out) if args.out else Path("hil-out") / "soak"
     options = RunOptions(out_dir=out, bus=args.bus, rate_hz=500.0, valve_watchdog_periods=args.valve_watchdog_periods,
@@ -83,7 +83,7 @@ def _soak(args) -> int:
 
 
 def _fuzz(args) -> int:
-    from .fuzz import TARGETS, as_dicts, format_reports, run
+    from ..fuzz import TARGETS, as_dicts, format_reports, run
     targets = [t.strip() for t in args.targets.split(",") if t.strip()]
     bad = [t for t in targets if t not in TARGETS]
     if bad or not targets:
@@ -95,7 +95,7 @@ def _fuzz(args) -> int:
 
 
 def _analyze(args) -> int:
-    from .runner import analyze_log
+    from ..runner import analyze_log
     scenario = _scenario(args.scenario)
     log = Path(args.log)
     out = Path(args.out) if args.out else log.parent
@@ -103,7 +103,7 @@ def _analyze(args) -> int:
 
 
 def _list(args) -> int:
-    from .scenarios import SCENARIOS
+    from ..scenarios import SCENARIOS
     rows = [{"name": s.name, "rig": s.rig, "pacing": s.pacing, "controllers": list(s.controllers),
              "thesis": s.chapter, "title": s.title} for s in SCENARIOS.values()]
     if args.json:
@@ -120,8 +120,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     hil_sub = hil.add_subparsers(dest="hil_command", required=True, metavar="SUBCOMMAND", parser_class=type(hil))
     p = hil_sub.add_parser("run", help="run a scenario: emulator + controller processes, this process as host")
     p.add_argument("scenario", metavar="SCENARIO")
-    p.add_argument("--bus", metavar="SPEC", help="bus to run on (default: a fresh on-host multicast group and "
-                                                 "port; 'default' = socketcan:vcan0 if present, else the default group)")
+    p.add_argument("--bus", metavar="SPEC",
+                   help="bus to run on (default: a fresh on-host multicast group and port; 'default' = "
+                        "socketcan:vcan0 if present, else the default group)")
     p.add_argument("--pacing", choices=("lockstep", "realtime"), default=None,
                    help="default: the scenario's (lockstep, realtime for the timing scenarios)")
     p.add_argument("--out", metavar="DIR", help="output directory (default: hil-out/SCENARIO)")

@@ -4,16 +4,15 @@ For each trajectory of Table 10.2 the platform's pose, twist and acceleration ar
 closed form (eq. 10.43-10.49). MuJoCo's answer: the leg joints' positions follow from the
 pose, their rates and accelerations by a 5-point central difference, and
 `Mechanism.inverse_forces` gives the actuator forces from MuJoCo's own tree dynamics and
-constraint Jacobian. The model's answer: `firmware_py.dynamics.InverseDynamics`. A
+constraint Jacobian; each side reads the geometry file with its own code. The model's
+answer: `firmware_py.dynamics.InverseDynamics`. A
 forward run then drives the MuJoCo model with the model's forces plus a leg-length PD
 loop, to show the forces hold the mechanism on the trajectory with the loop closed.
 """
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import asdict, dataclass
-from importlib import resources
 
 import mujoco
 import numpy as np
@@ -21,10 +20,12 @@ import numpy as np
 from firmware_py.dynamics import InverseDynamics
 from firmware_py.geometry import Geometry
 from firmware_py.workspace import MIN_CONDITION_INDEX, check_poses
+from physics.constants import MM
+from plant_emulator.mechanism import Mechanism
+from plant_emulator.rig_geometry import RigGeometry
 
-from .mechanism import Mechanism
+from ..design.thesis import thesis_data
 
-MM = 1e-3
 DIFF_STEP_S = 1e-3
 FORWARD_PD = (4.0e4, 4.0e2)      # N/m, N s/m on each leg's length error in the forward run
 
@@ -57,7 +58,7 @@ class Trajectory:
 
 
 def table_10_2() -> list[Trajectory]:
-    data = tomllib.loads(resources.files("plant_emulator").joinpath("data/table_10_2.toml").read_text())
+    data = thesis_data("table_10_2")
     return [Trajectory(row["name"], np.array(row["a0_mm"]) * MM, row["a1_mm"] * MM, np.array(row["ur"], float),
                        float(row["theta0_rad"]), np.array(row["up"], float), row["absmax_n"], row["rel_pct"],
                        data["w_rad_s"], data["duration_s"]) for row in data["trajectory"]]
@@ -108,8 +109,8 @@ def _mujoco_state(mech: Mechanism, traj: Trajectory, t: float):
     return qpos, qvel, qacc
 
 
-def validate(geometry: Geometry, traj: Trajectory, sample_dt_s: float = 0.01) -> ValidationResult:
-    mech = Mechanism(geometry)
+def validate(geometry: Geometry, rig: RigGeometry, traj: Trajectory, sample_dt_s: float = 0.01) -> ValidationResult:
+    mech = Mechanism(rig)
     model = InverseDynamics(geometry)
     times = np.arange(0.0, traj.duration_s + 1e-9, sample_dt_s)
     errors = np.empty((len(times), 6))
@@ -167,8 +168,10 @@ def forward_run(geometry: Geometry, traj: Trajectory, mech: Mechanism, model: In
     return max_leg_error, max_closure
 
 
-def validate_all(geometry: Geometry) -> list[dict]:
-    rows = [asdict(validate(geometry, traj)) for traj in table_10_2()]
+def validate_all(geometry: Geometry, rig: RigGeometry) -> list[dict]:
+    """Every Table 10.2 trajectory; `geometry` and `rig` are the controller's and the plant's
+    readings of the same geometry file."""
+    rows = [asdict(validate(geometry, rig, traj)) for traj in table_10_2()]
     for row in rows:              # JSON has no NaN: a forward run that was not made is null
         for key in ("forward_max_leg_error_mm", "forward_max_closure_um"):
             if row[key] != row[key]:

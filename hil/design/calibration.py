@@ -17,24 +17,26 @@ Here the same three numbers come from a **linearisation** of the emulator's own 
   5-300 rad/s, the band of the 150 ms identification windows.
 
 `fit` tunes the declared physical parameters by least squares on the log-ratios to
-Table A.3 and is how the "tuned" values of `data/emulator.toml` were produced.
+Table A.3 and is how the "tuned" values of the emulator's `data/emulator.toml` were produced.
 """
 
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
-from importlib import resources
 
 import numpy as np
 from scipy.optimize import fsolve, least_squares
 
-from . import hydraulics as hy
-from .friction import FP_S2_NEG, FP_S2_POS
-from .params import GRAVITY_M_S2, EmulatorConfig, build, merge
+from physics import lugre
+from physics.constants import BAR, GRAVITY_M_S2, MM
+from plant_emulator import hydraulics as hy
+from plant_emulator.params import EmulatorConfig, build, merge
+
+from .thesis import thesis_data
 
 LOADS_KG = (0.0, 3.0, 6.0)
+SPOOL_UNIT = 1e-3        # the operating-point solver's spool variable, per unit of it
 BAND_RAD_S = np.logspace(np.log10(5.0), np.log10(300.0), 40)
 # Table A.3 bounds of the issue: b0 and k01 within +/-20 %, b1 within +/-25 %, the complex
 # pole pair inside Re [-65, -45], Im [75, 125] 1/s widened by 10 %.
@@ -59,9 +61,7 @@ TUNABLE = {
 
 def table_a3() -> np.ndarray:
     """Rows [Po_mm, b0_0k, b1_0k, k01_0k, b0_3k, b1_3k, k01_3k, b0_6k, b1_6k, k01_6k]."""
-    path = resources.files("plant_emulator").joinpath("data/table_A3.toml")
-    with path.open("rb") as handle:
-        return np.asarray(tomllib.load(handle)["rows"], dtype=float)
+    return np.asarray(thesis_data("table_A3")["rows"], dtype=float)
 
 
 @dataclass
@@ -95,24 +95,24 @@ def moving_mass_kg(cfg: EmulatorConfig, load_kg: float) -> float:
 
 
 def linearise(cfg: EmulatorConfig, position_mm: float, load_kg: float) -> OperatingPoint:
-    y = position_mm * 1e-3
+    y = position_mm * MM
     mass = moving_mass_kg(cfg, load_kg)
     fp = cfg.friction
-    damping = 0.5 * (fp[FP_S2_POS] + fp[FP_S2_NEG]) + cfg.guide.viscous_ns_m
+    damping = 0.5 * (fp[lugre.S2_POS] + fp[lugre.S2_NEG]) + cfg.guide.viscous_ns_m
     ps = cfg.supply_pressure_pa
     hold = mass * GRAVITY_M_S2 / cfg.area_a_m2          # load pressure that holds it
 
     def residual(q):
-        pa, pb, spool = q[0] * 1e5, q[1] * 1e5, q[2] * 1e-3
+        pa, pb, spool = q[0] * BAR, q[1] * BAR, q[2] * SPOOL_UNIT
         rate_a, rate_b, _, _ = hy.pressure_rates(y, 0.0, pa, pb, spool, ps, cfg.hp, 1.0)
         va, vb = hy.chamber_volumes(y, cfg.hp)
-        return [(pa - cfg.alpha * pb - hold) / 1e5,
+        return [(pa - cfg.alpha * pb - hold) / BAR,
                 rate_a * va / hy.bulk_modulus(pa, cfg.hp) * 1e6 / cfg.area_a_m2,
                 rate_b * vb / hy.bulk_modulus(pb, cfg.hp) * 1e6 / cfg.area_a_m2]
 
-    guess = [(0.5 * ps + hold) / 1e5, 0.5 * ps / 1e5, 0.0]
+    guess = [(0.5 * ps + hold) / BAR, 0.5 * ps / BAR, 0.0]
     solution, _, ier, _ = fsolve(residual, guess, full_output=True, xtol=1e-12)
-    pa, pb, spool = solution[0] * 1e5, solution[1] * 1e5, solution[2] * 1e-3
+    pa, pb, spool = solution[0] * BAR, solution[1] * BAR, solution[2] * SPOOL_UNIT
     converged = ier == 1 and np.max(np.abs(residual(solution))) < 1e-6
     x0 = np.array([0.0, pa, pb, spool])
     u0 = spool * cfg.valve_full_scale_v
@@ -136,8 +136,8 @@ def linearise(cfg: EmulatorConfig, position_mm: float, load_kg: float) -> Operat
     eye = np.eye(4)
     response = np.array([np.linalg.solve(1j * w * eye - a_mat, b_vec)[0] for w in BAND_RAD_S])  # v/u, m/s/V
     model = b0 / ((1j * BAND_RAD_S) ** 2 + b1 * 1j * BAND_RAD_S + b0)
-    k01 = float(np.real(np.vdot(model, response)) / np.real(np.vdot(model, model))) * 1e3   # (mm/s)/V
-    return OperatingPoint(position_mm, load_kg, float(b0), float(b1), k01, poles, pa / 1e5, pb / 1e5,
+    k01 = float(np.real(np.vdot(model, response)) / np.real(np.vdot(model, model))) / MM   # (mm/s)/V
+    return OperatingPoint(position_mm, load_kg, float(b0), float(b1), k01, poles, pa / BAR, pb / BAR,
                           spool * 100.0, bool(converged))
 
 
@@ -218,7 +218,8 @@ def format_table(table: list[dict]) -> str:
     for e in table:
         em, th, r = e["emulator"], e["thesis"], e["ratio"]
         flag = "yes" if e["within_bounds"] and e["pole_in_region"] else "NO"
-        lines.append(f"{e['position_mm']:4.0f}  {e['load_kg']:3.0f}  | {em['b0']:7.0f} / {th['b0']:6.0f} {r['b0']:5.2f} |"
+        lines.append(f"{e['position_mm']:4.0f}  {e['load_kg']:3.0f}  | "
+                     f"{em['b0']:7.0f} / {th['b0']:6.0f} {r['b0']:5.2f} |"
                      f" {em['b1']:5.1f} / {th['b1']:4.0f} {r['b1']:5.2f} | {em['k01']:5.1f} / {th['k01']:4.0f} "
                      f"{r['k01']:5.2f} | {e['pole'][0]:5.1f}{e['pole'][1]:+6.1f}j | {flag}")
     s = summary(table)

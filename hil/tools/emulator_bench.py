@@ -12,11 +12,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from protocol.values import NMT_OPERATIONAL
-
-from .emulator import Emulator
-from .params import EmulatorConfig
-from .rigs import make_rig
+from plant_emulator.emulator import Emulator
+from plant_emulator.params import EmulatorConfig
+from plant_emulator.rigs import make_rig
+from protocol.enums import NmtState
 
 GOALS = {"testbench": 10.0, "hexapod": 3.0}
 
@@ -28,7 +27,7 @@ def bench_rig(name: str, cfg: EmulatorConfig, seconds: float, rate_hz: float) ->
     emulator = Emulator(None, rig, cfg)
     emulator.boot()
     for n in emulator.nmt:
-        emulator.nmt[n] = NMT_OPERATIONAL
+        emulator.nmt[n] = NmtState.OPERATIONAL
     for valve in emulator.valves.values():   # hold, then active with a small sine command
         valve.receive(True, True, False, False, 0.0)
         valve.on_sync()

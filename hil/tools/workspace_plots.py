@@ -4,15 +4,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from firmware_py.geometry import Geometry
+from firmware_py.rotation import rpy_to_quat
+from firmware_py.workspace import check_poses
 
-from .geometry import Geometry  # noqa: E402
-from .rotation import rpy_to_quat  # noqa: E402
-from .workspace import check_poses, dexterous_mask  # noqa: E402
+from ..plotting import plt, save
+from .workspace_figures import dexterous_mask
 
 
 def _grid(a_range, b_range, n):
@@ -20,13 +19,6 @@ def _grid(a_range, b_range, n):
     b = np.linspace(*b_range, n)
     aa, bb = np.meshgrid(a, b)
     return a, b, aa.ravel(), bb.ravel()
-
-
-def _save(fig, path: Path) -> Path:
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
 
 
 def _mask_plot(ax, a, b, mask, xlabel, ylabel, title):
@@ -49,7 +41,7 @@ def plot_workspace(geometry: Geometry, out_dir: Path, resolution: int = 81) -> l
     a, b, xx, zz = _grid((-0.6, 0.6), (0.45, 0.9), n)
     mask = dexterous_mask(geometry, np.column_stack([xx, np.zeros_like(xx), zz]))
     _mask_plot(axes[1], a * 1e3, b * 1e3, mask, "x [mm]", "z [mm]", "dexterous (+/-25 deg), y = 0 (Fig. 9.3b)")
-    written.append(_save(fig, out_dir / "fig9_3_dexterous.png"))
+    written.append(_saved(fig, out_dir / "fig9_3_dexterous.png"))
     # Fig. 9.5: parallel platforms, slices z = 600 mm and y = 0
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.5))
     a, b, xx, yy = _grid((-0.7, 0.7), (-0.7, 0.7), n)
@@ -58,7 +50,7 @@ def plot_workspace(geometry: Geometry, out_dir: Path, resolution: int = 81) -> l
     a, b, xx, zz = _grid((-0.7, 0.7), (0.45, 0.9), n)
     mask = check_poses(geometry, np.column_stack([xx, np.zeros_like(xx), zz]), [1, 0, 0, 0]).reachable
     _mask_plot(axes[1], a * 1e3, b * 1e3, mask, "x [mm]", "z [mm]", "parallel platforms, y = 0 (Fig. 9.5b)")
-    written.append(_save(fig, out_dir / "fig9_5_translation.png"))
+    written.append(_saved(fig, out_dir / "fig9_5_translation.png"))
     # Fig. 9.7 and 9.11-9.12: orientation workspace at r = [0, 0, 700] mm, singular surface
     centre = np.array([0.0, 0.0, 0.7])
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.5))
@@ -72,5 +64,10 @@ def plot_workspace(geometry: Geometry, out_dir: Path, resolution: int = 81) -> l
         _mask_plot(ax, a, b, report.reachable, "pitch [deg]", "yaw [deg]",
                    f"roll = {roll:g} deg, det Jx = 0 in red (Fig. {fig_no})")
         ax.contour(a, b, np.sign(report.det_jx).reshape(len(b), len(a)), levels=[0.0], colors="red")
-    written.append(_save(fig, out_dir / "fig9_7_fig9_12_orientation.png"))
+    written.append(_saved(fig, out_dir / "fig9_7_fig9_12_orientation.png"))
     return written
+
+
+def _saved(fig, path: Path) -> Path:
+    save(fig, path)
+    return path

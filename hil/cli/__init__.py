@@ -1,19 +1,20 @@
 """The `hydrapod` command: one entry point, one subcommand per job.
 
-Each package contributes its subcommands through an `add_parsers(subparsers)` function
-whose parsers set `handler`; errors in user input are one line and exit code 2.
+Each module here contributes its subcommands through `add_parsers(subparsers)`, whose
+parsers set `handler`; errors in user input are one line and exit code 2.
 """
 
 from __future__ import annotations
 
 import sys
 
-from firmware_py import commands as firmware_commands
-from hil import commands as hil_commands
-from hil.design import commands as design_commands
-from plant_emulator import commands as emulator_commands
-from protocol import commands as protocol_commands
-from protocol.cliutil import OneLineArgumentParser, run
+from physics.numba_cache import configure
+
+configure()     # before any kernel is defined (see physics/numba_cache.py)
+
+from protocol.cliutil import OneLineArgumentParser, run  # noqa: E402
+
+from . import controller, design, emulator, hil, kinematics, protocol  # noqa: E402
 
 PROG = "hydrapod"
 
@@ -23,11 +24,8 @@ def build_parser() -> OneLineArgumentParser:
                                                           "Stewart-Gough platform over CAN")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineArgumentParser,
                                 metavar="COMMAND")
-    protocol_commands.add_parsers(sub)
-    firmware_commands.add_parsers(sub)
-    emulator_commands.add_parsers(sub)
-    hil_commands.add_parsers(sub)
-    design_commands.add_parsers(sub)
+    for module in (protocol, controller, kinematics, emulator, hil, design):
+        module.add_parsers(sub)
     return parser
 
 

@@ -13,10 +13,11 @@ import tracemalloc
 
 import numpy as np
 
-from .dynamics import InverseDynamics
-from .geometry import N_LEGS, Geometry
-from .kinematics import DirectKinematics, ik_batch, ik_into, jacobian_into
-from .trajectory import diagonal_motion
+from firmware_py.dynamics import InverseDynamics
+from firmware_py.geometry import N_LEGS, Geometry
+from firmware_py.kinematics import DirectKinematics, ik_batch, ik_into, jacobian_into
+
+from ..motions import diagonal_motion
 
 CYCLE_S = 0.002
 

@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from .codec import CODECS, FrameDecoder
+from protocol.codec import CODECS, FrameDecoder
 
 LEGS = range(1, 7)
 

@@ -6,11 +6,12 @@ import argparse
 import json
 from dataclasses import asdict
 
-from .bench import format_bench, run_bench
-from .busload import MAX_LOAD, MIN_COMPUTE_WINDOW_US, bus_budget, format_budget
-from .cliutil import number_in_range
-from .codec import CODECS
-from .dbc import dbc_path
+from protocol.busload import MAX_LOAD, MIN_COMPUTE_WINDOW_US, bus_budget, format_budget
+from protocol.cliutil import number_in_range
+from protocol.codec import CODECS
+from protocol.dbc import dbc_path
+
+from ..tools.protocol_bench import format_bench, run_bench
 
 CLASSIC_CAN_MAX_BITRATE = 1_000_000
 

@@ -6,10 +6,10 @@ import argparse
 import json
 from pathlib import Path
 
-from protocol.cliutil import number_in_range, output_file
+from firmware_py.geometry import default_geometry, load_geometry_file
+from firmware_py.workspace import MIN_CONDITION_INDEX
+from protocol.cliutil import number_in_range
 from protocol.errors import UserInputError
-
-from .geometry import default_geometry, load_geometry_file
 
 
 def _geometry(args):
@@ -22,15 +22,14 @@ def _print(args, report, text) -> int:
 
 
 def _dk_eval(args) -> int:
-    from .dk_eval import evaluate, format_evaluation
-    from .workspace import MIN_CONDITION_INDEX
+    from ..tools.dk_eval import evaluate, format_evaluation
     margin = MIN_CONDITION_INDEX if args.min_condition_index is None else args.min_condition_index
     report = evaluate(_geometry(args), int(args.samples), int(args.seed), margin)
     return _print(args, report, format_evaluation(report))
 
 
 def _workspace(args) -> int:
-    from .workspace import MIN_CONDITION_INDEX, workspace_extents
+    from ..tools.workspace_figures import workspace_extents
     geometry = _geometry(args)
     report = {"extents": workspace_extents(geometry), "min_condition_index": MIN_CONDITION_INDEX}
     if args.plot:
@@ -39,7 +38,7 @@ def _workspace(args) -> int:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as error:
             raise UserInputError(f"--plot {args.plot}: cannot create the directory ({error.strerror})") from None
-        from .workspace_plots import plot_workspace
+        from ..tools.workspace_plots import plot_workspace
         report["plots"] = [str(p) for p in plot_workspace(geometry, out, int(args.resolution))]
     text = "\n".join([f"{k:>26}: {v:8.1f}" for k, v in report["extents"].items()] +
                      [f"wrote {p}" for p in report.get("plots", [])])
@@ -47,21 +46,20 @@ def _workspace(args) -> int:
 
 
 def _validate_dynamics(args) -> int:
-    from plant_emulator.validation import format_validation, validate_all
-    rows = validate_all(_geometry(args))
+    from plant_emulator.rig_geometry import read_rig_geometry
+
+    from ..tools.validate_dynamics import format_validation, validate_all
+    rows = validate_all(_geometry(args), read_rig_geometry(args.geometry))
     return _print(args, {"trajectories": rows}, format_validation(rows))
 
 
 def _bench(args) -> int:
-    from .kinematics_bench import format_bench, run_bench
+    from ..tools.kinematics_bench import format_bench, run_bench
     report = run_bench(_geometry(args), int(args.calls))
     return _print(args, report, format_bench(report))
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
-    ctl = sub.add_parser("controller", help="the controller daemon (runs until SIGTERM/SIGINT); "
-                                            "'controller bench' times the update step")
-    configure_controller_parser(ctl)
     kin = sub.add_parser("kinematics", help="mechanism: direct kinematics, workspace, dynamics validation, bench")
     kin_sub = kin.add_subparsers(dest="kinematics_command", required=True, metavar="SUBCOMMAND",
                                  parser_class=type(kin))
@@ -93,36 +91,3 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--calls", type=number_in_range(int, 100, 10_000_000), default=20000)
     common(p)
     p.set_defaults(handler=_bench)
-
-
-
-def _controller_bench(args) -> int:
-    from .config import load_config
-    from .controller_bench import format_bench, run_bench
-    rows = run_bench(load_config(args.config), cycles=args.cycles)
-    return _print(args, {"update_step_us": rows}, format_bench(rows))
-
-
-def configure_controller_parser(ctl) -> None:
-    """Options of the daemon and its `bench` subcommand, on `hydrapod controller` and
-    `python -m firmware_py` alike."""
-    from .control import CONTROLLER_NAMES
-    from .daemon import run_daemon
-
-    ctl.add_argument("--bus", default=None, metavar="SPEC",
-                     help="socketcan:<if> | udp_multicast:<group>[:<port>] | virtual:<name> "
-                          "(default: socketcan:vcan0 if present, else an on-host multicast group)")
-    ctl.add_argument("--rig", choices=("testbench", "hexapod"), default="testbench")
-    ctl.add_argument("--rate-hz", type=number_in_range(float, 1.0, 1000.0), default=500.0)
-    ctl.add_argument("--pacing", choices=("realtime", "lockstep"), default="realtime")
-    ctl.add_argument("--controller", choices=tuple(CONTROLLER_NAMES), default="pi")
-    ctl.add_argument("--config", metavar="FILE", help="controller TOML overriding the packaged defaults")
-    ctl.add_argument("--summary", metavar="FILE", type=output_file, help="write the run's summary as JSON on exit")
-    ctl.set_defaults(handler=run_daemon)
-    ctl_sub = ctl.add_subparsers(dest="controller_command", required=False, metavar="SUBCOMMAND",
-                                 parser_class=type(ctl))
-    p = ctl_sub.add_parser("bench", help="compute time of the update step per controller and rig (p50/p99/max)")
-    p.add_argument("--cycles", type=number_in_range(int, 100, 10_000_000), default=20000)
-    p.add_argument("--config", metavar="FILE", help="controller TOML overriding the packaged defaults")
-    p.add_argument("--json", action="store_true", help="print JSON")
-    p.set_defaults(handler=_controller_bench)

@@ -1,0 +1,343 @@
+"""The controller of one rig without the bus: `update(meas, cmd)` is one cycle (supervision,
+the host's frames, reference, estimation, control, limits, valve commands) on arrays made
+here; it allocates nothing in the steady cycle.
+
+Rigs: `testbench` (one leg; a waypoint's Z is the piston stroke) and `hexapod` (six legs;
+waypoints are platform poses, joint references by inverse kinematics, the pose estimated by
+direct kinematics every cycle). Host frames reach it through `host` (hostlink.py); the
+methods they end in (`host_command`, `waypoint_commit`, `test_command`) are events and may
+allocate.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from physics.actuator import piston_force
+from physics.constants import GRAVITY_M_S2
+from protocol.enums import Ack, Command, Fault, State, TestMode, WaypointFlag
+
+from .config import ControllerConfig
+from .control import MODEL_BASED, JointController
+from .geometry import Geometry, default_geometry
+from .hostlink import HostLink
+from .identification import TEST_MODES, IdentificationSignal
+from .interfaces import Measurements, ValveCommands
+from .monitors import FrameMonitor, LimitMonitor, LoopMonitor, NodeMonitor
+from .plausibility import AttitudeCrossCheck, MotionPlausibility
+from .reference import Reference
+from .supervisor import ACTIVE, Action, Supervisor
+from .waypoints import HexapodCheck, TestbenchCheck, WaypointQueue
+
+RIGS = ("testbench", "hexapod")
+MOTION_COMMANDS = (Command.ENABLE, Command.HOME, Command.PARK, Command.START)
+RESET_GRACE_CYCLES = 4                 # valves need a SYNC or two to leave FAULT after R
+
+
+class Controller:
+    def __init__(self, cfg: ControllerConfig, rig: str, period_s: float, controller: int = 0,
+                 geometry: Geometry | None = None):
+        if rig not in RIGS:
+            raise ValueError(f"unknown rig {rig!r} (known: {', '.join(RIGS)})")
+        self.cfg, self.rig, self.period_s = cfg, rig, period_s
+        self.hexapod = rig == "hexapod"
+        self.n = n = 6 if self.hexapod else 1
+        if self.hexapod:
+            from .platform import PlatformModel
+            self.geometry = geometry or default_geometry()
+            self.platform = PlatformModel(self.geometry, cfg.dk_tolerance_m, cfg.dk_max_iterations, period_s)
+            self.stroke_m = self.geometry.stroke_m
+            self.home_strokes = self.platform.lengths - self.geometry.leg_min_m     # lengths at home
+            self.park_strokes = np.full(n, cfg.hexapod_park_stroke_m)
+            moving_mass, mass_offset = self.geometry.rod.mass_kg, 0.0
+            kp_factor, ki_factor = cfg.hexapod_kp_factor, cfg.hexapod_ki_factor
+            check = HexapodCheck(cfg, self.geometry)
+            self.gravity_axial = self.platform.gravity_axial
+            self.tau_n = self.platform.force_n
+        else:
+            self.geometry = None
+            self.platform = None
+            self.stroke_m = cfg.stroke_m
+            self.home_strokes = np.full(n, cfg.testbench_home_m)
+            self.park_strokes = np.full(n, cfg.testbench_park_m)
+            moving_mass, mass_offset = cfg.moving_mass_kg, cfg.slide_mass_kg
+            kp_factor, ki_factor = 1.0, 1.0
+            check = TestbenchCheck(cfg, cfg.stroke_m)
+            self.gravity_axial = np.full(n, GRAVITY_M_S2)
+            self.tau_n = np.zeros(n)
+        self.joint = JointController(cfg, n, period_s, moving_mass_kg=moving_mass, mass_offset_kg=mass_offset,
+                                     kp_factor=kp_factor, ki_factor=ki_factor)
+        self.sup = Supervisor(controller)
+        self.joint.set_mode(controller)
+        self.reference = Reference(n, period_s, cfg.waypoint_queue + 2)
+        self.waypoints = WaypointQueue(cfg, check)
+        self.host = HostLink()
+        # supervision
+        self.loop_monitor = LoopMonitor(cfg)
+        self.node_monitor = NodeMonitor(cfg, n)
+        self.frames = FrameMonitor(cfg, n)
+        self.limits = LimitMonitor(cfg, n, self.stroke_m)
+        spool, cycles = ((cfg.plausibility_spool, cfg.plausibility_cycles) if self.hexapod else
+                         (cfg.testbench_plausibility_spool, cfg.testbench_plausibility_cycles))
+        self.plausibility = MotionPlausibility(n, spool * cfg.valve_full_scale_v, cycles, cfg.plausibility_travel_m)
+        self.attitude_check = AttitudeCrossCheck(cfg.attitude_mismatch_rad, cfg.attitude_mismatch_samples)
+        self._finite3 = np.zeros((n, 3), dtype=bool)
+        self._finite = np.zeros(n, dtype=bool)
+        # identification tests (HOST_TEST, test bench only: chapter 6.4)
+        self.test = None if self.hexapod else IdentificationSignal(
+            cfg.test_force_gain_v_n, cfg.test_stroke_guard_m, cfg.stroke_m, cfg.saturation_v, period_s)
+        self.meas, _ = self.new_interfaces()            # the last cycle's measurements (events read them)
+        self.dk_failures = 0
+        self.reset_cycles = 0
+        self._reset_pulse = False
+        self.time_s = 0.0
+        self.cycles = 0
+        self.initialised = False
+        self.reinitialise = False              # a RESET waits for a complete fresh set of measurements
+        self.nodes_restart_requested = False   # a RESET was accepted: the NMT master starts nodes that rebooted
+        self._warm_up()
+
+    def new_interfaces(self) -> tuple[Measurements, ValveCommands]:
+        """Measurements and commands sized for this rig (allocate once, reuse every cycle)."""
+        return Measurements(self.n, self.n + (1 if self.hexapod else 0)), ValveCommands(self.n)
+
+    def _warm_up(self) -> None:
+        """Load every compiled kernel now (configure), not in the first cycle."""
+        ref = self.reference
+        self.joint.update(self.home_strokes, np.ones(self.n, dtype=bool), np.zeros(self.n), ref.yr, ref.ar,
+                          self.gravity_axial, self.tau_n, False)
+        if self.hexapod:
+            self.platform.estimate(self.home_strokes)
+            self.platform.reset_reference(self.home_strokes)
+            self.platform.reference_forces(self.home_strokes, ref.vr)
+            self.platform.dk.reset()
+        self.joint.reset(0.0)
+
+    @property
+    def state(self) -> State:
+        return self.sup.state
+
+    @property
+    def active_waypoint(self) -> int:
+        return self.reference.active_waypoint
+
+    # -- host frames (events) ---------------------------------------------------------------
+    def host_command(self, command: int, argument: int) -> Ack:
+        if self.reinitialise and command in MOTION_COMMANDS:
+            return Ack.BAD_STATE             # after RESET: not before every sensor has reported again
+        result = self.sup.command(command, argument)
+        if result is Ack.ACCEPTED:
+            self._do_action()
+        return result
+
+    def waypoint_commit(self, tag: int, seq: int, segment_time: float, accel_time: float, flags: int) -> Ack:
+        """HOST_WAYPOINT_TIME: check the staged pose and queue it (or say why not)."""
+        ref = self.reference
+        previous = ref.target() if ref.moving else ref.yr.copy()
+        result = self.waypoints.commit(tag, seq, segment_time, accel_time, flags, self.state, previous,
+                                       float(self.joint.mass_kg[0]))
+        if (result is Ack.ACCEPTED and self.waypoints.queue[-1].flags & WaypointFlag.START
+                and self.state is State.READY):
+            self.host_command(Command.START, 0)
+        return result
+
+    def piston_force_n(self) -> float:
+        """Leg 1's F_p from its latest chamber pressures (eq. 6.5)."""
+        return piston_force(self.meas.pa_pa[0], self.meas.pb_pa[0], self.cfg.piston_area_m2, self.cfg.area_ratio)
+
+    def test_command(self, mode: int, valve_v: float, force_n: float, duration_s: float) -> Ack:
+        """HOST_TEST (test bench): start an identification test from READY, or ABORT the one
+        running (the leg then holds where it is)."""
+        test = self.test
+        if test is None or mode not in TEST_MODES or not all(map(math.isfinite, (valve_v, force_n, duration_s))):
+            return Ack.BAD_ARGUMENT
+        if mode == TestMode.ABORT:
+            if not test.running:
+                return Ack.BAD_STATE
+            self._end_test()
+            return Ack.ACCEPTED
+        if duration_s <= 0.0 or abs(valve_v) > self.cfg.saturation_v:
+            return Ack.BAD_ARGUMENT
+        if (self.state is not State.READY or self.reference.moving or self.reinitialise
+                or not self.meas.pressure_valid[0]):
+            return Ack.BAD_STATE
+        test.start(mode, valve_v, force_n, duration_s, self.cycles, self.piston_force_n(),
+                   float(self.joint.u_v[0]))           # the holding input: FORCE_SINE starts bumpless
+        self.sup.start_running()
+        return Ack.ACCEPTED
+
+    def _end_test(self) -> None:
+        self.test.stop()
+        self.reference.hold(self.joint.position_estimate)
+        self.sup.motion_done()
+
+    def _do_action(self) -> None:
+        action, self.sup.action = self.sup.action, Action.NONE
+        cfg, ref = self.cfg, self.reference
+        if self.test is not None and self.test.running and action is not Action.NONE:
+            self.test.stop()                 # STOP (or anything else that moves the leg) ends a test
+        if action is Action.ENABLE:
+            ref.hold(self.limits.enable_target(self.meas.position_m))
+            self.joint.integral[:] = 0.0
+        elif action in (Action.HOME, Action.PARK):
+            target = self.park_strokes if action is Action.PARK else self.home_strokes
+            if not self.initialised:
+                ref.yr[:] = self.meas.position_m
+            ref.move(ref.yr, target, cfg.homing_speed_m_s, cfg.homing_accel_time_s, self.cycles)
+        elif action is Action.START:
+            self._start_queue()
+        elif action is Action.STOP:
+            ref.stop(cfg.homing_accel_time_s, self.cycles)
+        elif action is Action.RESET:
+            self.reset_cycles = RESET_GRACE_CYCLES
+            self.frames.reset()
+            self.loop_monitor.reset()
+            self.dk_failures = 0
+            ref.trajectory = None
+            # estimators and reference start again at the first complete set of fresh
+            # measurements: after an outage the Kalman filter predicted on for seconds, and a
+            # restarted sensor node may read elsewhere than the legs were last seen
+            self.reinitialise = True
+            self.nodes_restart_requested = True
+        elif action is Action.CLEAR:
+            self.waypoints.clear()
+
+    def _start_queue(self) -> None:
+        taken = self.waypoints.take(self.reference.yr)
+        if taken is None:
+            return
+        trajectory, seqs = taken
+        self.reference.play(trajectory, seqs, self.cycles)
+        self.sup.start_running()
+
+    def after_write(self) -> None:
+        """Host work that must not delay the cycle's VALVE_CMD: one waypoint commit."""
+        self.host.run_after_write(self)
+
+    # -- lifecycle ----------------------------------------------------------------------------
+    def activated(self, auto_enable: bool) -> None:
+        """Activation is over (valves in HOLD): IDLE, or READY holding the measured position."""
+        self.sup.booted(auto_enable)
+        self._do_action()
+
+    def initialise(self, meas: Measurements, keep_load: bool = False) -> None:
+        """First measurements are in (or the first after a RESET): estimators and the reference
+        start at the measured state; `keep_load` keeps the load's mass estimate."""
+        position = meas.position_m
+        if self.hexapod:
+            self.platform.estimate(position)
+            self.platform.reset_reference(position)
+        if keep_load:
+            self.joint.restart_at(position, self.gravity_axial)
+        else:
+            self.joint.reset(position, self.gravity_axial)
+        self.reference.yr[:] = position
+        self.reference.hold_position[:] = position
+        self.initialised = True
+
+    # -- the cycle ------------------------------------------------------------------------------
+    def update(self, meas: Measurements, cmd: ValveCommands) -> None:
+        """One cycle: supervision, host frames, reference, estimation and control, limits,
+        and the valve commands for the state the supervisor is in at its end."""
+        sup, joint, ref = self.sup, self.joint, self.reference
+        self.meas = meas
+        # the loop and the nodes: before anything received late is acted on
+        if sup.state is not State.BOOT:
+            sup.fault(self.loop_monitor.check(meas.stalled, meas.overrun))
+            sup.fault(self.node_monitor.check_heartbeats(meas.heartbeat_age_s))
+        sup.fault(self.node_monitor.check_emergency(meas.emergency, self.reset_cycles > 0))
+        # host frames received since the last update: carried out as between two cycles (a
+        # trajectory they start is at t = T in this cycle, the rule a log's analysis rebuilds)
+        self.host.run_before_update(self)
+        self.cycles += 1
+        self.time_s += self.period_s
+        self._reset_pulse = self.reset_cycles == RESET_GRACE_CYCLES      # R high for one cycle
+        if not self.initialised:
+            if not meas.fresh.all():
+                self._write(cmd)
+                return
+            self.initialise(meas)
+        elif self.reinitialise and meas.fresh.all():
+            self.initialise(meas, keep_load=True)
+            self.reinitialise = False
+        sup.fault(self.frames.check(meas.fresh, meas.rejected, meas.sensor_fault))
+        if self.reset_cycles > 0:
+            self.reset_cycles -= 1
+        elif sup.state not in (State.FAULT, State.ESTOP, State.BOOT):
+            sup.fault(self.node_monitor.check_valves(meas.valve_state))
+        if self.hexapod:
+            self._platform(meas)
+        # reference
+        active = sup.state in ACTIVE
+        testing = self.test is not None and self.test.running
+        if testing and not active:
+            self.test.stop()                         # a fault or an e-stop ends it: valves hold
+            testing = False
+        if testing:                                  # the test drives the valve: the loop follows the leg
+            ref.follow(joint.position_estimate)
+        elif active and ref.moving:
+            if ref.advance(self.cycles):
+                sup.motion_done()
+                if self.waypoints.head_starts_now() and sup.state is State.READY:
+                    self._start_queue()              # queued "start now": as soon as the last one ends
+        elif active:
+            ref.held()
+        else:                                        # valves locked: follow the measurement
+            ref.follow(joint.position_estimate)
+        if self.hexapod and sup.controller == MODEL_BASED:
+            if not self.platform.reference_forces(ref.yr, ref.vr) and active:
+                sup.fault(Fault.SINGULARITY)
+        # estimation and control
+        if joint.mode != sup.controller:
+            joint.set_mode(sup.controller)
+        joint.update(meas.position_m, meas.fresh, meas.force_n, ref.yr, ref.ar, self.gravity_axial, self.tau_n,
+                     sup.state in ACTIVE)
+        if testing:
+            u, done = self.test.output(self.cycles, meas.position_m[0], self.piston_force_n())
+            joint.u_v[0] = u
+            if done:
+                self._end_test()
+        self._limits(meas, active)
+        self._write(cmd)
+
+    def _platform(self, meas: Measurements) -> None:
+        """Pose by direct kinematics, gravity along the legs; singularity and IMU checks."""
+        sup, cfg = self.sup, self.cfg
+        if self.platform.estimate(meas.position_m):
+            self.dk_failures = 0
+            if self.platform.det_ratio < cfg.singularity_ratio_min:
+                sup.fault(Fault.SINGULARITY)
+            if meas.attitude_fresh and self.attitude_check.update(self.platform.rot, *meas.attitude_rad):
+                sup.fault(Fault.ATTITUDE_MISMATCH)
+        else:
+            self.dk_failures += 1
+            if self.dk_failures >= cfg.dk_failures_fault:
+                sup.fault(Fault.DK_FAILURE)
+
+    def _limits(self, meas: Measurements, active: bool) -> None:
+        sup, joint = self.sup, self.joint
+        sup.fault(self.limits.check_always(joint.u_v, joint.kalman_x, meas.force_n, self._finite3))
+        if not active:
+            self.plausibility.reset()
+            return
+        sup.fault(self.limits.check_active(meas.position_m, joint.velocity_estimate, joint.error_m))
+        if self.plausibility.update(joint.u_v, meas.position_m):
+            sup.fault(Fault.MOTION_PLAUSIBILITY)
+
+    def _write(self, cmd: ValveCommands) -> None:
+        """Control words and spool setpoints for the state the supervisor is in now."""
+        state = self.sup.state
+        if state is State.ESTOP:
+            cmd.disable_all()
+        else:
+            cmd.hold_all()
+            if state in ACTIVE:
+                cmd.active[:] = 1.0
+                np.multiply(self.joint.u_v, 1.0 / self.cfg.valve_full_scale_v, out=cmd.spool)
+                np.isfinite(cmd.spool, out=self._finite)
+                if not self._finite.all():
+                    cmd.spool[:] = 0.0
+                    cmd.active[:] = 0.0
+        cmd.reset[:] = 1.0 if self._reset_pulse else 0.0

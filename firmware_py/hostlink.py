@@ -1,0 +1,85 @@
+"""The host's frames on their way into the controller, in arrival order, each carried out at
+its place in the cycle, and the acknowledgements going back.
+
+The loop only queues what it decoded. The controller carries the queue out:
+- in its update, before the reference is computed: the frames at the front up to the first
+  waypoint commit (commands, waypoint halves, tests), and ESTOP and DISABLE wherever they
+  stand (they never wait);
+- after the cycle's VALVE_CMD are sent: one waypoint commit (its workspace check takes up to
+  a few ms on the hexapod, longer than the sensor window); what follows it waits for the
+  next update.
+So a command never overtakes a commit sent before it (a waypoint half reusing a TAG cannot
+reach a commit that has not been checked yet), and the cycle's timing never waits for one.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from enum import IntEnum
+
+from protocol.enums import AckKind, Command
+
+IMMEDIATE_COMMANDS = (int(Command.ESTOP), int(Command.DISABLE))
+
+
+class Frame(IntEnum):
+    COMMAND = 0
+    POSITION = 1
+    ROTATION = 2
+    COMMIT = 3
+    TEST = 4
+
+
+class HostLink:
+    def __init__(self):
+        self.queue: deque[tuple] = deque()              # (Frame, values)
+        self.acks: deque[tuple[int, int, int]] = deque()  # (AckKind, SEQ, result) to send
+
+    # -- what the loop decoded ------------------------------------------------------------
+    def command(self, command: int, argument: int, seq: int) -> None:
+        self.queue.append((Frame.COMMAND, (command, argument, seq)))
+
+    def waypoint_position(self, tag: int, x: float, y: float, z: float) -> None:
+        self.queue.append((Frame.POSITION, (tag, x, y, z)))
+
+    def waypoint_rotation(self, tag: int, roll: float, pitch: float, yaw: float) -> None:
+        self.queue.append((Frame.ROTATION, (tag, roll, pitch, yaw)))
+
+    def waypoint_commit(self, tag: int, seq: int, segment_time: float, accel_time: float, flags: int) -> None:
+        self.queue.append((Frame.COMMIT, (tag, seq, segment_time, accel_time, flags)))
+
+    def test(self, mode: int, seq: int, valve_v: float, force_n: float, duration_s: float) -> None:
+        self.queue.append((Frame.TEST, (mode, seq, valve_v, force_n, duration_s)))
+
+    # -- carried out by the controller --------------------------------------------------------
+    def run_before_update(self, controller) -> None:
+        """The frames up to the first commit, in order; ESTOP and DISABLE wherever they are."""
+        queue = self.queue
+        while queue and queue[0][0] is not Frame.COMMIT:
+            self._carry_out(controller, *queue.popleft())
+        if queue:
+            waiting = [item for item in queue if item[0] is Frame.COMMAND and item[1][0] in IMMEDIATE_COMMANDS]
+            for item in waiting:
+                queue.remove(item)
+                self._carry_out(controller, *item)
+
+    def run_after_write(self, controller) -> None:
+        """The waypoint commit at the front, if there is one."""
+        if self.queue and self.queue[0][0] is Frame.COMMIT:
+            self._carry_out(controller, *self.queue.popleft())
+
+    def _carry_out(self, controller, frame: Frame, values: tuple) -> None:
+        if frame is Frame.COMMAND:
+            command, argument, seq = values
+            self.acks.append((AckKind.HOST_CMD, seq, int(controller.host_command(command, argument))))
+        elif frame is Frame.POSITION:
+            controller.waypoints.stage_position(*values)
+        elif frame is Frame.ROTATION:
+            controller.waypoints.stage_rotation(*values)
+        elif frame is Frame.COMMIT:
+            tag, seq, segment_time, accel_time, flags = values
+            self.acks.append((AckKind.WAYPOINT, seq,
+                              int(controller.waypoint_commit(tag, seq, segment_time, accel_time, flags))))
+        else:
+            mode, seq, valve_v, force_n, duration_s = values
+            self.acks.append((AckKind.TEST, seq, int(controller.test_command(mode, valve_v, force_n, duration_s))))

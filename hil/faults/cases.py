@@ -1,0 +1,143 @@
+"""The fault matrix's cases: what is injected, the bound it is judged against, and the
+marks the host records for each (times in the log's clock)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+PROBE_RISE_M = 30e-3
+PROBE_SEGMENT_S, PROBE_ACCEL_S = 1.5, 0.3
+INJECT_AT_S = 0.5                 # into the probe's first segment (moving at ~20 mm/s)
+OBSERVE_S = 1.0                   # excursion window after the injection
+SETTLE_S = 2.0                    # at rest before the next case (the hexapod rings at ~1.5 Hz after a stop)
+TRANSIENT_MAX_M = 1e-3            # transient faults: within 1 mm of the no-fault probe
+HOLD_MOTION_MAX_M = 2e-3          # controller killed: the platform moves <= 2 mm afterwards
+ENCODER_COUNT_M = 0.125e-3        # LEG_STATE's encoder (LXEP40, chapter 8.2.3)
+STALL_S = 0.050                   # SIGSTOP
+BABBLE_FRAMES_PER_SYNC = 15       # 1 Mbit/s, 135-bit frames: 7,400 frames/s = 14.8 per 2 ms
+HOLD_WITHIN_PERIODS = 3           # case 1: every valve in FAULT_HOLD this long after the last command
+# the valves' SYNC watchdog as configured for the matrix: half a period inside the bound, for
+# the last command's lag behind its SYNC and a non-RT host's wake-up latency (at 3.0 the
+# test bench's EMCY came 3.04 periods after the last command)
+VALVE_WATCHDOG_PERIODS = 2.5
+PLANT_FAULT_MAX_CYCLES = 250      # stuck encoder: FAULT within 0.5 s
+SLOW_PLANT_FAULT_MAX_CYCLES = 500  # seized rod, lost supply: within 1 s (the motion window, see 5c)
+TRY_LIMIT = 8                     # realtime: attempts of a case (or a recovery) a machine stall may spoil
+
+
+class CaseKind(StrEnum):
+    """How a case is injected (session.py) and judged (judge.py)."""
+    BASELINE = "baseline"              # no fault: the probe, for comparison
+    TRANSIENT = "transient"            # a frame fault that must be rejected without a fault
+    PERSISTENT = "persistent"          # a frame fault that must fault within its count
+    PLANT = "plant"                    # a fault of the plant (sensor, rod, supply)
+    ESTOP = "estop"
+    WAYPOINTS = "waypoints"            # bad waypoints, each refused with its reason
+    BABBLE = "babble"
+    STALL = "stall"                    # the controller stopped (SIGSTOP) and resumed
+    KILL = "kill"                      # the controller killed
+    KILL_EMULATOR = "kill_emulator"
+
+
+@dataclass
+class Case:
+    key: str                      # "4b"
+    what: str
+    bound: str
+    kind: CaseKind
+    fault: str = ""               # EMU_CTRL fault name
+    target: int = 1
+    param: int = 0
+    expect: tuple[str, ...] = ()  # acceptable controller fault codes (empty: no fault)
+    max_cycles: int = 0           # detection bound
+    rigs: tuple[str, ...] = ("hexapod", "testbench")
+
+
+@dataclass
+class Marks:
+    """What the host knows about one case: times (epoch, as the log's) and cycles."""
+    case: Case
+    t_start: float = math.nan     # probe's first waypoint sent
+    t_inject: float = math.nan
+    t_end: float = math.nan
+    notes: list[str] = field(default_factory=list)
+    extra: dict = field(default_factory=dict)
+
+
+LOCKSTEP_CASES = [
+    Case("0", "no fault (the probe, for comparison)", "runs, no fault", CaseKind.BASELINE),
+    Case("0b", "no fault, again (the comparison's floor)", "runs, no fault", CaseKind.BASELINE),
+    Case("4a", "LEG_STATE of leg 1: 1 frame dropped", "no fault, <= 1 mm from no-fault run", CaseKind.TRANSIENT,
+         "DROP", 1, 1),
+    Case("4b", "LEG_STATE of leg 1: 10 consecutive drops", "SENSOR_TIMEOUT within 5 cycles", CaseKind.PERSISTENT,
+         "DROP", 1, 10, ("SENSOR_TIMEOUT",), 5),
+    Case("4c", "LEG_STATE of leg 1: 100 consecutive drops", "SENSOR_TIMEOUT within 5 cycles", CaseKind.PERSISTENT,
+         "DROP", 1, 100, ("SENSOR_TIMEOUT",), 5),
+    # E2E profile 1 with max delta 2 tolerates one lost frame between two received: after a
+    # burst of n >= 2 the next good frame is a WRONG_SEQUENCE too, n + 1 rejections in a row
+    Case("4d", "CRC corruption burst, 1 frame of leg 2", "no fault, <= 1 mm from no-fault run", CaseKind.TRANSIENT,
+         "CORRUPT", 2, 1),
+    Case("4e", "CRC corruption burst, 20 frames of leg 2", "E2E_ERROR within 3 cycles", CaseKind.PERSISTENT,
+         "CORRUPT", 2, 20, ("E2E_ERROR",), 3),
+    Case("4f", "duplicated frames, leg 3 for 50 cycles", "rejected; no fault, <= 1 mm", CaseKind.TRANSIENT,
+         "DUPLICATE", 3, 50),
+    Case("4g", "out-of-order counters: one swapped pair, leg 3", "rejected; no fault, <= 1 mm", CaseKind.TRANSIENT,
+         "REORDER", 3, 2),
+    # swapped every other cycle: after the first swap the receiver re-synchronises to the late
+    # frame's counter and every later frame is a WRONG_SEQUENCE, as profile 1 demands
+    Case("4g2", "out-of-order counters, leg 3 for 50 cycles", "SENSOR_TIMEOUT or E2E_ERROR within 5 cycles",
+         CaseKind.PERSISTENT, "REORDER", 3, 50, ("SENSOR_TIMEOUT", "E2E_ERROR"), 5),
+    Case("4h", "repeated counter (stale frame), leg 4 for 1 cycle", "rejected; no fault, <= 1 mm", CaseKind.TRANSIENT,
+         "REPEAT", 4, 1),
+    Case("4i", "repeated counter (stale frame), leg 4 for 50 cycles", "E2E_ERROR within 3 cycles", CaseKind.PERSISTENT,
+         "REPEAT", 4, 50, ("E2E_ERROR",), 3),
+    Case("3b", "sensor node of leg 3 silent", "SENSOR_TIMEOUT within 5 cycles, held, no NaN", CaseKind.PERSISTENT,
+         "SILENT", 3, 0, ("SENSOR_TIMEOUT",), 5),
+    # hexapod: the IMU disagrees with the encoders' attitude (ATTITUDE_MISMATCH); the test
+    # bench has no IMU: the motion window or the tracking limit
+    Case("5a", "stuck encoder, leg 2", "FAULT within 0.5 s", CaseKind.PLANT, "STUCK", 2, 0,
+         ("ATTITUDE_MISMATCH", "MOTION_PLAUSIBILITY", "TRACKING_ERROR"), PLANT_FAULT_MAX_CYCLES),
+    Case("5b", "out-of-range force, leg 4", "FORCE_LIMIT within 1 cycle", CaseKind.PLANT, "OUT_OF_RANGE", 4, 0,
+         ("FORCE_LIMIT",), 1),
+    # a seized rod and a lost supply are seen by the motion window (30 % input for 0.2 s
+    # without 0.5 mm of travel) once the PI has wound the valve up to 30 %: ~0.5 s, then
+    # 0.2 s of window. A 10 % window catches them sooner but trips the hexapod's pm-circle
+    # (model-based legs hold their load at > 10 % input without moving)
+    Case("5c", "leg jam (rod seized), leg 1", "FAULT within 1 s", CaseKind.PLANT, "LEG_JAM", 1, 0,
+         ("MOTION_PLAUSIBILITY", "TRACKING_ERROR", "VELOCITY_LIMIT"), SLOW_PLANT_FAULT_MAX_CYCLES),
+    Case("5d", "loss of supply pressure", "FAULT within 1 s", CaseKind.PLANT, "SUPPLY_LOSS", 0, 0,
+         ("MOTION_PLAUSIBILITY", "TRACKING_ERROR", "VELOCITY_LIMIT"), SLOW_PLANT_FAULT_MAX_CYCLES),
+    Case("6", "e-stop from the host mid-trajectory", "valves disabled in the cycle of the command", CaseKind.ESTOP,
+         expect=("ESTOP",), max_cycles=1),
+    Case("7", "bad waypoints: outside, singular, too fast, NaN, sequence gap", "each rejected with its reason, "
+         "zero motion", CaseKind.WAYPOINTS),
+]
+REALTIME_CASES = [
+    Case("0", "no fault, realtime (the period reference for the babble case)", "runs, no fault", CaseKind.BASELINE),
+    Case("8", f"babbling node: {BABBLE_FRAMES_PER_SYNC} frames of id 0x601 per SYNC (the bus's capacity)",
+         "period kept (jitter reported); cyclic frames through or FAULT", CaseKind.BABBLE, "BABBLE", 0,
+         BABBLE_FRAMES_PER_SYNC),
+    Case("2", "controller stalled: SIGSTOP 50 ms, SIGCONT", "valves FAULT_HOLD; controller FAULT, no motion "
+         "without reset", CaseKind.STALL, expect=("OVERRUN", "VALVE_FAULT")),
+    Case("1", "controller killed (SIGKILL) mid-trajectory", "every valve FAULT_HOLD <= 3 SYNC periods after "
+         "the last command, EMCY; platform <= 2 mm after", CaseKind.KILL),
+    Case("3a", "emulator killed", "controller FAULT within 5 cycles, valves commanded to hold, no NaN",
+         CaseKind.KILL_EMULATOR, expect=("SENSOR_TIMEOUT",), max_cycles=5),
+]
+
+
+@dataclass
+class CaseResult:
+    key: str
+    rig: str
+    what: str
+    bound: str
+    measured: str
+    passed: bool
+    recovered: bool | None            # case 9: RESET + ENABLE -> READY and a trajectory ran
+    detail: dict
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)

@@ -1,0 +1,50 @@
+"""The controller's real loop against the in-process fake bus (tests/fake_bus.py): what the
+supervisor, allocation and identification tests drive."""
+
+from __future__ import annotations
+
+from firmware_py.config import load_config
+from firmware_py.control import CONTROLLER_NAMES
+from firmware_py.controller import Controller
+from firmware_py.loop import ControllerLoop
+from protocol.enums import State
+from protocol.nodes import rig_nodes
+from tests.fake_bus import FakeBus
+
+
+def make_loop(rig: str, controller: str, overrides: dict | None = None):
+    """(loop, controller, bus), activated: the controller READY at home."""
+    cfg = load_config(overrides=overrides)
+    ctl = Controller(cfg, rig, 0.002, CONTROLLER_NAMES[controller])
+    bus = FakeBus(ctl.n, ctl.home_strokes.copy(), nodes=rig_nodes(ctl.n))
+    loop = ControllerLoop(bus, ctl, 500.0, "lockstep", log=lambda _: None)
+    loop.activate()
+    return loop, ctl, bus
+
+
+def cycles(loop, n: int) -> None:
+    for _ in range(n):
+        loop.cycle()
+
+
+def cycles_until_fault(loop, limit: int) -> int:
+    """Cycles run until the controller faulted (the last one included), at most `limit`."""
+    for k in range(1, limit + 1):
+        loop.cycle()
+        if loop.controller.state is State.FAULT:
+            return k
+    return limit
+
+
+def send_waypoint(ctl, seq, x, y, z, rpy=(0.0, 0.0, 0.0), segment=1.0, accel=0.2, flags=0):
+    """A waypoint's three frames carried out at once (as the host link does), its ack."""
+    ctl.waypoints.stage_position(seq & 0x0F, x, y, z)
+    ctl.waypoints.stage_rotation(seq & 0x0F, *rpy)
+    return ctl.waypoint_commit(seq & 0x0F, seq, segment, accel, flags)
+
+
+def valve_words(loop):
+    """What the controller last wrote to leg 1: (D, H, M, spool)."""
+    box = loop.out_cmd[0]
+    v = box.values
+    return v[box.index["CW_D"]], v[box.index["CW_H"]], v[box.index["CW_M"]], v[box.index["SPOOL_SETPOINT"]]
