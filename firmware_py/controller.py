@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from physics.actuator import piston_force
 from physics.constants import GRAVITY_M_S2
@@ -76,15 +77,13 @@ class Controller:
         self.host = HostLink()
         # supervision
         self.loop_monitor = LoopMonitor(cfg)
-        self.node_monitor = NodeMonitor(cfg, n)
+        self.node_monitor = NodeMonitor(cfg)
         self.frames = FrameMonitor(cfg, n)
         self.limits = LimitMonitor(cfg, n, self.stroke_m)
         spool, cycles = ((cfg.plausibility_spool, cfg.plausibility_cycles) if self.hexapod else
                          (cfg.testbench_plausibility_spool, cfg.testbench_plausibility_cycles))
         self.plausibility = MotionPlausibility(n, spool * cfg.valve_full_scale_v, cycles, cfg.plausibility_travel_m)
         self.attitude_check = AttitudeCrossCheck(cfg.attitude_mismatch_rad, cfg.attitude_mismatch_samples)
-        self._finite3 = np.zeros((n, 3), dtype=bool)
-        self._finite = np.zeros(n, dtype=bool)
         # identification tests (HOST_TEST, test bench only: chapter 6.4)
         self.test = None if self.hexapod else IdentificationSignal(
             cfg.test_force_gain_v_n, cfg.test_stroke_guard_m, cfg.stroke_m, cfg.saturation_v, period_s)
@@ -318,7 +317,7 @@ class Controller:
 
     def _limits(self, meas: Measurements, active: bool) -> None:
         sup, joint = self.sup, self.joint
-        sup.fault(self.limits.check_always(joint.u_v, joint.kalman_x, meas.force_n, self._finite3))
+        sup.fault(self.limits.check_always(joint.u_v, joint.kalman_x, meas.force_n))
         if not active:
             self.plausibility.reset()
             return
@@ -329,15 +328,25 @@ class Controller:
     def _write(self, cmd: ValveCommands) -> None:
         """Control words and spool setpoints for the state the supervisor is in now."""
         state = self.sup.state
-        if state is State.ESTOP:
-            cmd.disable_all()
-        else:
-            cmd.hold_all()
-            if state in ACTIVE:
-                cmd.active[:] = 1.0
-                np.multiply(self.joint.u_v, 1.0 / self.cfg.valve_full_scale_v, out=cmd.spool)
-                np.isfinite(cmd.spool, out=self._finite)
-                if not self._finite.all():
-                    cmd.spool[:] = 0.0
-                    cmd.active[:] = 0.0
-        cmd.reset[:] = 1.0 if self._reset_pulse else 0.0
+        mode = VALVES_DISABLED if state is State.ESTOP else VALVES_ACTIVE if state in ACTIVE else VALVES_HOLD
+        valve_commands(mode, self.joint.u_v, self.cfg.valve_full_scale_v, self._reset_pulse, cmd.enable, cmd.hold,
+                       cmd.active, cmd.reset, cmd.spool)
+
+
+VALVES_DISABLED, VALVES_HOLD, VALVES_ACTIVE = 0, 1, 2
+
+
+@njit(cache=True)
+def valve_commands(mode, u_v, full_scale_v, reset_pulse, enable, hold, active, reset, spool):
+    """CiA 408 control words and spool setpoints: DISABLED (power off), HOLD, or ACTIVE with
+    the controller's input as the spool setpoint; ACTIVE with a non-finite input holds."""
+    finite = True
+    for leg in range(u_v.shape[0]):
+        finite = finite and math.isfinite(u_v[leg])
+    for leg in range(u_v.shape[0]):
+        enable[leg] = 0.0 if mode == VALVES_DISABLED else 1.0
+        hold[leg] = enable[leg]
+        go = mode == VALVES_ACTIVE and finite
+        active[leg] = 1.0 if go else 0.0
+        spool[leg] = u_v[leg] / full_scale_v if go else 0.0
+        reset[leg] = 1.0 if reset_pulse else 0.0

@@ -20,8 +20,37 @@ made at construction (no allocation per cycle).
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from .rotation import angle_between_matrices, rpy_to_matrix_into
+
+
+@njit(cache=True)
+def motion_window(input_v, position_m, input_min_v, window, travel_min_m, count, start, sign):
+    """One cycle of every leg's motion window; True when a leg completed one without moving
+    `travel_min_m` along its command."""
+    implausible = False
+    for leg in range(input_v.shape[0]):
+        driven = abs(input_v[leg]) >= input_min_v
+        s = (1.0 if input_v[leg] > 0.0 else -1.0) if driven else 0.0
+        if s != sign[leg]:                   # a new direction (or none) starts a new window here
+            start[leg] = position_m[leg]
+            count[leg] = 0
+        sign[leg] = s
+        if driven:
+            count[leg] += 1
+        # progress is counted from the furthest point back in the window: a heavy load still
+        # coasting the other way after the command reversed is not a failure to move
+        progress = (position_m[leg] - start[leg]) * s
+        if progress < 0.0:
+            start[leg] = position_m[leg]
+            progress = 0.0
+        if count[leg] >= window:
+            if progress < travel_min_m:
+                implausible = True
+            start[leg] = position_m[leg]     # a completed window starts the next one here
+            count[leg] = 0
+    return implausible
 
 
 class MotionPlausibility:
@@ -30,11 +59,6 @@ class MotionPlausibility:
         self.count = np.zeros(n, dtype=np.int64)        # cycles in the current window
         self.start = np.zeros(n)                         # encoder reading when it began
         self.sign = np.zeros(n)                          # the command's direction in it (0: none)
-        self._sign_now = np.zeros(n)
-        self._progress = np.zeros(n)
-        self._changed = np.zeros(n, dtype=bool)
-        self._driven = np.zeros(n, dtype=bool)
-        self._full = np.zeros(n, dtype=bool)
 
     def reset(self) -> None:
         self.count[:] = 0
@@ -43,36 +67,8 @@ class MotionPlausibility:
     def update(self, input_v: np.ndarray, position_m: np.ndarray) -> bool:
         """One cycle: `input_v` the commanded valve input (V), `position_m` the encoder.
         True when a leg completed a window without moving along its command."""
-        sign, count = self._sign_now, self.count
-        np.abs(input_v, out=self._progress)
-        np.greater_equal(self._progress, self.input_min_v, out=self._driven)
-        np.sign(input_v, out=sign)
-        np.multiply(sign, self._driven, out=sign)
-        # a new direction (or none) starts a new window at the present reading
-        np.not_equal(sign, self.sign, out=self._changed)
-        np.copyto(self.start, position_m, where=self._changed)
-        np.logical_not(self._changed, out=self._changed)
-        np.multiply(count, self._changed, out=count)
-        self.sign[:] = sign
-        np.add(count, self._driven, out=count)
-        # progress is counted from the furthest point back in the window: a heavy load still
-        # coasting the other way after the command reversed is not a failure to move
-        np.subtract(position_m, self.start, out=self._progress)
-        np.multiply(self._progress, sign, out=self._progress)
-        np.less(self._progress, 0.0, out=self._changed)
-        np.copyto(self.start, position_m, where=self._changed)
-        np.maximum(self._progress, 0.0, out=self._progress)
-        np.greater_equal(count, self.window, out=self._full)
-        if not self._full.any():
-            return False
-        np.less(self._progress, self.travel_min_m, out=self._changed)
-        np.logical_and(self._changed, self._full, out=self._changed)
-        implausible = bool(self._changed.any())
-        # a completed window starts the next one here
-        np.copyto(self.start, position_m, where=self._full)
-        np.logical_not(self._full, out=self._full)
-        np.multiply(count, self._full, out=count)
-        return implausible
+        return motion_window(input_v, position_m, self.input_min_v, self.window, self.travel_min_m, self.count,
+                             self.start, self.sign)
 
 
 class AttitudeCrossCheck:
