@@ -30,6 +30,7 @@ from .monitors import FrameMonitor, LimitMonitor, LoopMonitor, NodeMonitor
 from .plausibility import AttitudeCrossCheck, MotionPlausibility
 from .reference import Reference
 from .supervisor import ACTIVE, Action, Supervisor
+from .trajectory import through_points
 from .waypoints import HexapodCheck, TestbenchCheck, WaypointQueue
 
 RIGS = ("testbench", "hexapod")
@@ -103,15 +104,34 @@ class Controller:
         return Measurements(self.n, self.n + (1 if self.hexapod else 0)), ValveCommands(self.n)
 
     def _warm_up(self) -> None:
-        """Load every compiled kernel now (configure), not in the first cycle."""
-        ref = self.reference
-        self.joint.update(self.home_strokes, np.ones(self.n, dtype=bool), np.zeros(self.n), ref.yr, ref.ar,
-                          self.gravity_axial, self.tau_n, False)
+        """Load every kernel the cycle calls now (configure): read from numba's cache inside a
+        realtime cycle, each would stall the loop for milliseconds, past the valves' watchdog.
+        Scratch arrays only; the state this touches is reset after."""
+        n, ref = self.n, self.reference
+        meas, cmd = self.new_interfaces()
+        meas.position_m[:] = self.home_strokes
+        meas.fresh[:] = True
+        self.joint.update(meas.position_m, meas.fresh, meas.force_n, ref.yr, ref.ar, self.gravity_axial, self.tau_n,
+                          False)
+        self.node_monitor.check_heartbeats(meas.heartbeat_age_s)
+        self.node_monitor.check_valves(meas.valve_state)
+        self.frames.check(meas.fresh, meas.rejected, meas.sensor_fault)
+        self.limits.check_always(self.joint.u_v, self.joint.kalman_x, meas.force_n)
+        self.limits.check_active(meas.position_m, self.joint.velocity_estimate, self.joint.error_m)
+        self.plausibility.update(self.joint.u_v, meas.position_m)
+        valve_commands(VALVES_HOLD, self.joint.u_v, 1.0, False, cmd.enable, cmd.hold, cmd.active, cmd.reset,
+                       cmd.spool)
+        ref.play(through_points(np.array([self.home_strokes, self.home_strokes + 1e-3]), 0.1, 0.2), [0], 0)
+        ref.advance(1)
+        ref.hold(np.zeros(n))
         if self.hexapod:
             self.platform.estimate(self.home_strokes)
             self.platform.reset_reference(self.home_strokes)
             self.platform.reference_forces(self.home_strokes, ref.vr)
             self.platform.dk.reset()
+        self.frames.reset()
+        self.plausibility.reset()
+        self.limits.recovery_left[0] = 0
         self.joint.reset(0.0)
 
     @property

@@ -86,6 +86,7 @@ class Emulator:
     def __init__(self, bus: can.BusABC | None, rig, cfg: EmulatorConfig, clock=time.monotonic):
         self.bus, self.rig, self.cfg, self.clock = bus, rig, cfg, clock
         rig.warm_up()                     # kernels loaded before the first SYNC, not in it
+        attitude_rpy(np.array([1.0, 0.0, 0.0, 0.0]))     # ... and SciPy's rotation code
         self.legs = range(1, rig.n_legs + 1)
         self.has_imu = rig.n_legs == 6
         self.nodes = rig_nodes(rig.n_legs)
@@ -146,6 +147,10 @@ class Emulator:
         """Encode and send a node's frame through the injected frame faults."""
         box = self.out[name]
         if not box.encode():
+            return
+        if not self.faults:                    # the common case: nothing injected
+            self._last_sent[name] = bytes(box.message.data)
+            self._send(box.message)
             return
         if self._fault(node, EmuFault.SILENT) or self._fault(node, EmuFault.DROP):
             return
