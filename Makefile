@@ -1,16 +1,22 @@
-# hydrapod — make demo: the main job (emulator + controller on the default bus, pm-circle with the
-# model-based controller in realtime, metrics table and plots in hil-out/).
-# make test: create .venv if missing, install with the test extra, run the suite.
+# hydrapod
+#   make demo    creates .venv if needed; the main job: emulator + controller on the default bus,
+#                pm-circle with both thesis controllers in realtime, metrics and plots in hil-out/
+#   make test    creates .venv if needed; the whole suite (what .ci/run runs)
+#   make check   the suite without the HIL runs and the VM (a few minutes)
+#   make lint    ruff over the tree
 PYTHON ?= python3
 VENV   ?= .venv
 PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed
+# the lockstep tiers on every CPU; the realtime tier alone on the machine, after them
+WORKERS ?= 2
+PYTEST  = $(PY) -m pytest -p no:cacheprovider
 
 PACING ?= realtime
 demo: $(STAMP)
 	$(VENV)/bin/hydrapod hil run pm-circle --pacing $(PACING) --bus default --out hil-out
 
-.PHONY: demo test venv vm-deps bus-load socketcan-check clean
+.PHONY: demo test check lint venv vm-deps bus-load socketcan-check clean
 
 venv: $(STAMP)
 
@@ -31,7 +37,14 @@ vm-deps:
 	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y --no-install-recommends $(VM_DEBS); }
 
 test: $(STAMP) vm-deps
-	$(PY) -m pytest
+	$(PYTEST) -n $(WORKERS) --dist loadfile -m "not realtime"
+	$(PYTEST) -m realtime
+
+check: $(STAMP)
+	$(PYTEST) -n $(WORKERS) --dist loadfile -m "not hil and not realtime and not vm"
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
 
 bus-load: $(STAMP)
 	$(VENV)/bin/hydrapod bus-load --rate-hz 500
@@ -48,4 +61,4 @@ socketcan-check: $(STAMP)
 	  $(PY) -m pytest -p no:cacheprovider tests/test_bus.py -k 'socketcan or default or two_processes or virtual'"
 
 clean:
-	rm -rf $(VENV) .pytest_cache .hypothesis *.egg-info
+	rm -rf $(VENV) .pytest_cache .hypothesis .numba-cache *.egg-info

@@ -63,15 +63,16 @@ def realtime_teardown() -> None:
 
 
 def run_daemon(args) -> int:
-    from protocol.bus import open_bus
+    from protocol.bus import open_bus, parse_bus_spec
 
     from .controller import Controller
     from .loop import ActivationError, ControllerLoop
 
+    spec = parse_bus_spec(args.bus) if args.bus is not None else None     # a bad string fails first
     cfg = load_config(args.config)
     controller = Controller(cfg, args.rig, 1.0 / args.rate_hz, CONTROLLER_NAMES[args.controller])
     stop = StopFlag()
-    bus = open_bus(args.bus)
+    bus = open_bus(spec)
     loop = ControllerLoop(bus, controller, args.rate_hz, args.pacing, log=log)
     code = 0
     notes = realtime_setup(cfg, args.pacing == "realtime")

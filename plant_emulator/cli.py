@@ -30,15 +30,16 @@ def load_run_config(args) -> object:
 
 
 def run_emulator(args) -> int:
-    from protocol.bus import open_bus
+    from protocol.bus import open_bus, parse_bus_spec
 
     from .emulator import Emulator
     from .rigs import make_rig
 
+    spec = parse_bus_spec(args.bus) if args.bus is not None else None     # a bad string fails first
     cfg = load_run_config(args)
     rig = make_rig(args.rig, cfg)
     stop = StopFlag()
-    bus = open_bus(args.bus)
+    bus = open_bus(spec)
     emulator = Emulator(bus, rig, cfg)
     try:
         emulator.run(stop)

@@ -137,6 +137,7 @@ def test_multicast_groups_on_one_port_are_isolated():
         assert other.recv(0.2) is None
 
 
+@pytest.mark.process
 def test_two_processes_exchange_10k_frames_none_lost_or_reordered():
     """SYNC -> 6 LEG_STATE from the peer process -> 6 VALVE_CMD back, 770 cycles = 10,010 frames.
 

@@ -1,4 +1,5 @@
-"""The `hydrapod` console script: figures on stdout, user errors as one line and exit 2."""
+"""The `hydrapod` command: figures on stdout, user errors as one line and exit 2 (in this
+process); the console script and `python -m hil.cli` as processes."""
 
 import json
 import subprocess
@@ -7,12 +8,9 @@ from pathlib import Path
 
 import pytest
 
-HYDRAPOD = Path(sys.executable).with_name("hydrapod")   # installed by `make test` with the package
+from tests.cli_run import hydrapod
 
-
-def hydrapod(*args: str) -> subprocess.CompletedProcess:
-    assert HYDRAPOD.exists(), f"console script missing: {HYDRAPOD} (install the package: make test)"
-    return subprocess.run([str(HYDRAPOD), *args], capture_output=True, text=True, timeout=120)
+CONSOLE_SCRIPT = Path(sys.executable).with_name("hydrapod")   # installed by `make test` with the package
 
 
 def test_bus_load_json_at_500hz():
@@ -48,10 +46,15 @@ def test_protocol_bench_prints_ordered_percentiles():
         assert 0 < r["p50_us"] <= r["p99_us"] <= r["max_us"] and r["n"] == 300
 
 
-def test_module_entry_point():
+@pytest.mark.process
+def test_module_entry_point_and_console_script():
     result = subprocess.run([sys.executable, "-m", "hil.cli", "bus-load", "--json"], capture_output=True, text=True,
                             timeout=120)
     assert result.returncode == 0 and json.loads(result.stdout)["fits"]
+    assert CONSOLE_SCRIPT.exists(), f"console script missing: {CONSOLE_SCRIPT} (install the package: make test)"
+    result = subprocess.run([str(CONSOLE_SCRIPT), "bus-load", "--rate-hz", "abc"], capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
 
 
 @pytest.mark.parametrize("args, culprit", [

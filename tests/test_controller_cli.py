@@ -8,12 +8,11 @@ import sys
 import pytest
 
 from firmware_py.config import ConfigError, load_config
+from tests.cli_run import hydrapod
 
-HYDRAPOD = [sys.executable, "-m", "hil.cli"]
 
-
-def run(args, tmp_path=None):
-    return subprocess.run(HYDRAPOD + args, capture_output=True, text=True, timeout=120)
+def run(args):
+    return hydrapod(*args)
 
 
 @pytest.mark.parametrize("text, culprit", [
@@ -68,6 +67,7 @@ def test_bench_prints_every_controller_and_rig_as_json():
         assert 0 < r["p50_us"] <= r["p99_us"] <= r["max_us"] and r["state"] == "RUNNING"
 
 
+@pytest.mark.process
 def test_python_m_firmware_py_is_the_same_command():
     result = subprocess.run([sys.executable, "-m", "firmware_py", "--rig", "crane"], capture_output=True,
                             text=True, timeout=60)

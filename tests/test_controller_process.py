@@ -10,6 +10,7 @@ import sys
 import time
 
 import can
+import pytest
 from test_bus import GROUP, free_port
 
 from protocol.bus import open_bus
@@ -19,6 +20,7 @@ from protocol.e2e import RxStatus
 CYCLES = 2500
 
 
+@pytest.mark.process
 def test_daemon_runs_against_a_scripted_peer_and_shuts_down_safely(tmp_path):
     spec = f"udp_multicast:{GROUP}:{free_port()}"
     bus = open_bus(spec)

@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -34,8 +32,8 @@ from hil.design.schedule import (
     write_schedule,
     ziegler_nichols,
 )
+from tests.cli_run import hydrapod
 
-HYDRAPOD = [sys.executable, "-m", "hil.cli"]
 P0 = Plant(0.12, 6.0, 7701.0, 90.0, 224.0 * MM)        # Table A.3, 120 mm, 6 kg
 THESIS_KP, THESIS_KI = 0.085 / MM, 0.46 / MM           # V/m, V/(m s)
 
@@ -211,8 +209,7 @@ def test_designed_gains_beside_table_7_2():
 
 # -- the commands ---------------------------------------------------------------------------------------
 def test_design_robustness_command_writes_its_report(tmp_path):
-    proc = subprocess.run(HYDRAPOD + ["design", "robustness", "--nominal", "120,6", "--out", str(tmp_path), "--json"],
-                          capture_output=True, text=True, timeout=300, check=False)
+    proc = hydrapod("design", "robustness", "--nominal", "120,6", "--out", tmp_path, "--json")
     assert proc.returncode == 0, proc.stderr[-2000:]
     doc = json.loads(proc.stdout)
     assert doc["nominal"]["plant"] == "120 mm, 6 kg" and doc["uncertainty"]["robustly_stable"]
@@ -220,15 +217,14 @@ def test_design_robustness_command_writes_its_report(tmp_path):
     assert "||W1 T||inf" in (tmp_path / "robustness.md").read_text()
 
 
+@pytest.mark.hil
 def test_the_generated_schedule_runs_the_controller_in_a_hil_step(tmp_path):
     schedule = tmp_path / "schedule.toml"
-    proc = subprocess.run(HYDRAPOD + ["design", "schedule", "--out", str(schedule)], capture_output=True, text=True,
-                          timeout=300, check=False)
+    proc = hydrapod("design", "schedule", "--out", schedule)
     assert proc.returncode == 0, proc.stderr[-2000:]
     out = tmp_path / "step"
-    proc = subprocess.run(HYDRAPOD + ["hil", "run", "sha-step", "--short", "--controllers", "adaptive",
-                                      "--controller-config", str(schedule), "--out", str(out), "--json"],
-                          capture_output=True, text=True, timeout=600, check=False)
+    proc = hydrapod("hil", "run", "sha-step", "--short", "--controllers", "adaptive", "--controller-config", schedule,
+                    "--out", out, "--json")
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     doc = json.loads((out / "metrics.json").read_text())
     assert doc["passed"] and any(str(schedule) in note for note in doc["notes"])

@@ -3,14 +3,10 @@
 import json
 import subprocess
 import sys
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+import pytest
 
-
-def hydrapod(*args):
-    return subprocess.run([sys.executable, "-m", "hil.cli", *args], cwd=ROOT, capture_output=True, text=True,
-                          timeout=600)
+from tests.cli_run import hydrapod
 
 
 def test_calibrate_json_has_every_point_beside_table_a3():
@@ -42,3 +38,11 @@ def test_bad_config_and_arguments_are_one_line_exit_2(tmp_path):
         result = hydrapod(*args)
         assert result.returncode == 2, (args, result.stderr)
         assert len(result.stderr.strip().splitlines()) == 1 and culprit in result.stderr, result.stderr
+
+
+@pytest.mark.process
+def test_python_m_plant_emulator_is_the_emulator_command():
+    result = subprocess.run([sys.executable, "-m", "plant_emulator", "--rig", "crane"], capture_output=True,
+                            text=True, timeout=60)
+    assert result.returncode == 2 and "python -m plant_emulator" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1

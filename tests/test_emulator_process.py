@@ -111,6 +111,7 @@ def emulator_process(tmp_path):
         peer.bus.shutdown()
 
 
+@pytest.mark.process
 def test_scripted_peer_drives_the_emulator(emulator_process):
     peer, proc, summary = emulator_process
     assert peer.wait_for("HEARTBEAT_1", timeout=60.0), "no heartbeat from the emulator"

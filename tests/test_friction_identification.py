@@ -5,8 +5,6 @@ processes), judged from their logs against the emulator's own parameters."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -22,8 +20,8 @@ from hil.design.friction import (
 )
 from physics import lugre
 from physics.constants import GRAVITY_M_S2, MM
+from tests.cli_run import hydrapod
 
-HYDRAPOD = [sys.executable, "-m", "hil.cli"]
 # Table 6.1 (the emulator's seal) in SI
 TRUE = {"+": SteadySide(12.1994, 10.6468, 10.0 * MM, 0.1316 / MM),
         "-": SteadySide(-15.0, -5.3903, -20.0 * MM, 0.0753 / MM)}
@@ -68,11 +66,11 @@ def test_presliding_slope_and_eq_6_12():
 @pytest.fixture(scope="module")
 def steady_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("friction-steady")
-    proc = subprocess.run(HYDRAPOD + ["hil", "run", "friction-steady", "--short", "--out", str(out), "--json"],
-                          capture_output=True, text=True, timeout=900, check=False)
+    proc = hydrapod("hil", "run", "friction-steady", "--short", "--out", out, "--json")
     return out, proc
 
 
+@pytest.mark.hil
 def test_friction_steady_recovers_the_emulators_map_through_the_bus(steady_run):
     out, proc = steady_run
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
@@ -87,20 +85,19 @@ def test_friction_steady_recovers_the_emulators_map_through_the_bus(steady_run):
     assert (out / "friction_steady.png").stat().st_size > 10_000
 
 
+@pytest.mark.hil
 def test_friction_steady_analysis_from_the_log_alone(steady_run, tmp_path):
     out, _ = steady_run
-    proc = subprocess.run(HYDRAPOD + ["hil", "analyze", str(out / "run.blf"), "--scenario", "friction-steady",
-                                      "--out", str(tmp_path), "--json"], capture_output=True, text=True, timeout=300,
-                          check=False)
+    proc = hydrapod("hil", "analyze", out / "run.blf", "--scenario", "friction-steady", "--out", tmp_path, "--json")
     assert proc.returncode == 0, proc.stderr[-2000:]
     again = json.loads((tmp_path / "metrics.json").read_text())
     first = json.loads((out / "metrics.json").read_text())
     assert again["metrics"]["fits"] == first["metrics"]["fits"]
 
 
+@pytest.mark.hil
 def test_friction_presliding_recovers_the_seals_stiffness_through_the_bus(tmp_path):
-    proc = subprocess.run(HYDRAPOD + ["hil", "run", "friction-presliding", "--short", "--out", str(tmp_path), "--json"],
-                          capture_output=True, text=True, timeout=900, check=False)
+    proc = hydrapod("hil", "run", "friction-presliding", "--short", "--out", tmp_path, "--json")
     doc = json.loads((tmp_path / "metrics.json").read_text())
     assert proc.returncode == 0, [c for c in doc["checks"] if not c["passed"]] or proc.stderr[-3000:]
     tests = doc["metrics"]["tests"]

@@ -1,12 +1,11 @@
 """Issue 7 item 10: 10^6 random frames (fixed seed) into the decoders and into the
 controller's receive side and host-command parser: no exception, every frame counted."""
 
-import subprocess
-import sys
 
 import pytest
 
 from hil import fuzz
+from tests.cli_run import hydrapod
 
 FRAMES = 1_000_000
 SEED = 20161
@@ -49,11 +48,9 @@ def test_the_same_seed_gives_the_same_frames():
 
 
 def test_fuzz_command_exits_0_and_rejects_an_unknown_target():
-    ok = subprocess.run([sys.executable, "-m", "hil.cli", "hil", "fuzz", "--frames", "20000"],
-                        capture_output=True, text=True)
+    ok = hydrapod("hil", "fuzz", "--frames", "20000")
     assert ok.returncode == 0, ok.stderr
     assert "0 exceptions, 20000 counted" in ok.stdout
-    bad = subprocess.run([sys.executable, "-m", "hil.cli", "hil", "fuzz", "--targets", "decoder,parser"],
-                         capture_output=True, text=True)
+    bad = hydrapod("hil", "fuzz", "--targets", "decoder,parser")
     assert bad.returncode == 2
     assert bad.stderr.strip().count("\n") == 0 and "parser" in bad.stderr and "Traceback" not in bad.stderr

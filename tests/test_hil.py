@@ -3,8 +3,6 @@ controller as processes on a fresh multicast bus, records a BLF log, and the met
 from that log; stock tools (cantools, python-can's reader) decode the same log."""
 
 import json
-import subprocess
-import sys
 
 import can
 import cantools
@@ -12,18 +10,17 @@ import pytest
 
 from hil.logdata import frames_by_sender, frames_counted_by_senders, read_log
 from protocol.dbc import dbc_path
-
-HYDRAPOD = [sys.executable, "-m", "hil.cli"]
+from tests.cli_run import hydrapod
 
 
 @pytest.fixture(scope="module")
 def sha_step_run(tmp_path_factory):
+    """One short sha-step run that several tests read."""
     out = tmp_path_factory.mktemp("sha-step")
-    proc = subprocess.run(HYDRAPOD + ["hil", "run", "sha-step", "--short", "--out", str(out), "--json"],
-                          capture_output=True, text=True, timeout=600)
-    return out, proc
+    return out, hydrapod("hil", "run", "sha-step", "--short", "--out", out, "--json")
 
 
+@pytest.mark.hil
 def test_sha_step_short_passes_with_zero_e2e_errors(sha_step_run):
     out, proc = sha_step_run
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
@@ -44,16 +41,17 @@ def test_sha_step_short_passes_with_zero_e2e_errors(sha_step_run):
     assert (out / "sha_step.png").stat().st_size > 10_000
 
 
+@pytest.mark.hil
 def test_analyze_reproduces_the_run_metrics_from_the_log_alone(sha_step_run, tmp_path):
     out, _ = sha_step_run
-    proc = subprocess.run(HYDRAPOD + ["hil", "analyze", str(out / "run.blf"), "--scenario", "sha-step",
-                                      "--out", str(tmp_path), "--json"], capture_output=True, text=True, timeout=300)
+    proc = hydrapod("hil", "analyze", out / "run.blf", "--scenario", "sha-step", "--out", tmp_path, "--json")
     assert proc.returncode == 0, proc.stderr[-2000:]
     again = json.loads((tmp_path / "metrics.json").read_text())
     first = json.loads((out / "metrics.json").read_text())
     assert again["metrics"] == first["metrics"]
 
 
+@pytest.mark.hil
 def test_the_log_decodes_with_stock_cantools_and_python_can(sha_step_run):
     out, _ = sha_step_run
     db = cantools.database.load_file(str(dbc_path()))
@@ -71,6 +69,7 @@ def test_the_log_decodes_with_stock_cantools_and_python_can(sha_step_run):
     assert counts[0x080] == log.n_cycles
 
 
+@pytest.mark.hil
 def test_the_log_holds_every_frame_each_sender_sent(sha_step_run):
     """Nothing lost: the BLF holds as many frames of each sender as it counted sending."""
     out, _ = sha_step_run
@@ -82,6 +81,7 @@ def test_the_log_holds_every_frame_each_sender_sent(sha_step_run):
     assert min(counts["controller"], counts["emulator"]) > 10_000
 
 
+@pytest.mark.hil
 def test_every_cycle_has_its_leg_frame_despite_on_host_reordering(sha_step_run):
     out, _ = sha_step_run
     log = read_log(out / "run.blf")
@@ -98,15 +98,14 @@ def test_every_cycle_has_its_leg_frame_despite_on_host_reordering(sha_step_run):
     (["hil", "analyze", "x.txt", "--scenario", "sha-step"], "x.txt"),
 ])
 def test_cli_errors_are_one_line_and_exit_2(argv, culprit, tmp_path):
-    proc = subprocess.run(HYDRAPOD + argv + (["--out", str(tmp_path)] if argv[1] == "run" else []),
-                          capture_output=True, text=True, timeout=60)
+    proc = hydrapod(*argv, *(["--out", tmp_path] if argv[1] == "run" else []))
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and culprit in lines[0] and "Traceback" not in proc.stderr
 
 
 def test_list_names_the_scenarios():
-    proc = subprocess.run(HYDRAPOD + ["hil", "list", "--json"], capture_output=True, text=True, timeout=60)
+    proc = hydrapod("hil", "list", "--json")
     names = {row["name"] for row in json.loads(proc.stdout)}
     assert {"sha-step", "sha-tracking", "sha-perturbation", "pm-diagonal", "pm-circle", "rt-testbench",
             "rt-hexapod", "sha-identification"} <= names
@@ -134,11 +133,11 @@ SCENARIO_RUNS = {
 }
 
 
-@pytest.mark.parametrize("scenario", list(SCENARIO_RUNS))
+@pytest.mark.parametrize("scenario", [pytest.param(name, marks=pytest.mark.realtime if name.startswith("rt-")
+                                                   else pytest.mark.hil) for name in SCENARIO_RUNS])
 def test_scenario_runs_from_the_command_and_passes(scenario, tmp_path):
     args, holds = SCENARIO_RUNS[scenario]
-    proc = subprocess.run(HYDRAPOD + ["hil", "run", scenario, "--out", str(tmp_path), "--json"] + args,
-                          capture_output=True, text=True, timeout=900)
+    proc = hydrapod("hil", "run", scenario, "--out", tmp_path, "--json", *args)
     assert proc.returncode in (0, 1), proc.stdout[-3000:] + proc.stderr[-3000:]
     doc = json.loads((tmp_path / "metrics.json").read_text())
     failed = [c for c in doc["checks"] if c["required"] and not c["passed"]]

@@ -1,19 +1,17 @@
 """`hydrapod kinematics ...` from the command line: JSON outputs, plots, one-line errors."""
 
 import json
-import subprocess
-import sys
 
 import pytest
 
-HYDRAPOD = [sys.executable, "-m", "hil.cli"]
+from tests.cli_run import hydrapod
 
 
 def run(*args, check=True):
-    proc = subprocess.run(HYDRAPOD + list(args), capture_output=True, text=True, timeout=600)
+    result = hydrapod(*args)
     if check:
-        assert proc.returncode == 0, proc.stderr
-    return proc
+        assert result.returncode == 0, result.stderr
+    return result
 
 
 def test_dk_eval_json_reports_every_guess_class_and_beats_the_thesis_near_the_pose():

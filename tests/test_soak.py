@@ -3,25 +3,21 @@ the bus, realtime pacing): random transient frame faults are rejected without a 
 persistent ones fault within their count and recover, and the log holds every frame."""
 
 import json
-import subprocess
-import sys
 
 import pytest
 
 from hil.logdata import read_log
 from hil.scenarios import soak
-
-HYDRAPOD = [sys.executable, "-m", "hil.cli"]
+from tests.cli_run import hydrapod
 
 
 @pytest.fixture(scope="module")
 def soak_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("soak")
-    proc = subprocess.run(HYDRAPOD + ["hil", "soak", "--minutes", "1", "--out", str(out), "--json"],
-                          capture_output=True, text=True, timeout=400, check=False)
-    return out, proc
+    return out, hydrapod("hil", "soak", "--minutes", "1", "--out", out, "--json")
 
 
+@pytest.mark.realtime
 def test_a_one_minute_soak_passes(soak_run):
     out, proc = soak_run
     assert proc.returncode in (0, 1), proc.stdout[-3000:] + proc.stderr[-3000:]
@@ -42,6 +38,7 @@ def test_a_one_minute_soak_passes(soak_run):
     assert (out / "report.md").is_file() and (out / "soak_jitter.png").is_file()
 
 
+@pytest.mark.realtime
 def test_the_analysis_fails_a_transient_fault_that_faulted(soak_run, monkeypatch):
     """Judged again with the persistent injections called transient (no fault expected),
     the same log fails: the checks are not vacuous."""
@@ -61,8 +58,7 @@ def test_the_analysis_fails_a_transient_fault_that_faulted(soak_run, monkeypatch
     (["--bus", "udp_multicast:10.0.0.1"], "10.0.0.1"),
 ])
 def test_soak_cli_errors_are_one_line_and_exit_2(argv, culprit, tmp_path):
-    proc = subprocess.run(HYDRAPOD + ["hil", "soak", "--out", str(tmp_path)] + argv,
-                          capture_output=True, text=True, timeout=60, check=False)
+    proc = hydrapod("hil", "soak", "--out", tmp_path, *argv)
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and culprit in lines[0] and "Traceback" not in proc.stderr

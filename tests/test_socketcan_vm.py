@@ -34,6 +34,7 @@ def _kernel() -> str:
     return kernels[-1]
 
 
+@pytest.mark.vm
 @pytest.mark.timeout(VM_TIMEOUT_S + 700)
 def test_sha_step_over_socketcan_vcan0_inside_a_vm(tmp_path):
     vng = BIN / "vng"

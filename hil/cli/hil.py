@@ -67,7 +67,8 @@ def _faults(args) -> int:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as error:
         raise UserInputError(f"--out {out}: cannot create the directory ({error.strerror})") from None
-    doc = run_matrix(out, short=args.short, bus=args.bus, start_timeout_s=args.start_timeout_s)
+    doc = run_matrix(out, short=args.short, bus=args.bus, start_timeout_s=args.start_timeout_s,
+                     pacings=(args.pacing,) if args.pacing else ("lockstep", "realtime"))
     print(json.dumps(doc, indent=1, default=str) if args.json else format_terminal(doc))
     return 0 if doc["passed"] else 1
 
@@ -145,6 +146,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--short", action="store_true", help="every case on the hexapod, a subset on the test bench "
                                                         "(what make test runs)")
     p.add_argument("--bus", metavar="SPEC", help="as for run (default: a fresh on-host multicast group per session)")
+    p.add_argument("--pacing", choices=("lockstep", "realtime"), default=None,
+                   help="only the sessions of this pacing (default: both)")
     p.add_argument("--start-timeout-s", type=number_in_range(float, 1.0, 3600.0), default=90.0)
     p.add_argument("--json", action="store_true", help="print faults.json instead of the table")
     p.set_defaults(handler=_faults)

@@ -9,19 +9,20 @@ from ..runner import RunOptions, run_scenario
 from .cases import LOCKSTEP_CASES, REALTIME_CASES, VALVE_WATCHDOG_PERIODS
 from .session import Session
 
-
-def sessions(short: bool) -> list[Session]:
-    """Full: every case on both rigs. Short (make test): every case on the hexapod (~2 min;
-    the suite's 20-minute budget has no room for the test bench's two sessions too)."""
-    out = [Session("hexapod", "lockstep", LOCKSTEP_CASES), Session("hexapod", "realtime", REALTIME_CASES)]
-    if not short:
-        out += [Session("testbench", "lockstep", LOCKSTEP_CASES), Session("testbench", "realtime", REALTIME_CASES)]
-    return out
+PACINGS = ("lockstep", "realtime")
 
 
-def run_matrix(out: Path, short: bool, bus: str | None = None, start_timeout_s: float = 90.0) -> dict:
+def sessions(short: bool, pacings: tuple[str, ...] = PACINGS) -> list[Session]:
+    """Full: every case on both rigs. Short (make test): every case on the hexapod (~2 min)."""
+    cases = {"lockstep": LOCKSTEP_CASES, "realtime": REALTIME_CASES}
+    rigs = ("hexapod",) if short else ("hexapod", "testbench")
+    return [Session(rig, pacing, cases[pacing]) for rig in rigs for pacing in PACINGS if pacing in pacings]
+
+
+def run_matrix(out: Path, short: bool, bus: str | None = None, start_timeout_s: float = 90.0,
+               pacings: tuple[str, ...] = PACINGS) -> dict:
     results, runs = [], []
-    for session in sessions(short):
+    for session in sessions(short, pacings):
         options = RunOptions(out_dir=out / session.name, bus=bus, short=short, start_timeout_s=start_timeout_s,
                              valve_watchdog_periods=VALVE_WATCHDOG_PERIODS if session.pacing == "realtime" else None)
         doc = run_scenario(session, options)
