@@ -1,7 +1,7 @@
 """The emulator on the bus: leg nodes (CiA 408 valve driver + encoder, load cell, pressure
 sensors), the IMU node (hexapod), fault injection, and the process loop.
 
-Per SYNC k (DESIGN.md "Timing model"):
+Per SYNC k (docs/ARCHITECTURE.md "The emulator's cycle"):
 1. every valve applies the command latched during cycle k-1 (state machine, setpoint) and
    checks its command timeout and spool deviation; EMCY on a fault;
 2. every OPERATIONAL sensor node samples the rig as it is at t_k and sends its frames due on

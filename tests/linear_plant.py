@@ -2,7 +2,7 @@
 
 P(s) = Y/Xv = k01 b0 / (s (s^2 + b1 s + b0)), Y in mm, Xv in V (thesis units); here in SI
 (metres, volts), discretised with a zero-order hold at the loop period. The valve command
-computed in cycle k acts from SYNC k+1 (one cycle of latency, DESIGN.md "Timing model");
+computed in cycle k acts from SYNC k+1 (one cycle of latency, docs/ARCHITECTURE.md "Timing model");
 the encoder quantises to 0.125 mm; the load cell reads m (y'' + g).
 """
 

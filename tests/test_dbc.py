@@ -1,4 +1,4 @@
-"""The DBC: loads in stock cantools, has the message set and ids of DESIGN.md, and meets the
+"""The DBC: loads in stock cantools, has the message set and ids of docs/PROTOCOL.md, and meets the
 scaling, protection and schedule rules of the protocol."""
 
 import math

@@ -1,6 +1,6 @@
 """The hexapod's joint-space loops with the emulator's hexapod, in process (no bus): the
 testbench's gains diverge on the 190 kg horizontal joint-space inertia; `[hexapod] kp_factor`
-and `ki_factor` (defaults 2 and 0.1) hold it (README "Hexapod gains")."""
+and `ki_factor` (defaults 2 and 0.1) hold it (docs/MEASUREMENTS.md "Hexapod gains")."""
 
 import numpy as np
 import pytest

@@ -66,7 +66,7 @@ def test_named_motions_stay_in_the_usable_workspace(name):
     lengths, vel, _ = traj.sample(t)
     assert np.all(lengths >= GEOMETRY.leg_min_m) and np.all(lengths <= GEOMETRY.leg_max_m)
     # headroom for tracking errors: a leg 1 mm from an end stop while moving is a POSITION_LIMIT
-    # fault, and the joint errors on the hexapod reach 10-20 mm (README "Hexapod gains")
+    # fault, and the joint errors on the hexapod reach 10-20 mm (docs/MEASUREMENTS.md "Hexapod gains")
     assert lengths.min() - GEOMETRY.leg_min_m >= 0.025 and GEOMETRY.leg_max_m - lengths.max() >= 0.025
     solver = DirectKinematics(GEOMETRY)
     poses = np.empty((len(t), 7))

@@ -50,7 +50,7 @@ class Session(Scenario):
                       for c in cases if rig in c.rigs]
         self.name = f"faults-{rig}-{pacing}"
         self.title = f"fault-injection matrix, {rig}, {pacing}"
-        self.chapter = "reliability (DESIGN.md Protocol, Supervisor)"
+        self.chapter = "reliability (docs/PROTOCOL.md, supervisor)"
         self.controllers = ("model-based",) if rig == "hexapod" else ("adaptive",)
         self.marks: list[Marks] = []
         self.results: list[CaseResult] = []

@@ -60,7 +60,7 @@ SINE_PERIOD_S = 25.0               # 0.04 Hz
 FINE_SENSOR_MM = 0.005             # presliding: the displacement sensor (LEG_STATE's LSB)
 
 # Steady map: the fit against the emulator's own parameters (the HIL truth). Tolerances from
-# the 0.125 mm encoder and the 16-cycle pressure frames over 0.5 s windows (README "Friction").
+# the 0.125 mm encoder and the 16-cycle pressure frames over 0.5 s windows (docs/MEASUREMENTS.md).
 STEADY_TOLERANCE = {"alpha0": 0.10, "alpha1": 0.30, "vs": 0.30, "sigma2": 0.10}
 PRESLIDING_TOLERANCE = 0.25        # sigma0 against the seal's + the guide's bristle stiffness (reported)
 SLIP_MM = 1.0                      # a sine that moved the piston further than this slid
@@ -358,7 +358,7 @@ class FrictionPresliding(Scenario):
                              "table_6_2_sigma1_ns_mm": c6["table_6_2"][f"sigma1_{key}_ns_mm"]}
             error = abs(sigma0 * MM - combined) / combined
             # reported, not asserted: a secant over the chart is not eq. 6.2's small-signal sigma0
-            # (README "Friction identification")
+            # (docs/MEASUREMENTS.md "Friction identification")
             checks.append(Check(f"sigma0{side} beside the emulator's seal + guide bristles",
                                 error <= PRESLIDING_TOLERANCE,
                                 f"{sigma0 * MM:.1f} vs {combined:.1f} N/mm ({error * 100:.0f} %)",

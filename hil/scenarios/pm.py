@@ -37,12 +37,8 @@ class PlatformMovement(Scenario):
                             "limits": {"velocity_max_mm_s": 1500.0}}
     motion_name = ""
     thesis: dict = {}
-    # The thesis's timing (a simulation) is beyond the emulated rig: its actuators (the test
-    # bench's, as identified) on this slender 6-UPS leave the horizontal directions with a
-    # joint-space inertia of 190-260 kg per leg and a ~1 Hz mode that the joint-space PI
-    # loops barely damp; at the thesis's ta/tm both controllers reach the tracking-error
-    # limit. The movement runs `time_scale` times slower (ta and tm scaled); README
-    # "Hexapod gains" has the measurements.
+    # Slower than the thesis's ta/tm: at its timing both controllers reach the tracking-error
+    # limit on this rig (docs/MEASUREMENTS.md "Hexapod gains").
     time_scale = 2.0
 
     @abstractmethod

@@ -36,9 +36,9 @@ DEFAULT_S, SHORT_S = 60.0, 10.0
 LEG_S = 2.0                         # one move of the back-and-forth
 # Asserted: the controller's own period error stays below one period at the 99th percentile
 # (a benchmark check) and no fault without a machine stall before it. Overruns and the
-# maximum are reported (a shared, noisy machine without an RT kernel: README "Timing").
+# maximum are reported (a shared, noisy machine without an RT kernel: docs/TIMING.md).
 P99_MAX_FRACTION = 1.0
-VALVE_WATCHDOG_PERIODS = 3          # the valves' command/SYNC watchdog (DESIGN.md "Supervisor")
+VALVE_WATCHDOG_PERIODS = 3          # the valves' command/SYNC watchdog (CiA 408 valve drivers)
 MAX_RECOVERIES = 10                 # stall faults a run recovers from before it gives up
 
 

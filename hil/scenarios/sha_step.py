@@ -39,11 +39,8 @@ class ShaStep(Scenario):
         return positions, loads, (1.2 if short else 2.0)
 
     def script(self, run) -> None:
-        # At each working position y0: move there and rest, then a 10 mm square wave up, down
-        # and up again. Only the last up-step is measured: it alone starts from the same state
-        # at every set point and load (at rest at y0 after a 10 mm down-step). The first one
-        # carries the approach's history: with friction the integrator keeps it, and the same
-        # PI overshoots 4-25 % depending on the side it came from (README "sha-step").
+        # At each working position: move there, then a 10 mm square wave up, down, up. Only the
+        # last up-step is measured: it alone starts from the same state everywhere.
         positions, loads, hold_s = self.plan(run.short)
         here = 0.150
         for _ in each_controller_and_load(run, loads):
