@@ -63,6 +63,10 @@ def test_presliding_slope_and_eq_6_12():
     assert (sigma1 + sigma2) ** 2 == pytest.approx(4.0 * sigma0 * mass)
 
 
+# the tests reading the one run share a worker (make test distributes with --dist loadgroup)
+STEADY_GROUP = pytest.mark.xdist_group("friction-steady-run")
+
+
 @pytest.fixture(scope="module")
 def steady_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("friction-steady")
@@ -71,6 +75,7 @@ def steady_run(tmp_path_factory):
 
 
 @pytest.mark.hil
+@STEADY_GROUP
 def test_friction_steady_recovers_the_emulators_map_through_the_bus(steady_run):
     out, proc = steady_run
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
@@ -86,6 +91,7 @@ def test_friction_steady_recovers_the_emulators_map_through_the_bus(steady_run):
 
 
 @pytest.mark.hil
+@STEADY_GROUP
 def test_friction_steady_analysis_from_the_log_alone(steady_run, tmp_path):
     out, _ = steady_run
     proc = hydrapod("hil", "analyze", out / "run.blf", "--scenario", "friction-steady", "--out", tmp_path, "--json")
@@ -112,21 +118,25 @@ def test_friction_presliding_recovers_the_seals_stiffness_through_the_bus(tmp_pa
 
 def test_the_bristle_model_is_the_emulators_lugre_state_at_rest():
     """`bristle_forces` (the analysis's model) against the law the emulator integrates
-    (physics.lugre.z_step, time-stepped) along the same displacement, guide stiffness ~0."""
+    (physics.lugre.z_step, time-stepped) along the same displacement: the seal's and, with
+    the guide's own vector, the guide's."""
     fp = lugre.pack(12.1994, 10.6468, 10.0 * MM, 131.6, -15.0, -5.3903, -20.0 * MM, 75.3,
                     238970.9, 1894.4, 81580.8, 1091.1)
+    gp = lugre.pack(10.9, 0.0, 0.3, 9.1, -10.9, 0.0, 0.3, 9.1, 100e3, 0.0, 100e3, 0.0, 3.0)
     t = np.arange(0.0, 6.0, 0.002)
     y = 0.01 * np.minimum(t, 1.0) + 0.05 * MM * np.sin(2 * np.pi * np.maximum(t - 2.0, 0.0) / 2.0)
     dy = np.diff(y, prepend=y[0])
     v = dy / 0.002
-    ours = np.empty(len(t))
-    bristle_forces(dy, v, fp, 10.9, 1.0, 0.0, 0.0, ours)
-    z, theirs = 0.0, np.empty(len(t))
+    seal, guide = np.empty(len(t)), np.empty(len(t))
+    bristle_forces(dy, v, fp, 10.9, 100e3, 0.0, 0.0, seal, guide)
+    z, zg = 0.0, 0.0
+    seal_theirs, guide_theirs = np.empty(len(t)), np.empty(len(t))
     for i in range(len(t)):
-        z = lugre.z_step(z, v[i], 0.002, fp)
-        theirs[i] = (238970.9 if z >= 0 else 81580.8) * z
-    # the guide term of `ours` is at most 1 N/m x 10 mm here
-    assert np.max(np.abs(theirs)) > 15.0 and np.allclose(ours, theirs, atol=0.02)
+        z, zg = lugre.z_step(z, v[i], 0.002, fp), lugre.z_step(zg, v[i], 0.002, gp)
+        seal_theirs[i] = (238970.9 if z >= 0 else 81580.8) * z
+        guide_theirs[i] = 100e3 * zg
+    assert np.max(np.abs(seal_theirs)) > 15.0 and np.allclose(seal, seal_theirs, atol=0.02)
+    assert np.max(np.abs(guide_theirs)) > 10.0 and np.allclose(guide, guide_theirs, atol=0.02)
 
 
 def test_the_presliding_fit_recovers_known_stiffnesses():
@@ -135,13 +145,16 @@ def test_the_presliding_fit_recovers_known_stiffnesses():
     for t0, amplitude in ((3.0, 0.03 * MM), (12.0, 0.06 * MM), (21.0, 0.1 * MM), (30.0, 0.14 * MM)):
         y = y + np.where((t >= t0) & (t < t0 + 8.0), amplitude * np.sin(2 * np.pi * (t - t0) / 8.0), 0.0)
     dy = np.diff(y, prepend=y[0])
-    truth = np.empty(len(t))
+    seal_true, guide_true = np.empty(len(t)), np.empty(len(t))
     seal = lugre.pack(12.1994, 10.6468, 10.0 * MM, 131.6, -15.0, -5.3903, -20.0 * MM, 75.3, 239e3, 0.0, 81.6e3, 0.0)
-    bristle_forces(dy, dy / 0.002, seal, 10.9, 100e3, 0.0, 0.0, truth)
-    at = np.flatnonzero(t >= 3.0)[::16]
-    measured = truth[at] + 4.0 + np.random.default_rng(3).normal(0.0, 0.2, len(at))
-    fit = fit_presliding(dy, dy / 0.002, at, measured, TRUE, 10.9)
+    bristle_forces(dy, dy / 0.002, seal, 10.9, 100e3, 0.0, 0.0, seal_true, guide_true)
+    rng = np.random.default_rng(3)
+    seal_at, guide_at = np.flatnonzero(t >= 3.0)[::16], np.flatnonzero(t >= 3.0)
+    seal_measured = seal_true[seal_at] + 4.0 + rng.normal(0.0, 0.4, len(seal_at))
+    guide_measured = guide_true[guide_at] - 1.5 + rng.normal(0.0, 0.3, len(guide_at))
+    fit = fit_presliding(dy, dy / 0.002, seal_at, seal_measured, guide_at, guide_measured, TRUE, 10.9)
     assert fit["sigma0_pos_n_m"] == pytest.approx(239e3, rel=0.03)
     assert fit["sigma0_neg_n_m"] == pytest.approx(81.6e3, rel=0.03)
-    assert fit["guide_n_m"] == pytest.approx(100e3, rel=0.05)
+    assert fit["guide_n_m"] == pytest.approx(100e3, rel=0.03)
     assert fit["offset_n"] == pytest.approx(4.0, abs=0.3)
+    assert fit["guide_offset_n"] == pytest.approx(-1.5, abs=0.1)

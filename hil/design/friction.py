@@ -91,14 +91,13 @@ def presliding_damping(sigma0_n_m: float, mass_kg: float, sigma2_ns_m: float, ze
 
 # -- pre-sliding by the bristle model --------------------------------------------------------------
 @numba.njit(cache=True)
-def bristle_forces(dy_m, v_m_s, seal, guide_g, guide_k, z_seal0, z_guide0, out_n):
-    """The bristle forces at the piston along a measured displacement: the seal's LuGre state
-    (eq. 6.2, `seal` a physics.lugre vector: g(v) of the side of motion, sigma0 by the sign of
-    z as Table 6.2's two slopes) and the guide's (the same equation with its Coulomb level and
-    one stiffness), each advanced exactly over every displacement increment dy at the velocity
-    v of that cycle; out_n[i] = sigma0 z_s + k_g z_g (eq. 6.1 at rest: the sigma1 and sigma2
-    terms vanish with v). Starts from the given deflections (a move makes both states forget
-    them within ~0.1 mm)."""
+def bristle_forces(dy_m, v_m_s, seal, guide_g, guide_k, z_seal0, z_guide0, seal_n, guide_n):
+    """The bristle forces of the seal and of the guide along a measured displacement: the
+    seal's LuGre state (eq. 6.2, `seal` a physics.lugre vector: g(v) of the side of motion,
+    sigma0 by the sign of z as Table 6.2's two slopes) and the guide's (the same equation with
+    its Coulomb level and one stiffness), each advanced exactly over every displacement
+    increment dy at the velocity v of that cycle; seal_n[i] = sigma0 z_s, guide_n[i] = k_g z_g
+    (eq. 6.1 at rest: the sigma1 and sigma2 terms vanish with v)."""
     z_s, z_g = z_seal0, z_guide0
     for i in range(dy_m.shape[0]):
         d, v = dy_m[i], v_m_s[i]
@@ -107,44 +106,48 @@ def bristle_forces(dy_m, v_m_s, seal, guide_g, guide_k, z_seal0, z_guide0, out_n
         z_s = lugre.bristle_relax(z_s, d, abs(g), sigma0)
         z_g = lugre.bristle_relax(z_g, d, guide_g, guide_k)
         sigma0, _ = lugre.bristle_coefficients(z_s, seal)
-        out_n[i] = sigma0 * z_s + guide_k * z_g
+        seal_n[i] = sigma0 * z_s
+        guide_n[i] = guide_k * z_g
 
 
-def fit_presliding(dy_m: np.ndarray, v_m_s: np.ndarray, at: np.ndarray, friction_n: np.ndarray,
-                   steady: dict[str, SteadySide], guide_coulomb_n: float, guess_n_m: float = 2e5) -> dict:
-    """sigma0+, sigma0- of the seal and the guide's bristle stiffness by least squares: the
-    bristle forces simulated along the whole displacement record (`bristle_forces`) against
-    the friction measured at the indices `at` (eq. 6.5 at rest), plus a constant offset (the
-    weight's and the mass's error) and both states' deflections at the record's start.
+def fit_presliding(dy_m: np.ndarray, v_m_s: np.ndarray, seal_at: np.ndarray, seal_friction_n: np.ndarray,
+                   guide_at: np.ndarray, guide_friction_n: np.ndarray, steady: dict[str, SteadySide],
+                   guide_coulomb_n: float, guess_n_m: float = 2e5) -> dict:
+    """sigma0+, sigma0- of the seal and the guide's bristle stiffness by least squares: both
+    bristle states simulated along the whole displacement record (`bristle_forces`), the
+    seal's against the cylinder's friction measured at the indices `seal_at`, the guide's
+    against the guide's at `guide_at` (the load cell between them tells the two apart), each
+    with a constant offset (weight and mass errors) and its deflection at the record's start.
     `steady` gives the seal's g(v) (Table 6.1's map)."""
     pos, neg = steady["+"], steady["-"]
     # the seal's law with the steady map given and sigma0 to be fitted (sigma1 plays no part at rest)
     seal = lugre.pack(pos.alpha0_n, pos.alpha1_n, pos.vs_m_s, pos.sigma2_ns_m, neg.alpha0_n, neg.alpha1_n,
                       neg.vs_m_s, neg.sigma2_ns_m, guess_n_m, 0.0, guess_n_m, 0.0)
     g_pos, g_neg = pos.alpha0_n + pos.alpha1_n, -(neg.alpha0_n + neg.alpha1_n)      # |g(0)| of each side
-    out = np.empty(len(dy_m))
+    seal_n, guide_n = np.empty(len(dy_m)), np.empty(len(dy_m))
 
     def model(q):
         s0p, s0n, kg = np.exp(q[:3])
         seal[lugre.S0_POS], seal[lugre.S0_NEG] = s0p, s0n
         # the initial deflections as fractions of their steady values (the record's start
         # state is unknown: after power-up, or after whatever moved the leg last)
-        z_s0 = q[4] * (g_pos / s0p if q[4] >= 0 else g_neg / s0n)
-        bristle_forces(dy_m, v_m_s, seal, guide_coulomb_n, kg, z_s0, q[5] * guide_coulomb_n / kg, out)
-        return out[at] + q[3]
+        z_s0 = q[5] * (g_pos / s0p if q[5] >= 0 else g_neg / s0n)
+        bristle_forces(dy_m, v_m_s, seal, guide_coulomb_n, kg, z_s0, q[6] * guide_coulomb_n / kg, seal_n, guide_n)
+        return np.concatenate([seal_n[seal_at] + q[3] - seal_friction_n, guide_n[guide_at] + q[4] - guide_friction_n])
 
-    q0 = np.array([np.log(guess_n_m), np.log(guess_n_m), np.log(guess_n_m / 2), 0.0, 0.0, 0.0])
-    lower = [np.log(1e3)] * 3 + [-np.inf, -1.0, -1.0]
-    upper = [np.log(1e8)] * 3 + [np.inf, 1.0, 1.0]
-    result = least_squares(lambda q: model(q) - friction_n, q0, bounds=(lower, upper),
-                           x_scale=[1.0, 1.0, 1.0, 10.0, 0.5, 0.5])
+    q0 = np.array([np.log(guess_n_m), np.log(guess_n_m), np.log(guess_n_m / 2), 0.0, 0.0, 0.0, 0.0])
+    lower = [np.log(1e3)] * 3 + [-np.inf, -np.inf, -1.0, -1.0]
+    upper = [np.log(1e8)] * 3 + [np.inf, np.inf, 1.0, 1.0]
+    result = least_squares(model, q0, bounds=(lower, upper), x_scale=[1.0, 1.0, 1.0, 10.0, 10.0, 0.5, 0.5])
     s0p, s0n, kg = np.exp(result.x[:3])
+    seal_res, guide_res = result.fun[:len(seal_at)], result.fun[len(seal_at):]
     # standard errors of the three logs (relative errors of the stiffnesses); pinv: after a
     # move the initial deflections have no effect left, so their columns are zero
     jac = result.jac
     cov = np.linalg.pinv(jac.T @ jac) * np.mean(result.fun ** 2)
     rel = np.sqrt(np.abs(np.diag(cov)))[:3]
     return {"sigma0_pos_n_m": float(s0p), "sigma0_neg_n_m": float(s0n), "guide_n_m": float(kg),
-            "offset_n": float(result.x[3]), "initial_deflection_fractions": [float(result.x[4]), float(result.x[5])],
-            "rms_n": float(np.sqrt(np.mean(result.fun ** 2))),
-            "relative_std": [float(r) for r in rel], "points": len(friction_n)}
+            "offset_n": float(result.x[3]), "guide_offset_n": float(result.x[4]),
+            "initial_deflection_fractions": [float(result.x[5]), float(result.x[6])],
+            "rms_n": float(np.sqrt(np.mean(seal_res ** 2))), "guide_rms_n": float(np.sqrt(np.mean(guide_res ** 2))),
+            "relative_std": [float(r) for r in rel], "points": len(seal_at), "guide_points": len(guide_at)}
