@@ -16,12 +16,14 @@ reads from the log:
 - excursion: the largest distance of the platform (the test bench's slide) from where it
   was at the injection, over `OBSERVE_S` after it (EMU_TRUTH, which keeps coming when the
   controller is dead: the emulator's plant runs on);
-- transient faults: the largest distance from the same probe without a fault, judged on the
-  legs (encoder strokes: the truth to one 0.125 mm count; cycles without the faulted leg's
-  frame skipped) and reported for the platform. On the hexapod two no-fault probes differ
-  by 1-2.5 mm horizontally (case 0b, measured in the same session): 1 mm of leg is 7-10 mm
-  there, and the pose hunts as encoder counts flip, so the platform cannot carry a 1 mm
-  criterion; its vertical axis repeats to 0.3 mm.
+- transient faults: what the fault changed against the same probe without a fault: the
+  largest change of the two probes' difference from the cycle before the injection over
+  `TRANSIENT_WINDOW_S` (the probe's constant speed), judged on the legs (encoder strokes:
+  the truth to one 0.125 mm count; cycles without the faulted leg's frame skipped) and
+  reported for the platform. The difference before the injection is where each leg's
+  stiction left it at rest (0.25-0.6 mm on the hexapod), never the fault's. On the hexapod
+  1 mm of leg is 7-10 mm of platform horizontally, so the platform cannot carry a 1 mm
+  criterion.
 """
 
 from .cases import LOCKSTEP_CASES, REALTIME_CASES, Case, CaseKind

@@ -13,6 +13,9 @@ INJECT_AT_S = 0.5                 # into the probe's first segment (moving at ~2
 OBSERVE_S = 1.0                   # excursion window after the injection
 SETTLE_S = 2.0                    # at rest before the next case (the hexapod rings at ~1.5 Hz after a stop)
 TRANSIENT_MAX_M = 1e-3            # transient faults: within 1 mm of the no-fault probe
+# the transient comparison's window after the injection: the fault and the loop's answer to
+# it, at the probe's constant speed (its deceleration starts PROBE_SEGMENT_S - PROBE_ACCEL_S in)
+TRANSIENT_WINDOW_S = 0.5
 HOLD_MOTION_MAX_M = 2e-3          # controller killed: the platform moves <= 2 mm afterwards
 ENCODER_COUNT_M = 0.125e-3        # LEG_STATE's encoder (LXEP40, chapter 8.2.3)
 STALL_S = 0.050                   # SIGSTOP

@@ -20,8 +20,8 @@ from .cases import (
     HOLD_WITHIN_PERIODS,
     INJECT_AT_S,
     OBSERVE_S,
-    PROBE_SEGMENT_S,
     TRANSIENT_MAX_M,
+    TRANSIENT_WINDOW_S,
     Case,
     CaseKind,
     Marks,
@@ -217,11 +217,12 @@ def first_affected_cycle(view: LogView, mark: Marks, case: Case) -> int | None:
     return None
 
 def deviation_from(view: LogView, mark: Marks, baseline: Marks | None) -> tuple[float | None, float | None]:
-    """Largest difference of this probe from the baseline's after the injection (the
-    probes aligned at the commit of their first waypoint), to 0.5 s after the probe:
-    (largest leg stroke difference, largest platform distance). What comes before the
-    injection cannot be the fault's: two no-fault probes differ there by the start from
-    rest (the test bench's stiction: a breakaway 75 ms earlier or later, 1.1 mm)."""
+    """What the fault changed: the largest change, over TRANSIENT_WINDOW_S from the injection,
+    of this probe's difference from the baseline's (the probes aligned at the commit of their
+    first waypoint): (leg strokes, platform distance). The difference one cycle before the
+    injection is subtracted: it cannot be the fault's (two no-fault probes start from rest
+    0.25-0.6 mm apart on the hexapod, where each leg's stiction left it). The window ends
+    before the probe decelerates, where two no-fault probes part again by their stops."""
     if baseline is None:
         return None, None
     ka, kb = waypoint_ack_cycle(view, mark), waypoint_ack_cycle(view, baseline)
@@ -229,12 +230,19 @@ def deviation_from(view: LogView, mark: Marks, baseline: Marks | None) -> tuple[
         return None, None
     k_inject = view.cycle_at(mark.t_inject) if not math.isnan(mark.t_inject) else None
     skip = k_inject - ka if k_inject is not None else int(round(INJECT_AT_S / view.period_s))
-    span = 2 * PROBE_SEGMENT_S + 0.5 - skip * view.period_s
-    a, b = _truth_window(view, ka + skip, span), _truth_window(view, kb + skip, span)
-    platform = None if a is None or b is None else float(np.max(np.linalg.norm(a - b, axis=1)))
-    la, lb = _legs_window(view, ka + skip, span), _legs_window(view, kb + skip, span)
-    legs = None if la is None or lb is None else float(np.nanmax(np.abs(la - lb)))
+    span = TRANSIENT_WINDOW_S + view.period_s                    # from the cycle before the injection
+    a, b = _truth_window(view, ka + skip - 1, span), _truth_window(view, kb + skip - 1, span)
+    platform = None if a is None or b is None else _largest_change(a - b, lambda d: np.linalg.norm(d, axis=1))
+    la, lb = _legs_window(view, ka + skip - 1, span), _legs_window(view, kb + skip - 1, span)
+    legs = None if la is None or lb is None else _largest_change(la - lb, np.abs)
     return legs, platform
+
+
+def _largest_change(difference: np.ndarray, size) -> float | None:
+    """The largest size(row - first row); None when the first row (the reference) is incomplete."""
+    if not np.all(np.isfinite(difference[0])):
+        return None
+    return float(np.nanmax(size(difference - difference[0])))
 
 def _legs_window(view: LogView, k0: int | None, span: float):
     n = int(round(span / view.period_s))
