@@ -37,11 +37,11 @@ vm-deps:
 	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y --no-install-recommends $(VM_DEBS); }
 
 test: $(STAMP) vm-deps
-	$(PYTEST) -n $(WORKERS) --dist loadfile -m "not realtime"
+	$(PYTEST) -n $(WORKERS) --dist loadgroup -m "not realtime"
 	$(PYTEST) -m realtime
 
 check: $(STAMP)
-	$(PYTEST) -n $(WORKERS) --dist loadfile -m "not hil and not realtime and not vm"
+	$(PYTEST) -n $(WORKERS) --dist loadgroup -m "not hil and not realtime and not vm"
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

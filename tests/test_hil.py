@@ -12,6 +12,9 @@ from hil.logdata import frames_by_sender, frames_counted_by_senders, read_log
 from protocol.dbc import dbc_path
 from tests.cli_run import hydrapod
 
+# the tests reading the one run share a worker (make test distributes with --dist loadgroup)
+SHA_STEP_GROUP = pytest.mark.xdist_group("sha-step-run")
+
 
 @pytest.fixture(scope="module")
 def sha_step_run(tmp_path_factory):
@@ -21,6 +24,7 @@ def sha_step_run(tmp_path_factory):
 
 
 @pytest.mark.hil
+@SHA_STEP_GROUP
 def test_sha_step_short_passes_with_zero_e2e_errors(sha_step_run):
     out, proc = sha_step_run
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
@@ -42,6 +46,7 @@ def test_sha_step_short_passes_with_zero_e2e_errors(sha_step_run):
 
 
 @pytest.mark.hil
+@SHA_STEP_GROUP
 def test_analyze_reproduces_the_run_metrics_from_the_log_alone(sha_step_run, tmp_path):
     out, _ = sha_step_run
     proc = hydrapod("hil", "analyze", out / "run.blf", "--scenario", "sha-step", "--out", tmp_path, "--json")
@@ -52,6 +57,7 @@ def test_analyze_reproduces_the_run_metrics_from_the_log_alone(sha_step_run, tmp
 
 
 @pytest.mark.hil
+@SHA_STEP_GROUP
 def test_the_log_decodes_with_stock_cantools_and_python_can(sha_step_run):
     out, _ = sha_step_run
     db = cantools.database.load_file(str(dbc_path()))
@@ -70,6 +76,7 @@ def test_the_log_decodes_with_stock_cantools_and_python_can(sha_step_run):
 
 
 @pytest.mark.hil
+@SHA_STEP_GROUP
 def test_the_log_holds_every_frame_each_sender_sent(sha_step_run):
     """Nothing lost: the BLF holds as many frames of each sender as it counted sending."""
     out, _ = sha_step_run
@@ -82,6 +89,7 @@ def test_the_log_holds_every_frame_each_sender_sent(sha_step_run):
 
 
 @pytest.mark.hil
+@SHA_STEP_GROUP
 def test_every_cycle_has_its_leg_frame_despite_on_host_reordering(sha_step_run):
     out, _ = sha_step_run
     log = read_log(out / "run.blf")
