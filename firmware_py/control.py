@@ -25,7 +25,6 @@ import math
 
 import numpy as np
 from numba import njit
-from scipy.interpolate import CubicSpline
 
 from physics.constants import GRAVITY_M_S2
 from protocol.enums import ControllerKind
@@ -54,6 +53,8 @@ CONTROLLER_NAMES = {kind.name.lower().replace("_", "-"): int(kind) for kind in C
 def spline_coefficients(positions: np.ndarray, table: np.ndarray) -> np.ndarray:
     """(n_loads, n_intervals, 4) polynomial coefficients [c0, c1, c2, c3] of natural cubic
     splines through each row of `table`: value = c0 + c1 d + c2 d^2 + c3 d^3, d = y - y_i."""
+    # imported at configure time only: the hosts that import this module never load it
+    from scipy.interpolate import CubicSpline
     out = np.empty((table.shape[0], len(positions) - 1, 4))
     for j, row in enumerate(table):
         c = CubicSpline(positions, row, bc_type="natural").c        # (4, n_int), highest power first

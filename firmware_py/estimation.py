@@ -28,7 +28,6 @@ import math
 
 import numpy as np
 from numba import njit
-from scipy.linalg import expm
 
 from physics.lugre import bristle_coefficients, stribeck
 
@@ -130,6 +129,9 @@ def second_order_filter(period_s: float, natural_hz: float, zeta: float) -> tupl
 
     State [x, x']; returns (Ad (2, 2), Bd (2,)), so x_{k+1} = Ad x_k + Bd u_k.
     """
+    # configure time only: the hosts that import this module never load scipy.linalg
+    from scipy.linalg import expm
+
     wn = 2.0 * math.pi * natural_hz
     a = np.array([[0.0, 1.0], [-wn * wn, -2.0 * zeta * wn]])
     big = np.zeros((3, 3))

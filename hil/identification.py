@@ -18,8 +18,6 @@ Fit index eq. 5.12: F = 1 - |y - ys| / |y - mean(y)|.
 from __future__ import annotations
 
 import numpy as np
-from scipy import signal
-from scipy.optimize import least_squares
 
 
 def proportional_gain(u_v: np.ndarray, error_m: np.ndarray) -> tuple[float, float]:
@@ -33,6 +31,7 @@ def proportional_gain(u_v: np.ndarray, error_m: np.ndarray) -> tuple[float, floa
 def closed_loop_step(n0: float, a2: float, a1: float, a0: float, t_s: np.ndarray, delay_s: float) -> np.ndarray:
     """Unit-step response of n0 / (s^3 + a2 s^2 + a1 s + a0), delayed by `delay_s`, on the
     equally spaced `t_s` (the delay a whole number of its steps)."""
+    from scipy import signal
     out = np.zeros(len(t_s))
     late = t_s >= delay_s - 1e-12
     if late.sum() >= 2:
@@ -53,6 +52,7 @@ def fit_closed_loop(t_s: np.ndarray, dy_m: np.ndarray, step_m: float, delay_s: f
     structure eq. 5.4 gives a type-I plant under u = K e: a0 = n0 = K k01 b0, a1 = b0, a2 = b1.
     (A free a0 drifted to wherever the window's friction put it: the "pole near the origin"
     of chapter 5.4.1, there removed by hand; here it never enters.) `guess`: (b0, b1, k01)."""
+    from scipy.optimize import least_squares
     def model(q):
         b0, b1, k01 = np.exp(q)
         n0 = k_v_m * k01 * b0
@@ -86,6 +86,7 @@ def closed_loop_of(plant: dict, k_v_m: float) -> tuple[float, float, float, floa
 
 def low_pass(x: np.ndarray, cutoff_hz: float, rate_hz: float) -> np.ndarray:
     """4th-order Butterworth, zero phase (chapter 5.4.1's filter, run forward and back)."""
+    from scipy import signal
     sos = signal.butter(4, cutoff_hz, fs=rate_hz, output="sos")
     return signal.sosfiltfilt(sos, x)
 

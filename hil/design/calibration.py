@@ -26,7 +26,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import fsolve, least_squares
 
 from physics import lugre
 from physics.constants import BAR, GRAVITY_M_S2, MM
@@ -95,6 +94,7 @@ def moving_mass_kg(cfg: EmulatorConfig, load_kg: float) -> float:
 
 
 def linearise(cfg: EmulatorConfig, position_mm: float, load_kg: float) -> OperatingPoint:
+    from scipy.optimize import fsolve
     y = position_mm * MM
     mass = moving_mass_kg(cfg, load_kg)
     fp = cfg.friction
@@ -185,6 +185,7 @@ def fit(raw: dict, names: list[str], max_evaluations: int = 300, power: float = 
     """Tune `names` (keys of TUNABLE) on the log-ratios to Table A.3, each divided by its
     tolerance and raised to `power` (3: the sum of sixth powers, close to minimising the
     worst point, which is what the bounds ask for)."""
+    from scipy.optimize import least_squares
     rows = table_a3()
     start = np.array([raw[TUNABLE[n][0]][TUNABLE[n][1]] for n in names], dtype=float)
     scale = np.where(start > 0, start, 1.0)

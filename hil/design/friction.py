@@ -12,7 +12,6 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from scipy.optimize import least_squares
 
 from physics import lugre
 from physics.constants import GRAVITY_M_S2
@@ -53,6 +52,7 @@ def fit_steady_side(v_m_s: np.ndarray, f_n: np.ndarray, sign: float) -> tuple[St
     """Eq. 6.4 on one side (sign +1: v > 0, -1: v < 0) by bounded nonlinear least squares
     (the thesis: lsqcurvefit with bounds from the observed extremes). Returns the parameters
     with the side's sign on alpha0, alpha1 and vs (Table 6.1's convention) and fit figures."""
+    from scipy.optimize import least_squares
     v, f = np.asarray(v_m_s, float), np.asarray(f_n, float)
     keep = np.sign(v) == sign
     v, f = sign * v[keep], sign * f[keep]                 # mirrored onto the positive side
@@ -119,6 +119,7 @@ def fit_presliding(dy_m: np.ndarray, v_m_s: np.ndarray, seal_at: np.ndarray, sea
     against the guide's at `guide_at` (the load cell between them tells the two apart), each
     with a constant offset (weight and mass errors) and its deflection at the record's start.
     `steady` gives the seal's g(v) (Table 6.1's map)."""
+    from scipy.optimize import least_squares
     pos, neg = steady["+"], steady["-"]
     # the seal's law with the steady map given and sigma0 to be fitted (sigma1 plays no part at rest)
     seal = lugre.pack(pos.alpha0_n, pos.alpha1_n, pos.vs_m_s, pos.sigma2_ns_m, neg.alpha0_n, neg.alpha1_n,
