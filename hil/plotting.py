@@ -13,10 +13,13 @@ LOAD_COLOURS = {0.0: "tab:blue", 3.0: "tab:orange", 6.0: "tab:green"}
 class _Pyplot:
     """matplotlib.pyplot with the Agg backend, loaded at the first attribute read."""
 
+    _module = None
+
     def __getattr__(self, name: str):
-        matplotlib = importlib.import_module("matplotlib")
-        matplotlib.use("Agg")
-        return getattr(importlib.import_module("matplotlib.pyplot"), name)
+        if _Pyplot._module is None:
+            importlib.import_module("matplotlib").use("Agg")
+            _Pyplot._module = importlib.import_module("matplotlib.pyplot")
+        return getattr(_Pyplot._module, name)
 
 
 plt = _Pyplot()
