@@ -27,7 +27,7 @@ import numpy as np
 
 from firmware_py.config import load_config
 from physics.actuator import piston_force
-from physics.constants import GRAVITY_M_S2, MM
+from physics.constants import MM
 from plant_emulator.params import load_config as load_emulator_config
 from protocol.enums import AckKind, TestMode
 
@@ -133,7 +133,7 @@ def _seal_friction(log: LogData, cfg, rod_n: np.ndarray) -> tuple[np.ndarray, np
     rod = np.full(len(cycle), np.nan)
     ok = (cycle >= 0) & (cycle < len(rod_n))
     rod[ok] = rod_n[cycle[ok]]
-    return cycle, fp - rod - cfg.moving_mass_kg * GRAVITY_M_S2
+    return cycle, cylinder_friction(fp - rod, 0.0, 0.0, cfg.moving_mass_kg, 0.0, 0.0)
 
 
 def _truth_steady() -> dict[str, SteadySide]:
@@ -462,7 +462,8 @@ class FrictionPresliding(Scenario):
             cycles = np.arange(k0, k1 + 1)
             cycles = cycles[at_rest[cycles] & np.isfinite(rod_n[cycles])]
             guide_at.append(cycles)
-            guide.append(rod_n[cycles] - _load_mass(cfg, load_at(log, k0)) * GRAVITY_M_S2)
+            # the slide at rest, pushed by the load cell: eq. 6.5 with nothing beyond it
+            guide.append(cylinder_friction(rod_n[cycles], 0.0, 0.0, _load_mass(cfg, load_at(log, k0)), 0.0, 0.0))
         if not sum(len(a) for a in seal_at) or not sum(len(a) for a in guide_at):
             return None
         fit = fit_presliding(dy, dy / period, np.concatenate(seal_at), np.concatenate(seal),
