@@ -271,7 +271,7 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
         for stale in out.glob(f"{base}-[0-9]*.*"):
             stale.unlink(missing_ok=True)
     run = Run(scenario, options, spec, out)
-    bus = open_bus(spec)
+    bus = open_bus(spec, recorder=True)
     run.host = Host(bus, str(out / LOG_NAME), watch=run._watch)
     failure = None
     started = time.monotonic()

@@ -34,6 +34,10 @@ DEFAULT_MULTICAST_GROUP = "239.255.72.80"   # IPv4 organisation-local scope
 DEFAULT_MULTICAST_PORT = 43180
 DEFAULT_SOCKETCAN_INTERFACE = "vcan0"
 _RCVBUF_BYTES = 4 << 20          # survive bursts while a process is busy; capped by rmem_max
+# a recorder may fall behind for seconds (a babbling node at the bus's capacity) and must
+# lose nothing: it reads the backlog afterwards (root lifts the rmem_max cap)
+RECORDER_RCVBUF_BYTES = 128 << 20
+_SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)
 _IP_MULTICAST_ALL = 49           # Linux: 0 = receive only the groups this socket joined
 _IFNAME = re.compile(r"[A-Za-z0-9_.\-]{1,15}")
 
@@ -141,24 +145,28 @@ class HostMulticastBus(UdpMulticastBus):
     - classic CAN only (FD frames are rejected on send and dropped on receive).
     """
 
-    def __init__(self, group: str, port: int):
+    def __init__(self, group: str, port: int, receive_buffer_bytes: int = _RCVBUF_BYTES):
         super().__init__(channel=group, port=port, hop_limit=0, fd=False)
         self._token = f"hydrapod-{os.urandom(8).hex()}"
         self.group, self.port = group, port
         self.channel_info = f"udp_multicast:{group}:{port} (hop limit 0)"
         self.rx_garbage = 0
-        self._tune_socket(group)
+        self._tune_socket(group, receive_buffer_bytes)
 
-    def _tune_socket(self, group: str) -> None:
+    def _tune_socket(self, group: str, receive_buffer_bytes: int) -> None:
         # fromfd duplicates the descriptor: options set on the copy apply to the socket.
         family = socket.AF_INET6 if ":" in group else socket.AF_INET
         with socket.fromfd(self.fileno(), family, socket.SOCK_DGRAM) as sock:
             try:
-                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, _RCVBUF_BYTES)
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, receive_buffer_bytes)
                 if family == socket.AF_INET:
                     sock.setsockopt(socket.IPPROTO_IP, _IP_MULTICAST_ALL, 0)
             except OSError:
                 pass   # best effort: defaults still work, only less isolated/buffered
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, _SO_RCVBUFFORCE, receive_buffer_bytes)
+            except OSError:
+                pass   # not root: SO_RCVBUF's size, capped by rmem_max
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         channel = msg.channel
@@ -193,8 +201,9 @@ class HostMulticastBus(UdpMulticastBus):
                     return None, False
 
 
-def open_bus(spec: str | BusSpec | None = None) -> can.BusABC:
-    """Open the bus named by `spec` (None: `default_bus_spec()`).
+def open_bus(spec: str | BusSpec | None = None, recorder: bool = False) -> can.BusABC:
+    """Open the bus named by `spec` (None: `default_bus_spec()`); `recorder`: the on-host
+    bus gets RECORDER_RCVBUF_BYTES of receive buffer, so a host that falls behind loses nothing.
 
     Raises `BusSpecError` for a malformed string and `BusOpenError` (one line, naming
     the bus) when it cannot be opened here.
@@ -213,7 +222,8 @@ def open_bus(spec: str | BusSpec | None = None) -> can.BusABC:
                                    f"ip link add dev {spec.channel} type vcan; ip link set up {spec.channel})")
             return can.Bus(interface="socketcan", channel=spec.channel, receive_own_messages=False)
         if spec.kind == "udp_multicast":
-            return HostMulticastBus(spec.channel, spec.port)
+            return HostMulticastBus(spec.channel, spec.port,
+                                    RECORDER_RCVBUF_BYTES if recorder else _RCVBUF_BYTES)
         if spec.kind == "virtual":
             return can.Bus(interface="virtual", channel=spec.channel, receive_own_messages=False)
     except (can.CanError, OSError) as error:

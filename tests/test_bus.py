@@ -14,6 +14,7 @@ import pytest
 
 from protocol.bus import (
     BUS_FORMS,
+    RECORDER_RCVBUF_BYTES,
     BusOpenError,
     BusSpec,
     BusSpecError,
@@ -196,3 +197,22 @@ def test_two_processes_exchange_10k_frames_none_lost_or_reordered():
             peer.kill()
             peer.wait()
         bus.shutdown()
+
+
+def _receive_buffer(bus) -> int:
+    with socket.fromfd(bus.fileno(), socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        return sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+
+
+def test_the_recorder_gets_a_receive_buffer_for_a_backlog_of_seconds():
+    spec = "udp_multicast:239.255.61.3:40877"
+    with ExitStack() as stack:
+        node = open_bus(spec)
+        stack.callback(node.shutdown)
+        recorder = open_bus(spec, recorder=True)
+        stack.callback(recorder.shutdown)
+        # the kernel reports twice the size asked for (its bookkeeping)
+        if os.geteuid() == 0:
+            assert _receive_buffer(recorder) >= RECORDER_RCVBUF_BYTES > _receive_buffer(node) // 2
+        else:
+            assert _receive_buffer(recorder) >= _receive_buffer(node)
