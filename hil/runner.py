@@ -50,6 +50,7 @@ class RunOptions:
     rate_hz: float = 500.0
     short: bool = False
     controllers: tuple[str, ...] | None = None
+    loads: tuple[float, ...] | None = None    # kg; scenarios that sweep loads: these instead of the plan's
     duration_s: float | None = None  # realtime scenarios: how long
     valve_watchdog_periods: float | None = None   # realtime: the emulated valves' SYNC watchdog
     start_timeout_s: float = START_TIMEOUT_S       # a slow machine (a VM in software emulation) needs more
@@ -256,6 +257,8 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
         if unknown:
             raise UserInputError(f"--controllers: {unknown[0]!r} is not run by {scenario.name} "
                                  f"(it runs: {', '.join(scenario.controllers)})")
+    if options.loads and not scenario.sweeps_loads:
+        raise UserInputError(f"--loads: {scenario.name} does not run at several loads")
     pacing = options.pacing or scenario.pacing
     if pacing not in scenario.pacings:
         raise UserInputError(f"--pacing {pacing}: {scenario.name} runs in {' or '.join(scenario.pacings)} pacing")

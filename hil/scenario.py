@@ -51,6 +51,7 @@ class Scenario(ABC):
     pacings: tuple[str, ...] = ("lockstep", "realtime")
     controllers: tuple[str, ...] = ("pi", "adaptive")
     load_kg = 0.0                             # the emulator's load at start
+    sweeps_loads = False                      # runs its script at several loads (`--loads` picks them)
     controller_overrides: dict = {}           # controller TOML sections for this experiment
     emulator_overrides: dict = {}
 
@@ -59,6 +60,9 @@ class Scenario(ABC):
 
     def chosen(self, run) -> tuple[str, ...]:
         return run.options.controllers or self.controllers
+
+    def chosen_loads(self, run, planned: tuple[float, ...]) -> tuple[float, ...]:
+        return run.options.loads or planned
 
     @abstractmethod
     def script(self, run) -> None:

@@ -18,13 +18,15 @@ from __future__ import annotations
 import ipaddress
 import os
 import re
+import select
 import socket
+import struct
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import can
-from can.interfaces.udp_multicast import UdpMulticastBus
+import msgpack
 
 from .errors import UserInputError
 
@@ -39,6 +41,9 @@ _RCVBUF_BYTES = 4 << 20          # survive bursts while a process is busy; cappe
 RECORDER_RCVBUF_BYTES = 128 << 20
 _SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)
 _IP_MULTICAST_ALL = 49           # Linux: 0 = receive only the groups this socket joined
+_SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
+_TIMESPEC = struct.Struct("@ll")     # the kernel's receive timestamp: seconds, nanoseconds
+_MAX_DATAGRAM = 4096
 _IFNAME = re.compile(r"[A-Za-z0-9_.\-]{1,15}")
 
 
@@ -135,70 +140,130 @@ def default_bus_spec() -> BusSpec:
     return BusSpec("udp_multicast", DEFAULT_MULTICAST_GROUP, DEFAULT_MULTICAST_PORT)
 
 
-class HostMulticastBus(UdpMulticastBus):
-    """python-can's udp_multicast, made to behave like one CAN controller on one host.
+class HostMulticastBus(can.BusABC):
+    """python-can's udp_multicast frame format (msgpack, interoperable with its
+    `UdpMulticastBus`), as one CAN controller on one host, at a lower cost per frame.
 
     - hop limit 0: frames are delivered only to sockets on this machine;
     - own frames are not received back (each bus tags what it sends with a random token
-      carried in the frame's `channel` field, and drops frames bearing its own token);
+      carried in the frame's `channel` field; a datagram bearing it is dropped unparsed);
     - a datagram that is not a python-can frame is counted in `rx_garbage`, not raised;
-    - classic CAN only (FD frames are rejected on send and dropped on receive).
+    - classic CAN only (FD frames are rejected on send and dropped on receive);
+    - the receive path reads what is queued without a system call to wait, and waits on
+      the socket (select, microsecond timeout) only when the queue is empty.
     """
 
-    def __init__(self, group: str, port: int, receive_buffer_bytes: int = _RCVBUF_BYTES):
-        super().__init__(channel=group, port=port, hop_limit=0, fd=False)
-        self._token = f"hydrapod-{os.urandom(8).hex()}"
+    def __init__(self, group: str, port: int, receive_buffer_bytes: int = _RCVBUF_BYTES, **kwargs):
+        super().__init__(channel=group, **kwargs)
+        self._can_protocol = can.CanProtocol.CAN_20
         self.group, self.port = group, port
         self.channel_info = f"udp_multicast:{group}:{port} (hop limit 0)"
         self.rx_garbage = 0
-        self._tune_socket(group, receive_buffer_bytes)
+        self._token = f"hydrapod-{os.urandom(8).hex()}"
+        self._token_bytes = self._token.encode()
+        self._family = socket.AF_INET6 if ":" in group else socket.AF_INET
+        self._socket = _multicast_socket(self._family, group, port, receive_buffer_bytes)
+        self._readable = [self._socket]
+        self._destination = (group, port)
+        self._cmsg_bytes = socket.CMSG_SPACE(_TIMESPEC.size)
+        self._packer = msgpack.Packer(use_bin_type=True)
 
-    def _tune_socket(self, group: str, receive_buffer_bytes: int) -> None:
-        # fromfd duplicates the descriptor: options set on the copy apply to the socket.
-        family = socket.AF_INET6 if ":" in group else socket.AF_INET
-        with socket.fromfd(self.fileno(), family, socket.SOCK_DGRAM) as sock:
-            try:
-                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, receive_buffer_bytes)
-                if family == socket.AF_INET:
-                    sock.setsockopt(socket.IPPROTO_IP, _IP_MULTICAST_ALL, 0)
-            except OSError:
-                pass   # best effort: defaults still work, only less isolated/buffered
-            try:
-                sock.setsockopt(socket.SOL_SOCKET, _SO_RCVBUFFORCE, receive_buffer_bytes)
-            except OSError:
-                pass   # not root: SO_RCVBUF's size, capped by rmem_max
+    def fileno(self) -> int:
+        return self._socket.fileno()
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        channel = msg.channel
-        msg.channel = self._token
+        if msg.is_fd:
+            raise can.CanOperationError("cannot send a CAN FD frame on this classic CAN bus")
+        datagram = self._packer.pack({
+            "timestamp": msg.timestamp, "arbitration_id": msg.arbitration_id,
+            "is_extended_id": msg.is_extended_id, "is_remote_frame": msg.is_remote_frame,
+            "is_error_frame": msg.is_error_frame, "channel": self._token, "dlc": msg.dlc,
+            "data": msg.data, "is_fd": False, "bitrate_switch": False,
+            "error_state_indicator": False})
         try:
-            super().send(msg, timeout)
-        finally:
-            msg.channel = channel
+            self._socket.sendto(datagram, self._destination)
+        except BlockingIOError:
+            # the send buffer is full: wait for room as a blocking send would, up to `timeout`
+            if not select.select([], self._readable, [], timeout)[1]:
+                raise can.CanOperationError(f"{self.channel_info}: send timed out") from None
+            self._socket.sendto(datagram, self._destination)
+        except OSError as error:
+            raise can.CanOperationError(f"{self.channel_info}: send failed: {error}") from error
 
     def _recv_internal(self, timeout: float | None):
         deadline = None if timeout is None else time.monotonic() + timeout
-        remaining = timeout
+        sock = self._socket
         while True:
             try:
-                msg, filtered = super()._recv_internal(remaining)
-            except can.CanOperationError as error:
-                # python-can raises "could not unpack" from the decoder's error for a bad
-                # datagram; a socket failure comes from an OSError (or with no cause).
-                if error.__cause__ is None or isinstance(error.__cause__, OSError):
-                    raise
-                self.rx_garbage += 1
-                msg, filtered = None, False
-            else:
-                if msg is None:
+                data, ancillary, _, _ = sock.recvmsg(_MAX_DATAGRAM, self._cmsg_bytes)
+            except BlockingIOError:                       # the queue is empty: wait for a frame
+                remaining = None if deadline is None else max(deadline - time.monotonic(), 0.0)
+                if not select.select(self._readable, [], [], remaining)[0] and remaining is not None \
+                        and time.monotonic() >= deadline:
                     return None, False
-                if msg.channel != self._token:
-                    msg.channel = self.channel_info
-                    return msg, filtered
-            if deadline is not None:
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    return None, False
+                continue
+            except OSError as error:
+                raise can.CanOperationError(f"{self.channel_info}: receive failed: {error}") from error
+            if self._token_bytes in data:
+                continue                                  # our own frame, looped back
+            msg = self._frame(data, ancillary)
+            if msg is not None:
+                return msg, False
+
+    def _frame(self, data: bytes, ancillary) -> can.Message | None:
+        """The python-can frame in a datagram (None, counted, if it is not one; None for FD)."""
+        try:
+            fields = msgpack.unpackb(data, raw=False)
+            if fields.get("is_fd"):
+                return None
+            fields["channel"] = self.channel_info
+            if ancillary:
+                seconds, nanoseconds = _TIMESPEC.unpack_from(ancillary[0][2])
+                fields["timestamp"] = seconds + nanoseconds * 1e-9
+            return can.Message(check=True, **fields)
+        except Exception:                                  # any malformed datagram
+            self.rx_garbage += 1
+            return None
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        self._socket.close()
+
+
+def _multicast_socket(family: int, group: str, port: int, receive_buffer_bytes: int) -> socket.socket:
+    """A non-blocking UDP socket bound to `port`, in `group`, hop limit 0, with kernel
+    receive timestamps and a receive buffer of `receive_buffer_bytes` where allowed."""
+    sock = socket.socket(family, socket.SOCK_DGRAM)
+    try:
+        hops = struct.pack("@I", 0)
+        if family == socket.AF_INET:
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, hops)
+        else:
+            sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS, hops)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
+        sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
+        sock.bind(("", port))
+        membership = socket.inet_pton(family, group) + struct.pack("@I", 0)
+        if family == socket.AF_INET:
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, membership)
+        else:
+            sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_JOIN_GROUP, membership)
+    except OSError as error:
+        sock.close()
+        raise can.CanInitializationError(f"udp_multicast:{group}:{port}: {error}") from error
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, receive_buffer_bytes)
+        if family == socket.AF_INET:
+            sock.setsockopt(socket.IPPROTO_IP, _IP_MULTICAST_ALL, 0)
+    except OSError:
+        pass   # best effort: defaults still work, only less isolated/buffered
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, _SO_RCVBUFFORCE, receive_buffer_bytes)
+    except OSError:
+        pass   # not root: SO_RCVBUF's size, capped by rmem_max
+    sock.setblocking(False)
+    return sock
 
 
 def open_bus(spec: str | BusSpec | None = None, recorder: bool = False) -> can.BusABC:

@@ -216,3 +216,35 @@ def test_the_recorder_gets_a_receive_buffer_for_a_backlog_of_seconds():
             assert _receive_buffer(recorder) >= RECORDER_RCVBUF_BYTES > _receive_buffer(node) // 2
         else:
             assert _receive_buffer(recorder) >= _receive_buffer(node)
+
+
+def test_multicast_frames_interoperate_with_python_cans_own_udp_multicast():
+    """The frame format is python-can's: its stock bus (the oracle) and ours read each other."""
+    from can.interfaces.udp_multicast import UdpMulticastBus
+    port = free_port()
+    ours = open_bus(f"udp_multicast:{GROUP}:{port}")
+    stock = UdpMulticastBus(channel=GROUP, port=port, hop_limit=0, fd=False)
+    try:
+        frames = ((0x181, b"\x01\x02\x03", False), (0x1ABCDEF, b"", True), (0x7FE, bytes(8), False))
+        for ident, data, extended in frames:
+            ours.send(can.Message(arbitration_id=ident, data=data, is_extended_id=extended))
+            got = stock.recv(1.0)
+            while got is not None and got.arbitration_id != ident:     # the stock bus hears itself
+                got = stock.recv(1.0)
+            assert (got.arbitration_id, bytes(got.data), got.is_extended_id) == (ident, data, extended)
+            assert got.dlc == len(data)
+            stock.send(can.Message(arbitration_id=ident + 1, data=data, is_extended_id=extended))
+            got = ours.recv(1.0)
+            assert (got.arbitration_id, bytes(got.data), got.is_extended_id) == (ident + 1, data, extended)
+            assert abs(got.timestamp - time.time()) < 5.0          # the kernel's receive time
+        with pytest.raises(can.CanOperationError):
+            ours.send(can.Message(arbitration_id=0x100, data=bytes(12), is_fd=True))
+        stock_fd = UdpMulticastBus(channel=GROUP, port=port, hop_limit=0, fd=True)
+        try:
+            stock_fd.send(can.Message(arbitration_id=0x100, data=bytes(12), is_fd=True))
+            assert ours.recv(0.2) is None and ours.rx_garbage == 0     # FD: dropped, not garbage
+        finally:
+            stock_fd.shutdown()
+    finally:
+        stock.shutdown()
+        ours.shutdown()

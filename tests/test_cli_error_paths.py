@@ -25,6 +25,7 @@ BAD_TEXT = {
     "--geometry": ("/nonexistent/geometry.toml", "/nonexistent/geometry.toml"),
     "--summary": ("/nonexistent/dir/summary.json", "--summary"),
     "--controllers": ("pi,fuzzy", "fuzzy"),
+    "--loads": ("3,heavy", "heavy"),
     "--targets": ("decoder,nope", "nope"),
     "--rigs": ("testbench,crane", "crane"),
     "--fit": ("nonsense", "nonsense"),

@@ -29,6 +29,25 @@ def _controllers(text: str | None) -> tuple[str, ...] | None:
     return names
 
 
+def _loads(text: str | None) -> tuple[float, ...] | None:
+    """Comma-separated masses in kg, each within what EMU_CTRL's LOAD_MASS carries."""
+    if text is None:
+        return None
+    from protocol.codec import CODECS
+    signal = CODECS["EMU_CTRL"].signals[CODECS["EMU_CTRL"].index["LOAD_MASS"]]
+    loads = []
+    for item in text.split(","):
+        try:
+            load = float(item)
+        except ValueError:
+            load = float("nan")
+        if not signal.minimum <= load <= signal.maximum:
+            raise UserInputError(f"--loads: {item.strip()!r} is not a mass in "
+                                 f"{signal.minimum:g}..{signal.maximum:g} {signal.unit}")
+        loads.append(load)
+    return tuple(loads)
+
+
 def _finish(args, doc: dict) -> int:
     from ..report import format_terminal
     print(json.dumps(doc, indent=1, default=str) if args.json else format_terminal(doc))
@@ -40,7 +59,8 @@ def _run(args) -> int:
     scenario = _scenario(args.scenario)
     out = Path(args.out) if args.out else Path("hil-out") / scenario.name
     options = RunOptions(out_dir=out, bus=args.bus, pacing=args.pacing, rate_hz=500.0, short=args.short,
-                         controllers=_controllers(args.controllers), duration_s=args.duration_s,
+                         controllers=_controllers(args.controllers), loads=_loads(args.loads),
+                         duration_s=args.duration_s,
                          valve_watchdog_periods=args.valve_watchdog_periods, start_timeout_s=args.start_timeout_s,
                          controller_config=_controller_config(args.controller_config))
     if args.controller_config:
@@ -129,6 +149,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", metavar="DIR", help="output directory (default: hil-out/SCENARIO)")
     p.add_argument("--short", action="store_true", help="the short variant (what make test runs)")
     p.add_argument("--controllers", metavar="LIST", help="comma-separated subset of the scenario's controllers")
+    p.add_argument("--loads", metavar="LIST",
+                   help="comma-separated loads in kg, for the scenarios that run at several (sha-step, sha-tracking)")
     p.add_argument("--duration-s", type=number_in_range(float, 1.0, 86400.0), default=None,
                    help="realtime scenarios: seconds of running (default 60; 10 with --short)")
     p.add_argument("--valve-watchdog-periods", type=number_in_range(float, 1.0, 10000.0), default=None,

@@ -35,7 +35,7 @@ def each_controller_and_load(run, loads):
     """For each controller of the run and each load: select it, set the load, yield both."""
     for controller in run.scenario.chosen(run):
         run.select(controller)
-        for load in loads:
+        for load in run.scenario.chosen_loads(run, loads):
             run.host.set_load(load)
             yield controller, load
 

@@ -32,6 +32,7 @@ class ShaStep(Scenario):
     name = "sha-step"
     title = "step response of the servo-hydraulic actuator, PI and adaptive"
     chapter = "7.6.1 (Fig. 7.16)"
+    sweeps_loads = True
 
     def plan(self, short: bool):
         positions = (50.0, 250.0) if short else (50.0, 150.0, 250.0)

@@ -106,6 +106,7 @@ class ShaTracking(Scenario):
     name = "sha-tracking"
     title = "sinusoidal tracking 150 + 125 sin(wt) mm, PI and adaptive"
     chapter = "7.6.2 (Fig. 7.19)"
+    sweeps_loads = True
     controller_overrides = TRACKING_OVERRIDES
     thesis = {"figure": "Fig. 7.19", "max_error_low_w_mm": 1.0, "w_range_rad_s": [0.1, 10.0],
               "claim": "max |error| <= 1 mm at low w; the adaptive controller better than PI"}
