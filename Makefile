@@ -37,8 +37,8 @@ vm-deps:
 	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y --no-install-recommends $(VM_DEBS); }
 
 test: $(STAMP) vm-deps
-	$(PYTEST) -n $(WORKERS) --dist loadgroup -m "not realtime"
-	$(PYTEST) -m realtime
+	$(PYTEST) -n $(WORKERS) --dist loadgroup -m "not realtime" --durations=15
+	$(PYTEST) -m realtime --durations=5
 
 check: $(STAMP)
 	$(PYTEST) -n $(WORKERS) --dist loadgroup -m "not hil and not realtime and not vm"

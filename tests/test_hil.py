@@ -130,11 +130,12 @@ SCENARIO_RUNS = {
     "pm-circle": ([], lambda m: set(m["controllers"]) == {"adaptive", "model-based"} and m["time_scale"] == 2.0),
     "pm-diagonal": ([], lambda m: set(m["controllers"]) == {"adaptive", "model-based"} and m["time_scale"] == 2.0
                     and all(r["complete"] for r in m["controllers"].values())),
-    # realtime pacing, 30 s each (the full runs are 60 s): jitter, overruns and faults after a
-    # machine stall are reported; asserted: ran the time, no fault without a stall before it
-    "rt-testbench": (["--duration-s", "30"], lambda m: m["seconds"] >= 28.5
+    # realtime pacing, their short 10 s (the full runs are 60 s; the soak runs a minute): jitter,
+    # overruns and faults after a machine stall are reported; asserted: ran the time, no fault
+    # without a stall before it. Their timing figures are benchmarks (docs/MEASUREMENTS.md).
+    "rt-testbench": (["--short"], lambda m: m["seconds"] >= 9.5
                      and set(m["sync_interval_error_us"]) >= {"p50", "p99", "max"}),
-    "rt-hexapod": (["--duration-s", "30"], lambda m: m["seconds"] >= 28.5
+    "rt-hexapod": (["--short"], lambda m: m["seconds"] >= 9.5
                    and set(m["ctrl_status"]["period_error_us"]) >= {"p50", "p99", "max"}),
     "sha-identification": (["--short"], lambda m: (
         {(r["set_point_mm"], r["load_kg"], tuple(r["gains_v_mm"])) for r in m["points"]}
