@@ -10,8 +10,9 @@ from .metrics import ctrl_status_timing
 from .scenario import Scenario
 
 
-def write_outputs(scenario: Scenario, log: LogData, out: Path, extra: dict, rate_hz: float = 500.0) -> dict:
-    analysis = scenario.analyze(log, out, rate_hz)
+def write_outputs(scenario: Scenario, log: LogData, out: Path, extra: dict, rate_hz: float = 500.0,
+                  plots: bool = True) -> dict:
+    analysis = scenario.analyze(log, out if plots else None, rate_hz)
     timing = ctrl_status_timing(log)
     failure = extra.get("failure")
     doc = {

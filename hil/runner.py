@@ -54,6 +54,7 @@ class RunOptions:
     duration_s: float | None = None  # realtime scenarios: how long
     valve_watchdog_periods: float | None = None   # realtime: the emulated valves' SYNC watchdog
     start_timeout_s: float = START_TIMEOUT_S       # a slow machine (a VM in software emulation) needs more
+    plots: bool = True                             # False: metrics and report only (batch runs, slow machines)
     # a controller config file's sections (e.g. `hydrapod design schedule`), over the
     # scenario's own overrides: validated by the caller before the run
     controller_config: dict = field(default_factory=dict)
@@ -302,7 +303,7 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
         "bus": str(spec), "pacing": pacing, "rate_hz": options.rate_hz, "short": options.short,
         "wall_time_s": round(wall_s, 1), "frames_sent_by_host": run.host.frames_sent,
         "frames_received_by_host": run.host.frames_received, "notes": run.notes,
-        "children": _children_summaries(run), "failure": failure})
+        "children": _children_summaries(run), "failure": failure}, plots=options.plots)
     return doc
 
 

@@ -25,7 +25,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 # one controller at one load: the bus path is what is under test, and emulated, it is ~20x slower
-SCENARIO = ["hil", "run", "sha-step", "--short", "--controllers", "pi", "--loads", "0"]
+SCENARIO = ["hil", "run", "sha-step", "--short", "--controllers", "pi", "--loads", "0", "--no-plots"]
 VM_TIMEOUT_S = 1500
 
 
@@ -43,9 +43,9 @@ def test_sha_step_over_socketcan_vcan0_inside_a_vm(tmp_path):
     assert shutil.which("qemu-system-x86_64"), "qemu-system-x86_64 missing: apt-get install qemu-system-x86"
     kernel = _kernel()
     work = tmp_path
-    env = {"NUMBA_CACHE_DIR": str(work / "numba"), "NUMBA_CPU_NAME": "generic", "MPLCONFIGDIR": str(work / "mpl")}
+    env = {"NUMBA_CACHE_DIR": str(work / "numba"), "NUMBA_CPU_NAME": "generic"}
 
-    # on the host: the portable kernel cache and matplotlib's font cache (and a reference run)
+    # on the host: the portable kernel cache (and a reference run)
     host = subprocess.run([str(BIN / "hydrapod"), *SCENARIO, "--out", str(work / "host"), "--json"],
                           capture_output=True, text=True, timeout=600, env={**os.environ, **env}, cwd=ROOT)
     assert host.returncode == 0, host.stdout[-2000:] + host.stderr[-2000:]
@@ -64,3 +64,4 @@ def test_sha_step_over_socketcan_vcan0_inside_a_vm(tmp_path):
     assert doc["passed"] and doc["failure"] is None, doc.get("failure")
     assert doc["e2e_errors"] == 0 and doc["log"]["lost_frames"] == 0
     assert doc["log"]["frames"] > 10000                      # the whole experiment went over vcan0
+    assert doc["figures"] == [] and not list((work / "vm").glob("*.png"))          # --no-plots

@@ -60,7 +60,7 @@ def _run(args) -> int:
     out = Path(args.out) if args.out else Path("hil-out") / scenario.name
     options = RunOptions(out_dir=out, bus=args.bus, pacing=args.pacing, rate_hz=500.0, short=args.short,
                          controllers=_controllers(args.controllers), loads=_loads(args.loads),
-                         duration_s=args.duration_s,
+                         duration_s=args.duration_s, plots=not args.no_plots,
                          valve_watchdog_periods=args.valve_watchdog_periods, start_timeout_s=args.start_timeout_s,
                          controller_config=_controller_config(args.controller_config))
     if args.controller_config:
@@ -160,6 +160,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="controller config sections over the scenario's (e.g. from `hydrapod design schedule`)")
     p.add_argument("--start-timeout-s", type=number_in_range(float, 1.0, 3600.0), default=90.0,
                    help="how long the processes may take to come up (default 90; a VM without KVM needs more)")
+    p.add_argument("--no-plots", action="store_true", help="metrics and report without the PNG figures")
     p.add_argument("--json", action="store_true", help="print metrics.json instead of the summary")
     p.set_defaults(handler=_run)
     p = hil_sub.add_parser("faults", help="the fault-injection matrix: every case in its own emulator + "
