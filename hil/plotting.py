@@ -5,8 +5,6 @@ without matplotlib, which costs 0.4 s here and a minute in the SocketCAN VM."""
 
 from __future__ import annotations
 
-import importlib
-
 LOAD_COLOURS = {0.0: "tab:blue", 3.0: "tab:orange", 6.0: "tab:green"}
 
 
@@ -17,8 +15,10 @@ class _Pyplot:
 
     def __getattr__(self, name: str):
         if _Pyplot._module is None:
-            importlib.import_module("matplotlib").use("Agg")
-            _Pyplot._module = importlib.import_module("matplotlib.pyplot")
+            import matplotlib
+            matplotlib.use("Agg")
+            import matplotlib.pyplot as pyplot
+            _Pyplot._module = pyplot
         return getattr(_Pyplot._module, name)
 
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import can
-import msgpack
+from can.interfaces.udp_multicast.utils import pack_message, unpack_message
 
 from .errors import UserInputError
 
@@ -161,12 +161,11 @@ class HostMulticastBus(can.BusABC):
         self.rx_garbage = 0
         self._token = f"hydrapod-{os.urandom(8).hex()}"
         self._token_bytes = self._token.encode()
-        self._family = socket.AF_INET6 if ":" in group else socket.AF_INET
-        self._socket = _multicast_socket(self._family, group, port, receive_buffer_bytes)
+        family = socket.AF_INET6 if ":" in group else socket.AF_INET
+        self._socket = _multicast_socket(family, group, port, receive_buffer_bytes)
         self._readable = [self._socket]
         self._destination = (group, port)
         self._cmsg_bytes = socket.CMSG_SPACE(_TIMESPEC.size)
-        self._packer = msgpack.Packer(use_bin_type=True)
 
     def fileno(self) -> int:
         return self._socket.fileno()
@@ -174,12 +173,12 @@ class HostMulticastBus(can.BusABC):
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         if msg.is_fd:
             raise can.CanOperationError("cannot send a CAN FD frame on this classic CAN bus")
-        datagram = self._packer.pack({
-            "timestamp": msg.timestamp, "arbitration_id": msg.arbitration_id,
-            "is_extended_id": msg.is_extended_id, "is_remote_frame": msg.is_remote_frame,
-            "is_error_frame": msg.is_error_frame, "channel": self._token, "dlc": msg.dlc,
-            "data": msg.data, "is_fd": False, "bitrate_switch": False,
-            "error_state_indicator": False})
+        channel = msg.channel
+        msg.channel = self._token
+        try:
+            datagram = pack_message(msg)
+        finally:
+            msg.channel = channel
         try:
             self._socket.sendto(datagram, self._destination)
         except BlockingIOError:
@@ -197,10 +196,10 @@ class HostMulticastBus(can.BusABC):
             try:
                 data, ancillary, _, _ = sock.recvmsg(_MAX_DATAGRAM, self._cmsg_bytes)
             except BlockingIOError:                       # the queue is empty: wait for a frame
-                remaining = None if deadline is None else max(deadline - time.monotonic(), 0.0)
-                if not select.select(self._readable, [], [], remaining)[0] and remaining is not None \
-                        and time.monotonic() >= deadline:
+                remaining = None if deadline is None else deadline - time.monotonic()
+                if remaining is not None and remaining <= 0.0:
                     return None, False
+                select.select(self._readable, [], [], remaining)
                 continue
             except OSError as error:
                 raise can.CanOperationError(f"{self.channel_info}: receive failed: {error}") from error
@@ -212,18 +211,16 @@ class HostMulticastBus(can.BusABC):
 
     def _frame(self, data: bytes, ancillary) -> can.Message | None:
         """The python-can frame in a datagram (None, counted, if it is not one; None for FD)."""
+        replace = {"channel": self.channel_info}
+        if ancillary:
+            seconds, nanoseconds = _TIMESPEC.unpack_from(ancillary[0][2])
+            replace["timestamp"] = seconds + nanoseconds * 1e-9
         try:
-            fields = msgpack.unpackb(data, raw=False)
-            if fields.get("is_fd"):
-                return None
-            fields["channel"] = self.channel_info
-            if ancillary:
-                seconds, nanoseconds = _TIMESPEC.unpack_from(ancillary[0][2])
-                fields["timestamp"] = seconds + nanoseconds * 1e-9
-            return can.Message(check=True, **fields)
+            msg = unpack_message(data, replace=replace, check=True)
         except Exception:                                  # any malformed datagram
             self.rx_garbage += 1
             return None
+        return None if msg.is_fd else msg
 
     def shutdown(self) -> None:
         super().shutdown()
