@@ -6,7 +6,9 @@ Per SYNC k (docs/ARCHITECTURE.md "The emulator's cycle"):
    checks its command timeout and spool deviation; EMCY on a fault;
 2. every OPERATIONAL sensor node samples the rig as it is at t_k and sends its frames due on
    this SYNC (LEG_STATE every SYNC, with the valve state just applied; LEG_PRESSURE,
-   VALVE_STATUS, IMU at their divisors);
+   VALVE_STATUS, IMU at their divisors), the IMU's first and each leg's LEG_STATE last: the
+   controller closes its window on the LEG_STATEs, and one socket keeps this order, so the
+   samples of SYNC k it uses are those of cycle k, never by chance the next cycle's;
 3. the rig integrates exactly one SYNC period with the applied spool setpoints.
 So the emulator follows whoever produces SYNC, in realtime and lockstep pacing alike.
 Heartbeats and the SYNC-loss watchdog run on the wall clock, like a real node's timers.
@@ -411,6 +413,18 @@ class Emulator:
 
     def _sample_and_send(self, counter: int) -> None:
         rig, cfg, rng = self.rig, self.cfg, self.rng
+        if self.has_imu and self.nmt[IMU_NODE] == NmtState.OPERATIONAL:
+            if self._due("IMU_ATTITUDE", counter):
+                _, quat = rig.platform_pose()
+                box = self.out["IMU_ATTITUDE"]
+                box.values[box.index["ROLL"]:box.index["YAW"] + 1] = (
+                    attitude_rpy(quat) + cfg.imu_angle_noise_rad * rng.standard_normal(3))
+                self._emit(IMU_NODE, "IMU_ATTITUDE")
+            if self._due("IMU_RATE", counter):
+                box = self.out["IMU_RATE"]
+                rate = rig.platform_body_rate() + cfg.imu_rate_noise_rad_s * rng.standard_normal(3)
+                box.values[box.index["RATE_X"]:box.index["RATE_Z"] + 1] = rate
+                self._emit(IMU_NODE, "IMU_RATE")
         for n in self.legs:
             if self.nmt[n] != NmtState.OPERATIONAL:
                 continue
@@ -423,12 +437,6 @@ class Emulator:
             if self._fault(n, EmuFault.OUT_OF_RANGE):
                 param = self.faults[(n, EmuFault.OUT_OF_RANGE)][1]
                 force = float(param) if param else 1e9         # saturates at the DBC's maximum
-            box = self.out[f"LEG_STATE_{n}"]
-            box.values[box.index["VALVE_STATE"]] = int(valve.state)
-            box.values[box.index["SENSOR_FAULT"]] = 0
-            box.values[box.index["POSITION"]] = position
-            box.values[box.index["FORCE"]] = force
-            self._emit(n, box.codec.name)
             name = f"LEG_PRESSURE_{n}"
             if self._due(name, counter):
                 box = self.out[name]
@@ -442,18 +450,12 @@ class Emulator:
                 box.values[box.index["SPOOL_ACTUAL"]] = rig.state[i, hy.S_SPOOL]
                 box.values[box.index["FAULT_REASON"]] = int(valve.fault_reason)
                 self._emit(n, name)
-        if self.has_imu and self.nmt[IMU_NODE] == NmtState.OPERATIONAL:
-            if self._due("IMU_ATTITUDE", counter):
-                _, quat = rig.platform_pose()
-                box = self.out["IMU_ATTITUDE"]
-                box.values[box.index["ROLL"]:box.index["YAW"] + 1] = (
-                    attitude_rpy(quat) + cfg.imu_angle_noise_rad * rng.standard_normal(3))
-                self._emit(IMU_NODE, "IMU_ATTITUDE")
-            if self._due("IMU_RATE", counter):
-                box = self.out["IMU_RATE"]
-                rate = rig.platform_body_rate() + cfg.imu_rate_noise_rad_s * rng.standard_normal(3)
-                box.values[box.index["RATE_X"]:box.index["RATE_Z"] + 1] = rate
-                self._emit(IMU_NODE, "IMU_RATE")
+            box = self.out[f"LEG_STATE_{n}"]
+            box.values[box.index["VALVE_STATE"]] = int(valve.state)
+            box.values[box.index["SENSOR_FAULT"]] = 0
+            box.values[box.index["POSITION"]] = position
+            box.values[box.index["FORCE"]] = force
+            self._emit(n, box.codec.name)
         self._send_truth(counter)
 
     def _send_truth(self, counter: int) -> None:
