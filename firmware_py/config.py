@@ -34,7 +34,8 @@ RANGES: dict[str, dict[str, object]] = {
     "testbench": {"slide_mass_kg": (0.0, 100.0), "home_mm": (0.0, 2000.0), "park_mm": (0.0, 2000.0),
                   "plausibility_spool_pct": (1.0, 100.0), "plausibility_cycles": (1, 100000),
                   "guide_coulomb_n": (0.0, 1000.0), "guide_viscous_ns_mm": (0.0, 100.0)},
-    "identification": {"force_gain_v_n": (0.0, 10.0), "stroke_guard_mm": (0.0, 500.0)},
+    "identification": {"force_gain_v_n": (0.0, 10.0), "force_filter_hz": (0.01, 100.0),
+                       "stroke_guard_mm": (0.0, 500.0)},
     "hexapod": {"park_stroke_mm": (0.0, 2000.0), "kp_factor": (0.01, 10.0), "ki_factor": (0.0, 10.0)},
     "friction": {
         "alpha0_pos_n": (-1000.0, 1000.0), "alpha1_pos_n": (-1000.0, 1000.0), "vs_pos_mm_s": (0.01, 1e4),
@@ -114,6 +115,7 @@ class ControllerConfig:
     guide_coulomb_n: float            # the test bench guide's friction (Table D.1, eq. D.3's gross
     guide_viscous_ns_m: float         # motion): eq. 6.5's Ffg in the friction identification
     test_force_gain_v_n: float        # HOST_TEST FORCE_SINE: P gain of the piston-force loop
+    test_force_filter_hz: float       # ... and the cut-off of its low-pass on the measured F_p
     test_stroke_guard_m: float        # HOST_TEST VALVE_STEP: ends this close to an end stop
     hexapod_park_stroke_m: float
     hexapod_kp_factor: float          # every controller's Kp on the hexapod (see controller.toml)
@@ -224,7 +226,8 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         testbench_plausibility_spool=tb["plausibility_spool_pct"] / 100.0,
         testbench_plausibility_cycles=tb["plausibility_cycles"],
         guide_coulomb_n=tb["guide_coulomb_n"], guide_viscous_ns_m=tb["guide_viscous_ns_mm"] / MM,
-        test_force_gain_v_n=ident["force_gain_v_n"], test_stroke_guard_m=ident["stroke_guard_mm"] * MM,
+        test_force_gain_v_n=ident["force_gain_v_n"],
+        test_force_filter_hz=ident["force_filter_hz"], test_stroke_guard_m=ident["stroke_guard_mm"] * MM,
         hexapod_park_stroke_m=raw["hexapod"]["park_stroke_mm"] * MM, hexapod_kp_factor=raw["hexapod"]["kp_factor"],
         hexapod_ki_factor=raw["hexapod"]["ki_factor"],
         friction=friction, observer_gain_per_s=f["observer_gain_per_s"], jerk_psd=k["jerk_psd_mm2_s5"] * MM ** 2,

@@ -87,7 +87,8 @@ class Controller:
         self.attitude_check = AttitudeCrossCheck(cfg.attitude_mismatch_rad, cfg.attitude_mismatch_samples)
         # identification tests (HOST_TEST, test bench only: chapter 6.4)
         self.test = None if self.hexapod else IdentificationSignal(
-            cfg.test_force_gain_v_n, cfg.test_stroke_guard_m, cfg.stroke_m, cfg.saturation_v, period_s)
+            cfg.test_force_gain_v_n, cfg.test_force_filter_hz, cfg.test_stroke_guard_m, cfg.stroke_m,
+            cfg.saturation_v, period_s)
         self.meas, _ = self.new_interfaces()            # the last cycle's measurements (events read them)
         self.dk_failures = 0
         self.reset_cycles = 0

@@ -7,11 +7,13 @@ It ends early within `stroke_guard_m` of an end stop (the step would otherwise r
 
 Experiment 2 (6.4.2.1, FORCE_SINE): the piston force under proportional control about the
 valve input that held the leg when it began (bumpless: the hold's force is the sine's
-centre), u = u0 + K (F_ref - F_p), F_ref = F_p(start) + FORCE sin(2 pi t / DURATION), one
-period: amplitudes below stiction
-move the piston within its pre-sliding range (eq. 6.8-6.12). F_p is eq. 6.5's piston force
-from the chamber pressures, which arrive every 16th SYNC (LEG_PRESSURE): the loop runs on
-the latest sample, and its gain must keep it slow against that (0.04 Hz in the thesis).
+centre), u = u0 + K (F_ref - F_f), F_ref = F_p(start) + FORCE sin(2 pi t / DURATION), one
+period: amplitudes below stiction move the piston within its pre-sliding range (eq.
+6.8-6.12). F_p is eq. 6.5's piston force from the chamber pressures (LEG_PRESSURE, the
+latest sample); F_f is F_p through a first-order low-pass far above the sine's frequency.
+Fed the raw samples, the loop passes the sensors' noise to the valve and the piston jitters
+below the displacement sensor's step: the bristles then move by far more than the record
+shows, and no model fitted to the record can follow them.
 """
 
 from __future__ import annotations
@@ -24,15 +26,18 @@ TEST_MODES = frozenset(int(mode) for mode in TestMode)
 
 
 class IdentificationSignal:
-    def __init__(self, force_gain_v_n: float, stroke_guard_m: float, stroke_m: float, saturation_v: float,
-                 period_s: float):
+    def __init__(self, force_gain_v_n: float, force_filter_hz: float, stroke_guard_m: float, stroke_m: float,
+                 saturation_v: float, period_s: float):
         self.force_gain_v_n, self.stroke_guard_m, self.stroke_m = force_gain_v_n, stroke_guard_m, stroke_m
+        # the low-pass's step response matched at the cycle: F_f += a (F_p - F_f)
+        self.filter_gain = 1.0 - math.exp(-2.0 * math.pi * force_filter_hz * period_s)
         self.saturation_v, self.period_s = saturation_v, period_s
         self.mode = TestMode.ABORT
         self.valve_v = 0.0
         self.force_n = 0.0
         self.duration_s = 0.0
         self.force0_n = 0.0
+        self.force_filtered_n = 0.0
         self.u0_v = 0.0
         self.start_cycle = 0
 
@@ -44,6 +49,7 @@ class IdentificationSignal:
               piston_force: float, u0_v: float) -> None:
         self.mode, self.valve_v, self.force_n, self.duration_s = mode, valve_v, force_n, duration_s
         self.start_cycle, self.force0_n, self.u0_v = cycle, piston_force, u0_v
+        self.force_filtered_n = piston_force
 
     def stop(self) -> None:
         self.mode = TestMode.ABORT
@@ -59,5 +65,6 @@ class IdentificationSignal:
                 return 0.0, True
         else:                                              # FORCE_SINE
             reference = self.force0_n + self.force_n * math.sin(2.0 * math.pi * t / self.duration_s)
-            u = self.u0_v + self.force_gain_v_n * (reference - piston_force)
+            self.force_filtered_n += self.filter_gain * (piston_force - self.force_filtered_n)
+            u = self.u0_v + self.force_gain_v_n * (reference - self.force_filtered_n)
         return min(max(u, -self.saturation_v), self.saturation_v), done

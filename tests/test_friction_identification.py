@@ -13,6 +13,7 @@ from hil.design.friction import (
     SteadySide,
     bristle_forces,
     cylinder_friction,
+    displacement_from_crossings,
     fit_presliding,
     fit_steady_side,
     presliding_damping,
@@ -158,3 +159,96 @@ def test_the_presliding_fit_recovers_known_stiffnesses():
     assert fit["guide_n_m"] == pytest.approx(100e3, rel=0.03)
     assert fit["offset_n"] == pytest.approx(4.0, abs=0.3)
     assert fit["guide_offset_n"] == pytest.approx(-1.5, abs=0.1)
+
+
+def _presliding_in_process(start_cycles: int, force_filter_hz: float | None = None):
+    """friction-presliding's script at 3 kg on the controller core and the emulator's test bench,
+    in process (no bus), with the scenario's 0.005 mm sensor and pressures every cycle; returns
+    the bristle fit on the quantised record read as the analysis reads it (its code crossings)
+    and on the true displacement."""
+    from firmware_py.config import load_config
+    from firmware_py.control import CONTROLLER_NAMES
+    from firmware_py.controller import Controller
+    from hil.design.friction import displacement_from_crossings, steady_sides
+    from hil.scenarios.friction import FINE_SENSOR_MM, REST_CYCLES, REST_SPEED_MM_S
+    from physics.actuator import piston_force
+    from plant_emulator import hydraulics as hy
+    from plant_emulator.params import load_config as load_emulator_config
+    from plant_emulator.rigs import TestbenchRig
+    from protocol.enums import TestMode, WaypointFlag
+
+    period, res, load = 0.002, FINE_SENSOR_MM * MM, 3.0
+    overrides = {"actuator": {"encoder_resolution_mm": FINE_SENSOR_MM}}
+    if force_filter_hz is not None:
+        overrides["identification"] = {"force_filter_hz": force_filter_hz}
+    cfg = load_config(overrides=overrides)
+    emulator = load_emulator_config(overrides={"sensors": {"encoder_resolution_mm": FINE_SENSOR_MM}})
+    rng = np.random.default_rng(1)
+    rig = TestbenchRig(emulator, load_kg=load)
+    ctl = Controller(cfg, "testbench", period, CONTROLLER_NAMES["pi"])
+    meas, cmd = ctl.new_interfaces()
+    true_y, y, pa, pb, rod = [], [], [], [], []
+
+    def cycles(n):
+        for _ in range(n):
+            true_y.append(rig.state[0, hy.S_Y])
+            meas.position_m[0] = round(true_y[-1] / res) * res
+            meas.force_n[0] = rig.rod_force_n[0] + emulator.load_cell_noise_n * rng.standard_normal()
+            meas.pa_pa[0] = rig.state[0, hy.S_PA] + emulator.pressure_noise_pa * rng.standard_normal()
+            meas.pb_pa[0] = rig.state[0, hy.S_PB] + emulator.pressure_noise_pa * rng.standard_normal()
+            meas.fresh[:], meas.pressure_valid[:], meas.valve_state[:] = True, True, 3
+            y.append(meas.position_m[0])
+            pa.append(meas.pa_pa[0])
+            pb.append(meas.pb_pa[0])
+            rod.append(meas.force_n[0])
+            ctl.update(meas, cmd)
+            ctl.after_write()
+            ctl.host.acks.clear()
+            rig.command[:] = cmd.spool
+            rig.advance(period)
+
+    cycles(1)
+    ctl.activated(True)
+    cycles(15 + start_cycles)
+    for seq, stroke_m in ((0, 0.160), (1, 0.150)):        # the script's approach, the last 10 mm downward
+        ctl.host.waypoint_position(seq, 0.0, 0.0, stroke_m)
+        ctl.host.waypoint_rotation(seq, 0.0, 0.0, 0.0)
+        ctl.host.waypoint_commit(seq, seq, 0.2, 0.1, int(WaypointFlag.LAST | WaypointFlag.START))
+        cycles(int((0.5 if seq == 0 else 1.2) / period))
+    sines = []
+    for seq, amplitude in enumerate(np.linspace(5.0, 25.0, 5), start=2):
+        ctl.host.test(int(TestMode.FORCE_SINE), seq, 0.0, amplitude, 25.0)
+        sines.append(np.arange(len(y) + 1, len(y) + int(25.0 / period)))
+        cycles(int(25.5 / period) + 5)
+    fp = piston_force(np.array(pa), np.array(pb), cfg.piston_area_m2, cfg.area_ratio)
+    seal = cylinder_friction(fp - np.array(rod), 0.0, 0.0, cfg.moving_mass_kg, 0.0, 0.0)
+    guide = cylinder_friction(np.array(rod), 0.0, 0.0, cfg.slide_mass_kg + load, 0.0, 0.0)
+    fits = {}
+    cycle = np.arange(len(y))
+    for name, record in (("record", displacement_from_crossings(cycle, np.array(y), len(y))),
+                         ("true", np.array(true_y))):
+        dy = np.diff(record, prepend=record[0])
+        speed = np.abs(np.convolve(dy, np.ones(REST_CYCLES) / (REST_CYCLES * period), mode="same"))
+        at = np.concatenate([k[speed[k] < REST_SPEED_MM_S * MM] for k in sines])
+        fits[name] = fit_presliding(dy, dy / period, at, seal[at], at, guide[at],
+                                    steady_sides(cfg.raw["friction"]), cfg.guide_coulomb_n)
+    return fits
+
+
+def test_a_toggling_reading_is_at_rest_on_its_boundary():
+    y = np.array([0.0, 0.0, 5.0, 0.0, 5.0, 5.0, 10.0, 10.0]) * 1e-6
+    out = displacement_from_crossings(np.arange(len(y)), y, len(y))
+    assert np.allclose(out * 1e6, [0.0, 5.0 / 3.0, 2.5, 2.5, 3.75, 6.25, 25.0 / 3.0, 10.0])
+
+
+@pytest.mark.parametrize("start_cycles", [0, 1, 2])
+def test_presliding_fits_the_seal_from_the_quantised_record_whatever_cycle_it_starts(start_cycles):
+    """The presliding flake, in process. The force loop fed on raw pressures jittered the
+    piston below the sensor's 0.005 mm step, and a reading that toggles across a code boundary
+    moved the bristle model a step each time: the fit on the record moved with the cycle the
+    script started at (191-250 N/mm for shifts of 0-2 cycles; on the true displacement 239).
+    The loop's low-pass removes the jitter, the crossings read the toggling as rest."""
+    fits = _presliding_in_process(start_cycles)
+    for name, fit in fits.items():
+        assert fit["sigma0_pos_n_m"] * MM == pytest.approx(238.9709, rel=0.10), name
+        assert fit["sigma0_neg_n_m"] * MM == pytest.approx(81.5808, rel=0.10), name

@@ -4,6 +4,7 @@ accepted, how they end, and that a cycle with a test running allocates nothing."
 
 import math
 
+import numpy as np
 import pytest
 
 from firmware_py.config import load_config
@@ -47,7 +48,7 @@ def test_piston_force_is_eq_6_5():
 
 
 def test_a_valve_step_holds_its_input_for_its_duration_then_ends():
-    signal = IdentificationSignal(0.004, 0.020, 0.304, 10.0, PERIOD)
+    signal = IdentificationSignal(0.004, 1.0, 0.020, 0.304, 10.0, PERIOD)
     signal.start(TestMode.VALVE_STEP, 0.3, 0.0, 1.2, cycle=100, piston_force=50.0, u0_v=0.1)
     outputs = [signal.output(100 + k, 0.150, 50.0) for k in range(600)]
     assert all(u == 0.3 for u, _ in outputs)
@@ -56,19 +57,33 @@ def test_a_valve_step_holds_its_input_for_its_duration_then_ends():
 
 @pytest.mark.parametrize("u, y_m", [(0.5, 0.285), (-0.5, 0.019)])
 def test_a_valve_step_ends_at_the_stroke_guard(u, y_m):
-    signal = IdentificationSignal(0.004, 0.020, 0.304, 10.0, PERIOD)
+    signal = IdentificationSignal(0.004, 1.0, 0.020, 0.304, 10.0, PERIOD)
     signal.start(TestMode.VALVE_STEP, u, 0.0, 1.2, cycle=0, piston_force=0.0, u0_v=0.0)
     assert signal.output(10, y_m, 0.0) == (0.0, True)
     assert signal.output(10, 0.150, 0.0) == (u, False)             # away from the guard it goes on
 
 
 def test_a_force_sine_is_bumpless_and_proportional_to_the_force_error():
-    signal = IdentificationSignal(0.004, 0.020, 0.304, 10.0, PERIOD)
+    signal = IdentificationSignal(0.004, 1.0, 0.020, 0.304, 10.0, PERIOD)
     signal.start(TestMode.FORCE_SINE, 0.0, 10.0, 4.0, cycle=0, piston_force=50.0, u0_v=0.12)
     assert signal.output(0, 0.150, 50.0)[0] == pytest.approx(0.12)            # at its start: the hold's input
-    # a quarter period in: the reference is 60 N; at 55 N measured the valve opens 4 mV/N x 5 N more
-    assert signal.output(500, 0.150, 55.0)[0] == pytest.approx(0.12 + 0.004 * 5.0)
+    # a quarter period in: the reference is 60 N; at 55 N measured (for 1 s: the 1 Hz low-pass has
+    # settled) the valve opens 4 mV/N x 5 N more
+    u = [signal.output(k, 0.150, 55.0)[0] for k in range(1, 501)]
+    assert u[-1] == pytest.approx(0.12 + 0.004 * 5.0, abs=1e-4)
+    first_reference_n = 10.0 * math.sin(2 * math.pi * PERIOD / 4.0)
+    assert u[0] == pytest.approx(0.12 + 0.004 * (first_reference_n - 5.0 * signal.filter_gain))
     assert signal.output(1999, 0.150, 50.0)[1] and not signal.output(1998, 0.150, 50.0)[1]
+
+
+def test_the_force_loop_passes_little_of_the_pressure_noise_to_the_valve():
+    """1 N of white noise on F_p at 500 Hz: through the 1 Hz low-pass the valve sees ~8 % of
+    what K alone would pass (a raw loop jitters the piston below the sensor's step)."""
+    signal = IdentificationSignal(0.004, 1.0, 0.020, 0.304, 10.0, PERIOD)
+    signal.start(TestMode.FORCE_SINE, 0.0, 0.0, 20.0, cycle=0, piston_force=50.0, u0_v=0.0)
+    noise = np.random.default_rng(3).normal(0.0, 1.0, 5000)
+    u = np.array([signal.output(k, 0.150, 50.0 + noise[k])[0] for k in range(5000)])
+    assert np.std(u) < 0.15 * 0.004 * 1.0
 
 
 def test_a_test_is_accepted_only_when_it_can_run():

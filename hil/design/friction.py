@@ -90,6 +90,18 @@ def presliding_damping(sigma0_n_m: float, mass_kg: float, sigma2_ns_m: float, ze
 
 
 # -- pre-sliding by the bristle model --------------------------------------------------------------
+def displacement_from_crossings(cycle: np.ndarray, position_m: np.ndarray, n_cycles: int) -> np.ndarray:
+    """The displacement at every cycle 0..n_cycles-1 from a quantised record (`position_m` at
+    `cycle`, increasing): where the reading changes code, the true position crossed the boundary
+    between the two codes between the two samples; straight lines through those crossings
+    (and the record's ends). A reading that toggles across one boundary is then at rest on it,
+    not moving by a whole step each time, which the bristle model would follow as motion."""
+    change = np.flatnonzero(np.diff(position_m) != 0.0) + 1
+    t = np.concatenate([cycle[:1], (cycle[change - 1] + cycle[change]) / 2.0, cycle[-1:]])
+    y = np.concatenate([position_m[:1], (position_m[change - 1] + position_m[change]) / 2.0, position_m[-1:]])
+    return np.interp(np.arange(n_cycles), t, y)
+
+
 @numba.njit(cache=True)
 def bristle_forces(dy_m, v_m_s, seal, guide_g, guide_k, z_seal0, z_guide0, seal_n, guide_n):
     """The bristle forces of the seal and of the guide along a measured displacement: the

@@ -34,6 +34,7 @@ from protocol.enums import AckKind, TestMode
 from ..design.friction import (
     SteadySide,
     cylinder_friction,
+    displacement_from_crossings,
     fit_presliding,
     fit_steady_side,
     presliding_damping,
@@ -439,13 +440,12 @@ class FrictionPresliding(Scenario):
         """The seal's and the guide's bristles simulated along the whole displacement record
         (`bristle_forces`, from the log's first cycle: the script's first move sets their
         state) and fitted to the friction at rest in every sine: the cylinder's (eq. 6.5 with
-        a, v ~ 0, every pressure frame) and the guide's (the load cell's, every cycle)."""
-        filled = y.copy()
-        valid = np.isfinite(filled)
-        if valid.sum() < 2:
+        a, v ~ 0, every pressure frame) and the guide's (the load cell's, every cycle). The
+        displacement is read through its code crossings (`displacement_from_crossings`)."""
+        valid = np.flatnonzero(np.isfinite(y))
+        if len(valid) < 2:
             return None
-        filled[~valid] = np.interp(np.flatnonzero(~valid), np.flatnonzero(valid), filled[valid])
-        dy = np.diff(filled, prepend=filled[0])
+        dy = np.diff(displacement_from_crossings(valid, y[valid], len(y)), prepend=y[valid[0]])
         # at rest: the model has no sliding terms (sigma2 v, g(v)'s Stribeck, m a); a sine's
         # minimum may creep when it started at breakaway, and those samples are left out
         speed = np.abs(np.convolve(dy, np.ones(REST_CYCLES) / (REST_CYCLES * period), mode="same"))
