@@ -7,19 +7,14 @@ affinity) are applied when permitted; each one that is not is logged and skipped
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
-import gc
 import json
-import os
 import sys
 
 from protocol.cliutil import StopFlag
+from protocol.realtime import freeze_gc, lock_memory, pin_cpu, set_fifo, thaw_gc
 
 from .config import ControllerConfig, load_config
 from .control import CONTROLLER_NAMES
-
-MCL_CURRENT, MCL_FUTURE = 1, 2
 
 
 def log(text: str) -> None:
@@ -27,39 +22,22 @@ def log(text: str) -> None:
 
 
 def realtime_setup(cfg: ControllerConfig, realtime: bool) -> list[str]:
-    """gc.freeze + gc.disable always; scheduling, memory locking, affinity for realtime."""
-    notes = []
-    gc.collect()
-    gc.freeze()
-    gc.disable()
+    """GC frozen and disabled always; scheduling, memory locking, affinity for realtime."""
+    freeze_gc(disable=True)
     if not realtime:
-        return notes
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(cfg.realtime_priority))
-        notes.append(f"SCHED_FIFO priority {cfg.realtime_priority}")
-    except (OSError, AttributeError) as exc:
-        log(f"SCHED_FIFO not permitted ({exc}); running with normal scheduling")
-    libc_name = ctypes.util.find_library("c")
-    try:
-        libc = ctypes.CDLL(libc_name, use_errno=True)
-        if libc.mlockall(MCL_CURRENT | MCL_FUTURE) != 0:
-            log(f"mlockall not permitted ({os.strerror(ctypes.get_errno())}); memory may page")
-        else:
-            notes.append("mlockall")
-    except (OSError, AttributeError) as exc:
-        log(f"mlockall unavailable ({exc})")
+        return []
+    problems = {f"SCHED_FIFO priority {cfg.realtime_priority}": set_fifo(cfg.realtime_priority),
+                "mlockall": lock_memory()}
     if cfg.cpu >= 0:
-        try:
-            os.sched_setaffinity(0, {cfg.cpu})
-            notes.append(f"CPU {cfg.cpu}")
-        except (OSError, AttributeError) as exc:
-            log(f"CPU affinity {cfg.cpu} not permitted ({exc})")
-    return notes
+        problems[f"CPU {cfg.cpu}"] = pin_cpu(cfg.cpu)
+    for problem in problems.values():
+        if problem:
+            log(problem)
+    return [done for done, problem in problems.items() if problem is None]
 
 
 def realtime_teardown() -> None:
-    gc.enable()
-    gc.unfreeze()
+    thaw_gc()
 
 
 def run_daemon(args) -> int:

@@ -20,6 +20,7 @@ from firmware_py.control import CONTROLLER_NAMES
 from protocol.bus import BusSpec, default_bus_spec, open_bus, parse_bus_spec
 from protocol.enums import Ack, Command, Fault, State
 from protocol.errors import UserInputError
+from protocol.realtime import freeze_gc, thaw_gc
 
 from .host import Host, HostError
 from .logdata import read_log
@@ -120,7 +121,8 @@ class Run:
         child = Child(name, ["-m", "plant_emulator", "--bus", str(self.spec), "--rig", self.scenario.rig,
                              "--rate-hz", str(self.options.rate_hz), "--load-kg", str(self.scenario.load_kg),
                              "--sync-watchdog-periods", f"{watchdog:g}", "--config", str(config),
-                             "--summary", str(self.out / f"{name}.json")], self.out)
+                             "--summary", str(self.out / f"{name}.json"),
+                             *(["--realtime"] if self.pacing == "realtime" else [])], self.out)
         heartbeats = self.host.node_heartbeats
         self.notes += child.start(realtime_priority=70 if self.pacing == "realtime" else None)
         self.children.append(child)
@@ -282,6 +284,8 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
     try:
         run.start_emulator()
         run.start_controller(scenario.first_controller(options.controllers))
+        if pacing == "realtime":            # the recorder: no long collection while it records
+            freeze_gc(disable=False)
         scenario.script(run)
         run.stop_all()
     except (ChildFailed, HostError) as error:
@@ -297,6 +301,7 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
         run.kill_all()
         run.host.close()
         bus.shutdown()
+        thaw_gc()
     wall_s = time.monotonic() - started
     log = read_log(out / LOG_NAME)
     doc = write_outputs(scenario, log, out, extra={

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 from protocol.cliutil import StopFlag, number_in_range, output_file
+from protocol.realtime import freeze_gc, lock_memory
 
 from .params import load_config
 
@@ -41,6 +43,11 @@ def run_emulator(args) -> int:
     stop = StopFlag()
     bus = open_bus(spec)
     emulator = Emulator(bus, rig, cfg)
+    # started: what start-up built leaves the collector's scans, so a collection in the run is short
+    freeze_gc(disable=False)
+    problem = lock_memory() if args.realtime else None
+    if problem:
+        print(f"emulator: {problem}", file=sys.stderr, flush=True)
     try:
         emulator.run(stop)
     finally:
@@ -72,4 +79,6 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                              "controller's lockstep wait")
     parser.add_argument("--config", metavar="FILE", help="TOML overriding the emulator's data/emulator.toml")
     parser.add_argument("--summary", metavar="FILE", type=output_file, help="write the exit counters as JSON")
+    parser.add_argument("--realtime", action="store_true",
+                        help="lock the process's memory once started (mlockall; logged when not permitted)")
     parser.set_defaults(handler=run_emulator)

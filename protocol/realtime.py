@@ -1,0 +1,86 @@
+"""Process set-up for realtime pacing, shared by the bus nodes (controller, emulator) and the
+host's recorder. Once a process's start-up is over: its start-up objects are frozen out of
+the garbage collector (a collection then scans only what the run created, not the whole
+heap of NumPy, SciPy and MuJoCo objects), its memory is locked (no page fault in the loop),
+and it may run SCHED_FIFO and pinned to a CPU. A measure that is not permitted returns the
+reason, for the process to log; none of them is fatal.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import gc
+import os
+import resource
+
+MCL_CURRENT, MCL_FUTURE = 1, 2
+
+
+def freeze_gc(disable: bool) -> None:
+    """Collect once, freeze what is left; `disable`: no automatic collection at all (for a
+    loop that creates no reference cycles, as the controller's cycle does not)."""
+    gc.collect()
+    gc.freeze()
+    if disable:
+        gc.disable()
+
+
+def thaw_gc() -> None:
+    gc.enable()
+    gc.unfreeze()
+
+
+CAP_IPC_LOCK = 14
+
+
+def _lock_unlimited() -> bool:
+    """Whether this process may lock any amount: CAP_IPC_LOCK, or an unlimited RLIMIT_MEMLOCK
+    (raised to its hard limit first)."""
+    try:
+        with open("/proc/self/status") as status:
+            caps = next((line.split()[1] for line in status if line.startswith("CapEff:")), "0")
+        if int(caps, 16) >> CAP_IPC_LOCK & 1:
+            return True
+    except OSError:
+        pass
+    soft, hard = resource.getrlimit(resource.RLIMIT_MEMLOCK)
+    if soft != hard:
+        try:
+            resource.setrlimit(resource.RLIMIT_MEMLOCK, (hard, hard))
+            soft = hard
+        except (OSError, ValueError):
+            pass
+    return soft == resource.RLIM_INFINITY
+
+
+def lock_memory() -> str | None:
+    """mlockall, current and future pages; None when done, else why not. Only where any amount
+    may be locked: under a finite limit an allocation past it would fail."""
+    if not _lock_unlimited():
+        soft, _ = resource.getrlimit(resource.RLIMIT_MEMLOCK)
+        return f"memory not locked: RLIMIT_MEMLOCK is {soft} bytes and no CAP_IPC_LOCK (ulimit -l unlimited)"
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+        if libc.mlockall(MCL_CURRENT | MCL_FUTURE) != 0:
+            return f"mlockall not permitted ({os.strerror(ctypes.get_errno())}); memory may page"
+    except (OSError, AttributeError) as exc:
+        return f"mlockall unavailable ({exc})"
+    return None
+
+
+def set_fifo(priority: int, pid: int = 0) -> str | None:
+    """SCHED_FIFO at `priority` for `pid` (0: this process); None when done, else why not."""
+    try:
+        os.sched_setscheduler(pid, os.SCHED_FIFO, os.sched_param(priority))
+    except (OSError, AttributeError) as exc:
+        return f"SCHED_FIFO not permitted ({exc}); running with normal scheduling"
+    return None
+
+
+def pin_cpu(cpu: int) -> str | None:
+    try:
+        os.sched_setaffinity(0, {cpu})
+    except (OSError, AttributeError) as exc:
+        return f"CPU affinity {cpu} not permitted ({exc})"
+    return None

@@ -1,0 +1,41 @@
+"""The realtime process set-up (protocol.realtime): each measure is applied, or its reason is
+returned for the process to log; none is fatal."""
+
+from __future__ import annotations
+
+import gc
+import subprocess
+import sys
+
+from protocol import realtime
+
+
+def test_freeze_gc_freezes_and_disables_and_thaw_restores():
+    assert gc.isenabled()
+    try:
+        realtime.freeze_gc(disable=True)
+        assert not gc.isenabled() and gc.get_freeze_count() > 0
+    finally:
+        realtime.thaw_gc()
+    assert gc.isenabled() and gc.get_freeze_count() == 0
+
+
+def test_memory_is_not_locked_under_a_finite_limit_and_says_why(monkeypatch):
+    monkeypatch.setattr(realtime, "_lock_unlimited", lambda: False)
+    problem = realtime.lock_memory()
+    assert problem is not None and "RLIMIT_MEMLOCK" in problem
+
+
+def test_a_refused_scheduling_policy_is_a_reason_not_an_exception():
+    problem = realtime.set_fifo(10_000)                 # no such priority
+    assert problem is not None and "SCHED_FIFO not permitted" in problem
+
+
+def test_the_controller_daemon_applies_each_measure_or_logs_why_not():
+    code = ("from firmware_py.config import load_config; from firmware_py.daemon import realtime_setup; "
+            "print(realtime_setup(load_config(), True))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    notes, log = proc.stdout, proc.stderr
+    assert "SCHED_FIFO priority" in notes or "SCHED_FIFO not permitted" in log, (notes, log)
+    assert "mlockall" in notes or "memory not locked" in log or "mlockall" in log, (notes, log)
