@@ -170,7 +170,7 @@ def _presliding_in_process(start_cycles: int, force_filter_hz: float | None = No
     from firmware_py.control import CONTROLLER_NAMES
     from firmware_py.controller import Controller
     from hil.design.friction import displacement_from_crossings, steady_sides
-    from hil.scenarios.friction import FINE_SENSOR_MM, REST_CYCLES, REST_SPEED_MM_S
+    from hil.scenarios.friction import FINE_SENSOR_MM, _at_rest
     from physics.actuator import piston_force
     from plant_emulator import hydraulics as hy
     from plant_emulator.params import load_config as load_emulator_config
@@ -228,8 +228,8 @@ def _presliding_in_process(start_cycles: int, force_filter_hz: float | None = No
     for name, record in (("record", displacement_from_crossings(cycle, np.array(y), len(y))),
                          ("true", np.array(true_y))):
         dy = np.diff(record, prepend=record[0])
-        speed = np.abs(np.convolve(dy, np.ones(REST_CYCLES) / (REST_CYCLES * period), mode="same"))
-        at = np.concatenate([k[speed[k] < REST_SPEED_MM_S * MM] for k in sines])
+        rest = _at_rest(dy, period)
+        at = np.concatenate([k[rest[k]] for k in sines])
         fits[name] = fit_presliding(dy, dy / period, at, seal[at], at, guide[at],
                                     steady_sides(cfg.raw["friction"]), cfg.guide_coulomb_n)
     return fits

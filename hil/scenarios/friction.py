@@ -72,6 +72,14 @@ REST_SPEED_MM_S = 0.5              # ... below this (pre-sliding at 0.04-0.2 Hz 
 REST_FRACTION = 0.8                # of the sines' samples, at least this many at rest
 
 
+def _at_rest(dy_m: np.ndarray, period_s: float) -> np.ndarray:
+    """Cycles at rest, for the bristle fit: the model has no sliding terms (sigma2 v, g(v)'s
+    Stribeck, m a); a sine's minimum may creep when it started at breakaway, and those
+    samples are left out."""
+    speed = np.abs(np.convolve(dy_m, np.ones(REST_CYCLES) / (REST_CYCLES * period_s), mode="same"))
+    return speed < REST_SPEED_MM_S * MM
+
+
 def chapter6() -> dict:
     return thesis_data("chapter6")
 
@@ -445,11 +453,9 @@ class FrictionPresliding(Scenario):
         valid = np.flatnonzero(np.isfinite(y))
         if len(valid) < 2:
             return None
-        dy = np.diff(displacement_from_crossings(valid, y[valid], len(y)), prepend=y[valid[0]])
-        # at rest: the model has no sliding terms (sigma2 v, g(v)'s Stribeck, m a); a sine's
-        # minimum may creep when it started at breakaway, and those samples are left out
-        speed = np.abs(np.convolve(dy, np.ones(REST_CYCLES) / (REST_CYCLES * period), mode="same"))
-        at_rest = speed < REST_SPEED_MM_S * MM
+        displacement = displacement_from_crossings(valid, y[valid], len(y))
+        dy = np.diff(displacement, prepend=displacement[0])
+        at_rest = _at_rest(dy, period)
         seal_at, seal, guide_at, guide, samples = [], [], [], [], 0
         for test in _tests(log, TestMode.FORCE_SINE):
             k0, k1 = test["cycle"], min(test["cycle"] + int(test["duration_s"] / period), log.n_cycles - 1)
