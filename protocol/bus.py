@@ -249,23 +249,32 @@ def _multicast_socket(family: int, group: str, port: int, receive_buffer_bytes: 
     except OSError as error:
         sock.close()
         raise can.CanInitializationError(f"udp_multicast:{group}:{port}: {error}") from error
-    try:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, receive_buffer_bytes)
-        if family == socket.AF_INET:
+    if family == socket.AF_INET:
+        try:
             sock.setsockopt(socket.IPPROTO_IP, _IP_MULTICAST_ALL, 0)
-    except OSError:
-        pass   # best effort: defaults still work, only less isolated/buffered
-    try:
-        sock.setsockopt(socket.SOL_SOCKET, _SO_RCVBUFFORCE, receive_buffer_bytes)
-    except OSError:
-        pass   # not root: SO_RCVBUF's size, capped by rmem_max
+        except OSError:
+            pass   # best effort: only less isolated
+    _grow_receive_buffer(sock, receive_buffer_bytes)
     sock.setblocking(False)
     return sock
 
 
+def _grow_receive_buffer(sock: socket.socket, receive_buffer_bytes: int) -> None:
+    """The socket's receive buffer, as large as allowed (root: the full size)."""
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, receive_buffer_bytes)
+    except OSError:
+        pass   # best effort: the default still works, only less buffered
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, _SO_RCVBUFFORCE, receive_buffer_bytes)
+    except OSError:
+        pass   # not root: SO_RCVBUF's size, capped by rmem_max
+
+
 def open_bus(spec: str | BusSpec | None = None, recorder: bool = False) -> can.BusABC:
-    """Open the bus named by `spec` (None: `default_bus_spec()`); `recorder`: the on-host
-    bus gets RECORDER_RCVBUF_BYTES of receive buffer, so a host that falls behind loses nothing.
+    """Open the bus named by `spec` (None: `default_bus_spec()`); `recorder`: the socket gets
+    RECORDER_RCVBUF_BYTES of receive buffer (SocketCAN and multicast alike), so a host that
+    falls behind loses nothing.
 
     Raises `BusSpecError` for a malformed string and `BusOpenError` (one line, naming
     the bus) when it cannot be opened here.
@@ -282,7 +291,9 @@ def open_bus(spec: str | BusSpec | None = None, recorder: bool = False) -> can.B
             if not Path("/sys/class/net", spec.channel).exists():
                 raise BusOpenError(f"{spec}: no such network interface (create it: "
                                    f"ip link add dev {spec.channel} type vcan; ip link set up {spec.channel})")
-            return can.Bus(interface="socketcan", channel=spec.channel, receive_own_messages=False)
+            bus = can.Bus(interface="socketcan", channel=spec.channel, receive_own_messages=False)
+            _grow_receive_buffer(bus.socket, RECORDER_RCVBUF_BYTES if recorder else _RCVBUF_BYTES)
+            return bus
         if spec.kind == "udp_multicast":
             return HostMulticastBus(spec.channel, spec.port,
                                     RECORDER_RCVBUF_BYTES if recorder else _RCVBUF_BYTES)
