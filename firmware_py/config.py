@@ -21,7 +21,8 @@ from protocol.tomlconfig import load_layered
 
 RANGES: dict[str, dict[str, object]] = {
     "timing": {
-        "sync_window_fraction": (0.1, 0.95), "spin_us": (0.0, 5000.0), "lockstep_timeout_ms": (1.0, 10000.0),
+        "sync_window_fraction": (0.1, 0.95), "spin_us": (0.0, 5000.0),
+        "commit_room_us": (0.0, 100000.0), "lockstep_timeout_ms": (1.0, 10000.0),
         "activation_timeout_s": (0.1, 600.0), "hold_cycles": (1, 10000), "shutdown_hold_cycles": (1, 10000),
         "shutdown_disable_cycles": (1, 10000), "heartbeat_ms": (10.0, 10000.0),
         "heartbeat_timeout_ms": (10.0, 60000.0), "realtime_priority": (1, 99),
@@ -90,6 +91,7 @@ class ControllerConfig:
     raw: dict                         # thesis units, as loaded
     # timing
     sync_window_fraction: float
+    commit_room_s: float
     spin_s: float
     lockstep_timeout_s: float
     activation_timeout_s: float
@@ -215,6 +217,7 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
     return ControllerConfig(
         raw=raw,
         sync_window_fraction=t["sync_window_fraction"], spin_s=t["spin_us"] * 1e-6,
+        commit_room_s=t["commit_room_us"] * 1e-6,
         lockstep_timeout_s=t["lockstep_timeout_ms"] * 1e-3, activation_timeout_s=t["activation_timeout_s"],
         hold_cycles=t["hold_cycles"], shutdown_hold_cycles=t["shutdown_hold_cycles"],
         shutdown_disable_cycles=t["shutdown_disable_cycles"], heartbeat_s=t["heartbeat_ms"] * 1e-3,

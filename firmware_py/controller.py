@@ -125,6 +125,8 @@ class Controller:
         ref.play(through_points(np.array([self.home_strokes, self.home_strokes + 1e-3]), 0.1, 0.2), [0], 0)
         ref.advance(1)
         ref.hold(np.zeros(n))
+        home = tuple(self.geometry.home_position_m) if self.hexapod else (0.0, 0.0, float(self.home_strokes[0]))
+        self.waypoints.check(self.home_strokes, home, (0.0, 0.0, 0.0), 1.0, 0.2, False, 0.0)   # a commit's kernels
         if self.hexapod:
             self.platform.estimate(self.home_strokes)
             self.platform.reset_reference(self.home_strokes)
@@ -232,9 +234,10 @@ class Controller:
         self.reference.play(trajectory, seqs, self.cycles)
         self.sup.start_running()
 
-    def after_write(self) -> None:
-        """Host work that must not delay the cycle's VALVE_CMD: one waypoint commit."""
-        self.host.run_after_write(self)
+    def after_write(self, time_left_s: float = math.inf) -> None:
+        """Host work that must not delay the cycle's VALVE_CMD: one waypoint commit, when
+        `time_left_s` before the next SYNC leaves room for it."""
+        self.host.run_after_write(self, time_left_s >= self.cfg.commit_room_s)
 
     # -- lifecycle ----------------------------------------------------------------------------
     def activated(self, auto_enable: bool) -> None:

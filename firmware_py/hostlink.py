@@ -5,9 +5,10 @@ The loop only queues what it decoded. The controller carries the queue out:
 - in its update, before the reference is computed: the frames at the front up to the first
   waypoint commit (commands, waypoint halves, tests), and ESTOP and DISABLE wherever they
   stand (they never wait);
-- after the cycle's VALVE_CMD are sent: one waypoint commit (its workspace check takes up to
-  a few ms on the hexapod, longer than the sensor window); what follows it waits for the
-  next update.
+- after the cycle's VALVE_CMD are sent: one waypoint commit (its workspace check takes a few
+  tenths of a ms on the hexapod), when the cycle has room left for it before the next SYNC;
+  else it waits for a later cycle (at most COMMIT_MAX_WAIT_CYCLES). What follows it waits
+  for the next update.
 So a command never overtakes a commit sent before it (a waypoint half reusing a TAG cannot
 reach a commit that has not been checked yet), and the cycle's timing never waits for one.
 """
@@ -20,6 +21,7 @@ from enum import IntEnum
 from protocol.enums import AckKind, Command
 
 IMMEDIATE_COMMANDS = (int(Command.ESTOP), int(Command.DISABLE))
+COMMIT_MAX_WAIT_CYCLES = 50      # a commit waits for a cycle with room at most this long, then runs
 
 
 class Frame(IntEnum):
@@ -34,6 +36,7 @@ class HostLink:
     def __init__(self):
         self.queue: deque[tuple] = deque()              # (Frame, values)
         self.acks: deque[tuple[int, int, int]] = deque()  # (AckKind, SEQ, result) to send
+        self.commit_waited = 0                           # cycles the front commit has waited for room
 
     # -- what the loop decoded ------------------------------------------------------------
     def command(self, command: int, argument: int, seq: int) -> None:
@@ -63,10 +66,16 @@ class HostLink:
                 queue.remove(item)
                 self._carry_out(controller, *item)
 
-    def run_after_write(self, controller) -> None:
-        """The waypoint commit at the front, if there is one."""
-        if self.queue and self.queue[0][0] is Frame.COMMIT:
+    def run_after_write(self, controller, room: bool = True) -> None:
+        """The waypoint commit at the front, if there is one and the cycle has `room` for it
+        (or it has waited long enough)."""
+        if not (self.queue and self.queue[0][0] is Frame.COMMIT):
+            return
+        if room or self.commit_waited >= COMMIT_MAX_WAIT_CYCLES:
+            self.commit_waited = 0
             self._carry_out(controller, *self.queue.popleft())
+        else:
+            self.commit_waited += 1
 
     def _carry_out(self, controller, frame: Frame, values: tuple) -> None:
         if frame is Frame.COMMAND:

@@ -126,6 +126,7 @@ class ControllerLoop:
         self._last_sync = math.nan
         self._next_heartbeat = 0.0
         self._overrun = False
+        self._next_deadline = math.inf          # realtime: the next SYNC's deadline (lockstep: none)
         self._stalled = False                        # seen since the last read
         self._emergency = False
         self._attitude_new = False
@@ -350,7 +351,8 @@ class ControllerLoop:
         self.stats.cycles += 1
         if self.controller.sup.faults != faults_before:
             self._log_fault(now)
-        self.controller.after_write()           # after the write: its cost never delays VALVE_CMD
+        # after the write: its cost never delays VALVE_CMD, and it waits when the SYNC is near
+        self.controller.after_write(self._next_deadline - self.clock())
 
     def _log_fault(self, sync_time: float) -> None:
         """One stderr line when the controller faults (an event, not the steady cycle): which
@@ -392,6 +394,7 @@ class ControllerLoop:
         done = 0
         while (count is None or done < count) and not should_stop():
             if self.pacing == "realtime":
+                self._next_deadline = deadline + self.period_s
                 self.cycle()
                 deadline += self.period_s
                 now = self.clock()

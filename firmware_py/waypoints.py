@@ -65,50 +65,52 @@ class TestbenchCheck:
 
 
 class HexapodCheck:
-    """The target and the joint-space path to it, pose by pose, in one workspace check (its
-    cost is mostly per call): reachable, away from singularities, a bounded joint speed and
-    static-plus-inertial actuator force."""
+    """The target and the joint-space path to it, pose by pose: reachable, away from
+    singularities, a bounded joint speed and static-plus-inertial actuator force. Compiled
+    per pose (about 10 us each): a commit runs after a cycle's write, within its slack."""
 
     def __init__(self, cfg: ControllerConfig, geometry):
         from .dynamics import InverseDynamics
         from .kinematics import DirectKinematics
+        from .workspace import PoseChecker
         self.cfg, self.geometry = cfg, geometry
         self.dk = DirectKinematics(geometry, cfg.dk_tolerance_m, 50)
         self.dynamics = InverseDynamics(geometry)
+        self.poses = PoseChecker(geometry)
+        self.fractions = np.linspace(1.0, 0.0, cfg.waypoint_path_samples)
+        self.zero_velocity, self.accel = np.zeros(6), np.zeros(6)
 
     def __call__(self, previous, pos, rot, segment_time, accel_time, step: bool, load_kg: float):
-        from .kinematics import ik_batch
         from .rotation import rpy_to_quat
-        from .workspace import MIN_CONDITION_INDEX, check_poses
+        from .workspace import MIN_CONDITION_INDEX, OUT_CONDITION, OUT_REACHABLE
 
         g, cfg = self.geometry, self.cfg
-        samples = cfg.waypoint_path_samples
-        poses, quats = np.empty((samples + 1, 3)), np.empty((samples + 1, 4))
-        poses[0], quats[0] = pos, rpy_to_quat(*rot)                 # row 0: the target itself
-        lengths, _ = ik_batch(g, poses[:1], quats[:1])
-        strokes = lengths[0] - g.leg_min_m
-        n = 1                        # the joint-space path between the waypoints, back from the target
-        self.dk.pose[:] = np.concatenate([poses[0], quats[0]])
-        for s in np.linspace(1.0, 0.0, samples):
-            self.dk.solve(g.leg_min_m + previous + s * (strokes - previous))
-            if not self.dk.converged:
-                break
-            poses[n], quats[n] = self.dk.pose[0:3], self.dk.pose[3:7]
-            n += 1
-        report = check_poses(g, poses[:n], quats[:n])
-        if not report.reachable[0]:
+        target, quat = np.array(pos, dtype=float), rpy_to_quat(*rot)
+        report = self.poses.check(target, quat)
+        if not report[OUT_REACHABLE]:
             return Ack.OUTSIDE_WORKSPACE, None
-        if report.condition_index[0] < MIN_CONDITION_INDEX:
+        if report[OUT_CONDITION] < MIN_CONDITION_INDEX:
             return Ack.SINGULAR, None
+        strokes = self.poses.lengths - g.leg_min_m
         if not peak_velocity_ok(cfg, previous, strokes, segment_time, accel_time, step):
             return Ack.TOO_FAST, None
-        if n < samples + 1 or not report.reachable.all():
-            return Ack.OUTSIDE_WORKSPACE, None
-        if np.min(report.condition_index) < MIN_CONDITION_INDEX:
+        # the joint-space path between the waypoints, back from the target
+        dk = self.dk
+        dk.pose[0:3], dk.pose[3:7] = target, quat
+        singular = False
+        for s in self.fractions:
+            dk.solve(g.leg_min_m + previous + s * (strokes - previous))
+            if not dk.converged:
+                return Ack.OUTSIDE_WORKSPACE, None
+            report = self.poses.check(dk.pose[0:3], dk.pose[3:7])
+            if not report[OUT_REACHABLE]:
+                return Ack.OUTSIDE_WORKSPACE, None
+            singular |= report[OUT_CONDITION] < MIN_CONDITION_INDEX
+        if singular:
             return Ack.SINGULAR, None
-        # static load plus the peak SLS acceleration of the segment's translation
-        peak_accel = (poses[0] - poses[n - 1]) / (segment_time - accel_time) * math.pi / (2.0 * accel_time)
-        if not self.dynamics.forces(poses[0], quats[0], np.zeros(6), np.concatenate([peak_accel, np.zeros(3)])):
+        # static load plus the peak SLS acceleration of the segment's translation (dk.pose: its start)
+        self.accel[0:3] = (target - dk.pose[0:3]) / (segment_time - accel_time) * math.pi / (2.0 * accel_time)
+        if not self.dynamics.forces(target, quat, self.zero_velocity, self.accel):
             return Ack.SINGULAR, None
         if np.max(np.abs(self.dynamics.force_n)) > cfg.waypoint_force_max_n:
             return Ack.TOO_FAST, None

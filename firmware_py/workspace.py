@@ -9,16 +9,22 @@ A pose is in the workspace when (chapter 9.3):
    cylinders of different legs must exceed the sum of their radii.
 Singularity: det Jx (eq. 9.27) changes sign across the singular surface; the condition
 index 1/cond(Jx) (rotation columns scaled by the platform radius) measures proximity.
+
+Two flavours: `check_poses`, vectorised NumPy for sweeps of many poses, and
+`PoseChecker`, a numba kernel per pose for the few poses of a waypoint commit (its cost
+must fit in the slack of a 2 ms cycle; `check_poses` is its oracle in the tests).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from .geometry import Geometry
-from .kinematics import condition_index_batch, ik_batch, jacobian_batch
+from .kinematics import condition_index_batch, ik_batch, ik_into, jacobian_batch, jacobian_into
 from .rotation import quat_to_matrix
 
 # Singularity proximity limit of the rig: poses with 1/cond(Jx) below this are refused
@@ -108,3 +114,99 @@ def _interference_clearance(geometry: Geometry, lengths, units) -> np.ndarray:
             gap = segment_distance(first[0][:, i], first[1][:, i], second[0][:, j], second[1][:, j])
             clearance = np.minimum(clearance, np.min(gap, axis=1) - (first[2] + second[2]))
     return clearance
+
+
+# -- one pose at a time, compiled ---------------------------------------------------------
+
+# layout of PoseChecker's limits array and of its result array
+(LIM_LEG_MIN, LIM_LEG_MAX, LIM_COS_UNIVERSAL, LIM_COS_SPHERICAL, LIM_CYLINDER_LENGTH, LIM_ROD_LENGTH,
+ LIM_CYLINDER_RADIUS, LIM_ROD_RADIUS, LIM_CHARACTERISTIC_LENGTH) = range(9)
+OUT_REACHABLE, OUT_CLEARANCE, OUT_DET, OUT_CONDITION = range(4)
+
+
+@njit(cache=True)
+def _segment_distance(p1, q1, p2, q2) -> float:
+    """`segment_distance` for one pair of segments (3-vectors)."""
+    a = e = f = c = b = 0.0
+    for k in range(3):
+        d1, d2, r = q1[k] - p1[k], q2[k] - p2[k], p1[k] - p2[k]
+        a += d1 * d1
+        e += d2 * d2
+        f += d2 * r
+        c += d1 * r
+        b += d1 * d2
+    denom = a * e - b * b
+    s = min(max((b * f - c * e) / denom, 0.0), 1.0) if denom > 1e-18 * a * e else 0.0
+    t = (b * s + f) / e
+    if t < 0.0:
+        s = min(max(-c / a, 0.0), 1.0)
+    elif t > 1.0:
+        s = min(max((b - c) / a, 0.0), 1.0)
+    t = min(max(t, 0.0), 1.0)
+    total = 0.0
+    for k in range(3):
+        gap = (p1[k] + (q1[k] - p1[k]) * s) - (p2[k] + (q2[k] - p2[k]) * t)
+        total += gap * gap
+    return math.sqrt(total)
+
+
+@njit(cache=True)
+def pose_check_into(base, platform, limits, r, p, rot, platform_world, lengths, units, ends, jac, out):
+    """The workspace test of one pose (the rules of `check_poses`) into out[OUT_*]; `ends`
+    (4, 6, 3) holds each leg's cylinder (U centre, its end) and rod (S centre, its end)."""
+    ik_into(base, platform, r, p, rot, platform_world, lengths, units)
+    n = base.shape[0]
+    reachable = True
+    for i in range(n):
+        reachable &= limits[LIM_LEG_MIN] <= lengths[i] <= limits[LIM_LEG_MAX]
+        reachable &= units[i, 2] >= limits[LIM_COS_UNIVERSAL]
+        normal_dot = units[i, 0] * rot[0, 2] + units[i, 1] * rot[1, 2] + units[i, 2] * rot[2, 2]
+        reachable &= normal_dot >= limits[LIM_COS_SPHERICAL]
+        cylinder = min(limits[LIM_CYLINDER_LENGTH], lengths[i])
+        rod = min(limits[LIM_ROD_LENGTH], lengths[i])
+        for k in range(3):
+            top = base[i, k] + units[i, k] * lengths[i]
+            ends[0, i, k] = base[i, k]
+            ends[1, i, k] = base[i, k] + units[i, k] * cylinder
+            ends[2, i, k] = top
+            ends[3, i, k] = top - units[i, k] * rod
+    radius = (limits[LIM_CYLINDER_RADIUS], limits[LIM_ROD_RADIUS])
+    clearance = np.inf
+    for i in range(n):
+        for j in range(i + 1, n):
+            for first in range(2):
+                for second in range(2):
+                    gap = _segment_distance(ends[2 * first, i], ends[2 * first + 1, i],
+                                            ends[2 * second, j], ends[2 * second + 1, j])
+                    clearance = min(clearance, gap - (radius[first] + radius[second]))
+    jacobian_into(units, platform_world, jac)
+    out[OUT_DET] = np.linalg.det(jac)
+    for i in range(n):
+        for k in range(3, 6):
+            jac[i, k] /= limits[LIM_CHARACTERISTIC_LENGTH]
+    singular_values = np.linalg.svd(jac)[1]
+    out[OUT_CONDITION] = singular_values[-1] / singular_values[0]
+    out[OUT_CLEARANCE] = clearance
+    out[OUT_REACHABLE] = 1.0 if reachable and clearance >= 0.0 else 0.0
+
+
+class PoseChecker:
+    """`pose_check_into` with its work arrays allocated once, for one geometry."""
+
+    def __init__(self, geometry: Geometry):
+        g = geometry
+        self.base, self.platform = g.base_anchor_m, g.platform_anchor_m
+        self.limits = np.array([g.leg_min_m, g.leg_max_m, np.cos(g.universal_cone_rad), np.cos(g.spherical_cone_rad),
+                                g.cylinder_length_m, g.rod_length_m, g.cylinder_radius_m, g.rod_radius_m,
+                                g.characteristic_length_m])
+        n = len(g.base_anchor_m)
+        self.rot, self.platform_world = np.empty((3, 3)), np.empty((n, 3))
+        self.lengths, self.units = np.empty(n), np.empty((n, 3))
+        self.ends, self.jac = np.empty((4, n, 3)), np.empty((n, 6))
+        self.out = np.empty(4)
+
+    def check(self, position_m, quat) -> np.ndarray:
+        """out[OUT_*] of the pose; `lengths` holds its leg lengths."""
+        pose_check_into(self.base, self.platform, self.limits, position_m, quat, self.rot, self.platform_world,
+                        self.lengths, self.units, self.ends, self.jac, self.out)
+        return self.out

@@ -22,7 +22,16 @@ from firmware_py.rotation import (
     rotation_angle_between,
     rpy_to_quat,
 )
-from firmware_py.workspace import MIN_CONDITION_INDEX, check_poses, segment_distance
+from firmware_py.workspace import (
+    MIN_CONDITION_INDEX,
+    OUT_CLEARANCE,
+    OUT_CONDITION,
+    OUT_DET,
+    OUT_REACHABLE,
+    PoseChecker,
+    check_poses,
+    segment_distance,
+)
 from hil.tools.dk_eval import sample_workspace
 
 GEOMETRY = default_geometry()
@@ -187,6 +196,26 @@ def test_workspace_limits_each_reject_what_they_should():
     assert not twisted.interference_ok[0] and twisted.stroke_ok[0]
     far = check_poses(GEOMETRY, [0.75, 0.0, 0.45], ident)
     assert not far.reachable[0]
+
+
+def test_the_compiled_pose_check_agrees_with_the_vectorised_one():
+    """PoseChecker (a waypoint commit's per-pose kernel) against check_poses (its oracle) over
+    poses on both sides of every limit: reach, cones, interference, singular surface."""
+    rng = np.random.default_rng(11)
+    n = 3000
+    positions = GEOMETRY.home_position_m + rng.uniform([-0.5, -0.5, -0.25], [0.5, 0.5, 0.25], (n, 3))
+    quats = rpy_to_quat(*rng.uniform(-1.2, 1.2, (3, n)) * np.array([[0.6], [0.6], [1.8]]))
+    report = check_poses(GEOMETRY, positions, quats)
+    assert 0.1 < report.reachable.mean() < 0.9
+    assert (~report.interference_ok & report.stroke_ok).any() and (~report.spherical_ok).any()
+    checker = PoseChecker(GEOMETRY)
+    for k in range(n):
+        out = checker.check(positions[k], quats[k])
+        assert bool(out[OUT_REACHABLE]) == report.reachable[k], k
+        assert out[OUT_CLEARANCE] == pytest.approx(report.min_clearance_m[k], abs=1e-12)
+        assert out[OUT_DET] == pytest.approx(report.det_jx[k], rel=1e-9, abs=1e-12)
+        assert out[OUT_CONDITION] == pytest.approx(report.condition_index[k], rel=1e-9, abs=1e-12)
+        assert np.allclose(checker.lengths, report.lengths_m[k], atol=1e-14)
 
 
 def test_segment_distance_matches_dense_sampling():

@@ -10,6 +10,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from firmware_py.hostlink import COMMIT_MAX_WAIT_CYCLES
 from firmware_py.kinematics import DirectKinematics, ik_batch
 from firmware_py.rotation import quat_to_rpy
 from firmware_py.supervisor import Supervisor
@@ -211,6 +212,27 @@ def host_frames(seq, z, flags=0):
 
 def host_command_frame(command, seq):
     return _host_frame("HOST_CMD", {"COMMAND": int(command), "ARGUMENT": 0, "SEQ": seq})
+
+
+def test_a_commit_waits_for_a_cycle_with_room_before_the_next_sync_but_not_forever():
+    loop, ctl, bus = make_loop("testbench", "pi")
+    z = ctl.reference.hold_position[0]
+    for frame in host_frames(0, z + 0.01):
+        loop.dispatch(frame)
+    ctl.host.run_before_update(ctl)
+    tight = 0.5 * ctl.cfg.commit_room_s
+    for _ in range(COMMIT_MAX_WAIT_CYCLES):
+        ctl.after_write(tight)                       # the SYNC is near: the commit waits
+    assert not ctl.host.acks and len(ctl.host.queue) == 1
+    ctl.after_write(tight)                           # waited its longest: it runs anyway
+    assert list(ctl.host.acks) == [(AckKind.WAYPOINT, 0, int(Ack.ACCEPTED))] and ctl.host.commit_waited == 0
+    for frame in host_frames(1, z + 0.02, flags=1):
+        loop.dispatch(frame)
+    ctl.host.run_before_update(ctl)
+    ctl.after_write(tight)
+    assert len(ctl.host.acks) == 1
+    ctl.after_write(ctl.cfg.commit_room_s)           # room enough: at once
+    assert list(ctl.host.acks)[-1] == (AckKind.WAYPOINT, 1, int(Ack.ACCEPTED))
 
 
 def test_waypoint_commits_wait_for_the_host_work_slot_and_estop_does_not():
