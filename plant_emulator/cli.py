@@ -8,7 +8,7 @@ import json
 import sys
 
 from protocol.cliutil import StopFlag, number_in_range, output_file
-from protocol.realtime import freeze_gc, lock_memory
+from protocol.realtime import freeze_gc, lock_memory, set_fifo
 
 from .params import load_config
 
@@ -31,6 +31,19 @@ def load_run_config(args) -> object:
     return load_config(args.config, overrides or None)
 
 
+def realtime_setup(cfg) -> list[str]:
+    """Memory locked and SCHED_FIFO at the config's priority; returns what was applied and
+    logs each measure that is not permitted (never fatal)."""
+    applied = []
+    for name, problem in (("mlockall", lock_memory()),
+                          (f"SCHED_FIFO priority {cfg.realtime_priority}", set_fifo(cfg.realtime_priority))):
+        if problem:
+            print(f"emulator: {problem}", file=sys.stderr, flush=True)
+        else:
+            applied.append(name)
+    return applied
+
+
 def run_emulator(args) -> int:
     from protocol.bus import open_bus, parse_bus_spec
 
@@ -45,9 +58,8 @@ def run_emulator(args) -> int:
     emulator = Emulator(bus, rig, cfg)
     # started: what start-up built leaves the collector's scans, so a collection in the run is short
     freeze_gc(disable=False)
-    problem = lock_memory() if args.realtime else None
-    if problem:
-        print(f"emulator: {problem}", file=sys.stderr, flush=True)
+    if args.realtime:
+        realtime_setup(cfg)
     try:
         emulator.run(stop)
     finally:
@@ -80,5 +92,6 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", metavar="FILE", help="TOML overriding the emulator's data/emulator.toml")
     parser.add_argument("--summary", metavar="FILE", type=output_file, help="write the exit counters as JSON")
     parser.add_argument("--realtime", action="store_true",
-                        help="lock the process's memory once started (mlockall; logged when not permitted)")
+                        help="once started, lock the process's memory (mlockall) and run SCHED_FIFO at "
+                             "[nodes].realtime_priority (each logged when not permitted)")
     parser.set_defaults(handler=run_emulator)

@@ -31,6 +31,20 @@ def test_a_refused_scheduling_policy_is_a_reason_not_an_exception():
     assert problem is not None and "SCHED_FIFO not permitted" in problem
 
 
+def test_the_emulator_applies_each_measure_or_logs_why_not():
+    code = ("import os; from plant_emulator.params import load_config; from plant_emulator.cli import "
+            "realtime_setup; print(realtime_setup(load_config()), os.sched_getscheduler(0) == os.SCHED_FIFO, "
+            "os.sched_getparam(0).sched_priority)")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    notes, log = proc.stdout, proc.stderr
+    if "SCHED_FIFO priority 70" in notes:                # below the controller's 80
+        assert notes.strip().endswith("True 70"), notes
+    else:
+        assert "SCHED_FIFO not permitted" in log, (notes, log)
+    assert "mlockall" in notes or "memory not locked" in log or "mlockall" in log, (notes, log)
+
+
 def test_the_controller_daemon_applies_each_measure_or_logs_why_not():
     code = ("from firmware_py.config import load_config; from firmware_py.daemon import realtime_setup; "
             "print(realtime_setup(load_config(), True))")
