@@ -39,11 +39,18 @@ from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import ImuStatus, NmtCommand, NmtState
 from protocol.nodes import CONTROLLER_NODE, SENDER_OF_NODE, rig_nodes
 from protocol.outbox import Outbox
+from protocol.realtime import percentiles_us
 
 from .controller import RESET_GRACE_CYCLES, Controller
 
 PACINGS = ("realtime", "lockstep")
 HISTORY = 1 << 16                       # cycles kept for the timing percentiles
+# the cycle's phases, in order (seconds each, per cycle, in `phase_s`): SYNC sent; the sensor
+# window less the frames' handling; the frames' handling (decode, dispatch); read; update;
+# write (frames encoded and sent, heartbeat); host work after the write (a waypoint commit);
+# idle until the next cycle (sleep, spin, frames handled meanwhile)
+PHASES = ("sync", "window", "decode", "read", "update", "write", "host_work", "idle")
+(PH_SYNC, PH_WINDOW, PH_DECODE, PH_READ, PH_UPDATE, PH_WRITE, PH_HOST_WORK, PH_IDLE) = range(len(PHASES))
 HOST_FRAMES = ("HOST_CMD", "HOST_WAYPOINT_POS", "HOST_WAYPOINT_ROT", "HOST_WAYPOINT_TIME", "HOST_TEST")
 
 
@@ -121,6 +128,9 @@ class ControllerLoop:
         self.stats = Stats()
         self.compute_s = np.zeros(HISTORY)
         self.period_error_s = np.zeros(HISTORY)
+        self.phase_s = np.zeros((HISTORY, len(PHASES)))
+        self._decode_s = 0.0                         # frames' handling inside this cycle's window
+        self._cycle_end = math.nan
         self._compute_max = 0.0
         self._period_error_max = 0.0
         self._last_sync = math.nan
@@ -208,7 +218,9 @@ class ControllerLoop:
                 if remaining <= 0.0:
                     return
                 continue
+            received = self.clock()
             self.dispatch(msg)
+            self._decode_s += self.clock() - received
 
     def _all_fresh(self) -> bool:
         fresh = self.decoder.fresh
@@ -324,6 +336,8 @@ class ControllerLoop:
         now = self.clock()
         self._note_stall()
         k = self.stats.cycles % HISTORY
+        phase = self.phase_s[k]
+        phase[PH_IDLE] = now - self._cycle_end if not math.isnan(self._cycle_end) else 0.0
         if not math.isnan(self._last_sync):
             error = abs(now - self._last_sync - self.period_s)
             self.period_error_s[k] = error
@@ -332,27 +346,36 @@ class ControllerLoop:
         self.sync_counter = self.sync_counter % self._overflow + 1
         self.out_sync.values[0] = self.sync_counter
         self._send(self.out_sync)
+        sent = self.clock()
         self.decoder.begin_cycle()
         self.meas.rejected[:] = False
         window = self.cfg.sync_window_fraction * self.period_s if self.pacing == "realtime" \
             else self.cfg.lockstep_timeout_s
+        self._decode_s = 0.0
         self._collect(now + window)
         self.stats.missing_frames += self.decoder.end_cycle(self.expected)
         start = self.clock()
         faults_before = self.controller.sup.faults
         self.read(start)
+        read = self.clock()
         self.controller.update(self.meas, self.cmd)
+        updated = self.clock()
         self.write()
         self._heartbeat(start)
         self.stats.faults += self.controller.sup.faults - faults_before
-        compute = self.clock() - start
+        written = self.clock()
+        compute = written - start
         self.compute_s[k] = compute
+        phase[PH_SYNC], phase[PH_WINDOW], phase[PH_DECODE] = sent - now, start - sent - self._decode_s, self._decode_s
+        phase[PH_READ], phase[PH_UPDATE], phase[PH_WRITE] = read - start, updated - read, written - updated
         self._compute_max = max(self._compute_max, compute)
         self.stats.cycles += 1
         if self.controller.sup.faults != faults_before:
             self._log_fault(now)
         # after the write: its cost never delays VALVE_CMD, and it waits when the SYNC is near
         self.controller.after_write(self._next_deadline - self.clock())
+        self._cycle_end = self.clock()
+        phase[PH_HOST_WORK] = self._cycle_end - written
 
     def _log_fault(self, sync_time: float) -> None:
         """One stderr line when the controller faults (an event, not the steady cycle): which
@@ -419,13 +442,14 @@ class ControllerLoop:
         self._run_cycles(self.cfg.shutdown_disable_cycles, never)
 
     def timing(self) -> dict:
+        """Percentiles (us) of the compute time, the period error and each phase of the cycle,
+        over the last HISTORY cycles."""
         n = min(self.stats.cycles, HISTORY)
-        out = {}
-        for name, data in (("compute_us", self.compute_s[:n]), ("period_error_us", self.period_error_s[:n])):
-            if n:
-                p50, p99 = np.percentile(data, [50, 99]) * 1e6
-                out[name] = {"p50": round(float(p50), 1), "p99": round(float(p99), 1),
-                             "max": round(float(data.max()) * 1e6, 1)}
+        if not n:
+            return {}
+        out = {"compute_us": percentiles_us(self.compute_s[:n]),
+               "period_error_us": percentiles_us(self.period_error_s[:n])}
+        out["phases_us"] = {name: percentiles_us(self.phase_s[:n, j]) for j, name in enumerate(PHASES)}
         return out
 
     def summary(self) -> dict:
@@ -435,3 +459,4 @@ class ControllerLoop:
                 "missing_frames": s.missing_frames, "faults": s.faults, "fault_code": c.sup.fault_code.name,
                 "state": c.state.name, "emergencies": s.emergencies, "host_commands": s.host_commands,
                 "frames_sent": s.frames_sent, "timing": self.timing()}
+

@@ -80,7 +80,25 @@ def format_report(scenario: Scenario, doc: dict, analysis) -> str:
     if doc.get("failure") is None and "children" in doc:
         for name, child in doc["children"].items():
             lines.append(f"- {name}: exit {child['exit_status']}: `{child['summary_line']}`")
+    budget = format_budget(doc)
+    if budget:
+        lines += ["", budget]
     return "\n".join(lines) + "\n"
+
+
+def format_budget(doc: dict) -> str:
+    """Where each process's cycle goes: the controller's phases per cycle and the emulator's per
+    SYNC (p50 / p99 / max in us, each process's own clock), from their exit summaries."""
+    rows = []
+    for name, child in doc.get("children", {}).items():
+        summary = child.get("summary") or {}
+        phases = summary.get("timing", {}).get("phases_us") or summary.get("phases_us") or {}
+        rows += [f"| {name} | {phase} | {p['p50']:g} | {p['p99']:g} | {p['max']:g} |" for phase, p in phases.items()]
+    if not rows:
+        return ""
+    period_us = 1e6 / doc.get("rate_hz", 500.0)
+    return "\n".join([f"## Cycle budget (period {period_us:g} us)", "",
+                      "| process | phase | p50 us | p99 us | max us |", "|---|---|---|---|---|", *rows])
 
 
 def format_terminal(doc: dict) -> str:

@@ -21,6 +21,7 @@ wall clock with the valves in FAULT_HOLD, and EMU_TRUTH reports where the mechan
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from dataclasses import dataclass, field
@@ -35,11 +36,17 @@ from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import EmuCommand, EmuFault, NmtCommand, NmtState
 from protocol.nodes import CONTROLLER_NODE, IMU_NODE, rig_nodes
 from protocol.outbox import Outbox
+from protocol.realtime import percentiles_us
 
 from . import hydraulics as hy
 from .params import EmulatorConfig
 from .valve_node import Emergency, ValveDriver, ValveState
 
+# per SYNC (seconds each, `phase_s`): from the SYNC's arrival to the last sampled frame sent;
+# the valve nodes' SYNC handling; sampling, encoding and sending; the physics step; the whole
+SYNC_PHASES = ("response", "nodes", "send", "physics", "total")
+SP_RESPONSE, SP_NODES, SP_SEND, SP_PHYSICS, SP_TOTAL = range(len(SYNC_PHASES))
+SYNC_HISTORY = 1 << 16
 BABBLE_ID = 0x601                    # not in the DBC (an SDO request id of node 1)
 FREE_RUN_CATCH_UP_STEPS = 25         # free run: periods of physics per poll at most (a late wake-up)
 # EMU_CTRL.FAULT (the DBC's value table). REPEAT: the node re-sends its previous frame (a
@@ -123,6 +130,8 @@ class Emulator:
                 override = next((d for prefix, d in divisors.items() if name.startswith(prefix)), 0)
                 self._period[name] = override or dbc_period
         self._overflow = sync_counter_overflow()
+        self.phase_s = np.zeros((SYNC_HISTORY, len(SYNC_PHASES)))     # per SYNC, seconds
+        self._received = math.nan                           # when the frame being handled came in
 
     def _tx_names(self) -> list[str]:
         names = []
@@ -364,6 +373,7 @@ class Emulator:
     # -- SYNC ---------------------------------------------------------------------------------
     def on_sync(self, counter: int, waited_s: float = 0.0) -> None:
         now = self.clock()
+        phase = self.phase_s[self.counters.syncs % SYNC_HISTORY]
         self.counters.syncs += 1
         if self.sync_counter and counter != self.sync_counter % self._overflow + 1:
             self.counters.sync_sequence_errors += 1
@@ -381,10 +391,16 @@ class Emulator:
                 emergency = valve.check_spool(float(self.rig.state[n - 1, hy.S_SPOOL]))
             if emergency is not None:
                 self._emergency(n, emergency)
+        nodes = self.clock()
         self._sample_and_send(counter)
+        sent = self.clock()
         self._apply_valves()
         self.rig.advance(self.cfg.sync_period_s)
+        stepped = self.clock()
         self._count_down_faults()
+        received = self._received if not math.isnan(self._received) else now
+        phase[SP_RESPONSE], phase[SP_NODES], phase[SP_SEND] = sent - received, nodes - now, sent - nodes
+        phase[SP_PHYSICS], phase[SP_TOTAL] = stepped - sent, self.clock() - received
 
     def _apply_valves(self) -> None:
         """Spool commands to the rig, and the load-holding valves open only while ACTIVE."""
@@ -497,7 +513,7 @@ class Emulator:
             timeout = min(max(wait, 0.0005), 0.05)
             wake = self.clock() + timeout
             msg = self.bus.recv(timeout=timeout)
-            received = self.clock()
+            received = self._received = self.clock()
             if received - wake > self.cfg.sync_period_s:         # woken this late: not scheduled
                 self.pause_node_clocks(received - wake)
             if msg is not None:
@@ -509,6 +525,9 @@ class Emulator:
 
     def summary(self) -> dict:
         valves = {str(n): ValveState(v.state).name for n, v in self.valves.items()}
+        n = min(self.counters.syncs, SYNC_HISTORY)
+        phases = {name: percentiles_us(self.phase_s[:n, j]) for j, name in enumerate(SYNC_PHASES)} if n else {}
         return {"rig": self.rig.name, "sim_time_s": round(self.rig.time_s, 6), **self.counters.as_dict(),
+                "phases_us": phases,
                 "rx_status": {s.name: int(c) for s, c in zip(RxStatus, self.decoder.counts.sum(axis=0))},
                 "valves": valves}

@@ -3,7 +3,8 @@ host's recorder. Once a process's start-up is over: its start-up objects are fro
 the garbage collector (a collection then scans only what the run created, not the whole
 heap of NumPy, SciPy and MuJoCo objects), its memory is locked (no page fault in the loop),
 and it may run SCHED_FIFO and pinned to a CPU. A measure that is not permitted returns the
-reason, for the process to log; none of them is fatal.
+reason, for the process to log; none of them is fatal. And the one summary of a loop's
+duration records (percentiles in us).
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ import ctypes.util
 import gc
 import os
 import resource
+
+import numpy as np
 
 MCL_CURRENT, MCL_FUTURE = 1, 2
 
@@ -84,3 +87,9 @@ def pin_cpu(cpu: int) -> str | None:
     except (OSError, AttributeError) as exc:
         return f"CPU affinity {cpu} not permitted ({exc})"
     return None
+
+
+def percentiles_us(seconds) -> dict:
+    """p50, p99 and max of a record of durations in seconds, in us (the loops' timing summaries)."""
+    p50, p99 = np.percentile(seconds, [50, 99]) * 1e6
+    return {"p50": round(float(p50), 1), "p99": round(float(p99), 1), "max": round(float(np.max(seconds)) * 1e6, 1)}

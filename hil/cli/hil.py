@@ -49,8 +49,10 @@ def _loads(text: str | None) -> tuple[float, ...] | None:
 
 
 def _finish(args, doc: dict) -> int:
-    from ..report import format_terminal
+    from ..report import format_budget, format_terminal
     print(json.dumps(doc, indent=1, default=str) if args.json else format_terminal(doc))
+    if getattr(args, "profile", False) and not args.json:
+        print(format_budget(doc) or "no cycle budget: no process summary was written")
     return 0 if doc["passed"] else 1
 
 
@@ -162,6 +164,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="how long the processes may take to come up (default 90; a VM without KVM needs more)")
     p.add_argument("--no-plots", action="store_true", help="metrics and report without the PNG figures")
     p.add_argument("--json", action="store_true", help="print metrics.json instead of the summary")
+    p.add_argument("--profile", action="store_true",
+                   help="print the cycle budget too: each phase of the controller's cycle and of the "
+                        "emulator's SYNC handling (also in report.md)")
     p.set_defaults(handler=_run)
     p = hil_sub.add_parser("faults", help="the fault-injection matrix: every case in its own emulator + "
                                           "controller session, reaction times and excursions from the log")
