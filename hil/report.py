@@ -77,6 +77,8 @@ def format_report(scenario: Scenario, doc: dict, analysis) -> str:
               f"frames missing from counter sequences {doc['log']['lost_frames']}",
               f"- overruns (CTRL_STATUS) {doc['overruns']}; controller period error per 16-cycle window "
               f"{t.get('period_error_us')}; compute time {t.get('compute_time_us')}"]
+    if realtime_line(doc):
+        lines.append(f"- {realtime_line(doc)}")
     if doc.get("failure") is None and "children" in doc:
         for name, child in doc["children"].items():
             lines.append(f"- {name}: exit {child['exit_status']}: `{child['summary_line']}`")
@@ -109,6 +111,24 @@ def format_terminal(doc: dict) -> str:
         lines.append(f"  [{mark}] {c['name']}{kind}: {c['measured']} (expected {c['expected']})")
     lines.append(f"  e2e_errors={doc['e2e_errors']} overruns={doc['overruns']} frames={doc['log']['frames']} "
                  f"lost={doc['log']['lost_frames']}")
+    realtime = realtime_line(doc)
+    if realtime:
+        lines.append("  " + realtime)
     if doc.get("failure"):
         lines.append("  run failure: " + doc["failure"].replace("\n", "\n    "))
     return "\n".join(lines)
+
+
+def realtime_line(doc: dict) -> str:
+    """A realtime run's timing in one line: clean (no overrun, no emulator stall) or not, with
+    the period error and compute time (CTRL_STATUS windows) and the emulator's stalls."""
+    if doc.get("pacing") != "realtime":
+        return ""
+    t = doc.get("ctrl_status_timing", {})
+    period, compute = t.get("period_error_us") or {}, t.get("compute_time_us") or {}
+    emulator = ((doc.get("children") or {}).get("emulator") or {}).get("summary") or {}
+    stalls, stall_max = emulator.get("host_stalls"), emulator.get("host_stall_max_ms")
+    clean = doc.get("overruns") == 0 and stalls == 0
+    return (f"realtime: {'clean' if clean else 'NOT clean'}: overruns {doc.get('overruns')}, period error p99 "
+            f"{period.get('p99')} us (max {period.get('max')}), compute p99 {compute.get('p99')} us "
+            f"(max {compute.get('max')}), emulator stalls {stalls} (max {stall_max} ms)")

@@ -97,3 +97,17 @@ def test_the_budget_table_has_a_row_per_process_and_phase():
     assert len(rows) == len(SYNC_PHASES) + len(PHASES)
     assert "| controller | update | 1 | 2 | 3 |" in rows
     assert format_budget({"children": {}}) == ""
+
+
+def test_a_realtime_run_says_in_one_line_whether_it_was_clean():
+    from hil.report import realtime_line
+    timing = {"period_error_us": {"p99": 60.0, "max": 900.0}, "compute_time_us": {"p99": 400.0, "max": 1000.0}}
+    doc = {"pacing": "realtime", "overruns": 0, "ctrl_status_timing": timing,
+           "children": {"emulator": {"summary": {"host_stalls": 0, "host_stall_max_ms": 0.0}}}}
+    assert realtime_line(doc).startswith("realtime: clean: overruns 0, period error p99 60.0 us")
+    doc["children"]["emulator"]["summary"]["host_stalls"] = 2
+    assert realtime_line(doc).startswith("realtime: NOT clean") and "emulator stalls 2" in realtime_line(doc)
+    doc["children"]["emulator"]["summary"]["host_stalls"] = 0
+    doc["overruns"] = 1
+    assert "NOT clean: overruns 1" in realtime_line(doc)
+    assert realtime_line({**doc, "pacing": "lockstep"}) == ""
