@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from protocol.enums import State
+from protocol.enums import Fault, State
 
 from .logdata import LogData
 
@@ -103,6 +103,25 @@ def after_machine_stall(log: LogData, cycle: int, period_s: float) -> bool:
     return late_sensor_frames(log, lo, hi, period_s) > 0
 
 
+def realtime_paced(log: LogData, period_s: float) -> bool:
+    """Whether the log's SYNCs came on the period's grid (realtime pacing), not as soon as each
+    exchange was over (lockstep, where a long SYNC gap is no machine stall)."""
+    sync = log.sync_time_s[np.isfinite(log.sync_time_s)]
+    return len(sync) > 2 and abs(float(np.median(np.diff(sync))) - period_s) < 0.05 * period_s
+
+
+def split_faults(log: LogData, period_s: float) -> tuple[list[tuple[int, str]], list[tuple[int, str]]]:
+    """The controller's faults as (cycle, name): (the machine's, the others). A fault is the
+    machine's in a realtime-paced log when it is OVERRUN (the stall watchdog) or follows a
+    machine stall (`after_machine_stall`)."""
+    realtime = realtime_paced(log, period_s)
+    stalled, other = [], []
+    for _, cycle, code in fault_transitions(log):
+        machine = realtime and (code == Fault.OVERRUN or after_machine_stall(log, cycle, period_s))
+        (stalled if machine else other).append((cycle, Fault(code).name))
+    return stalled, other
+
+
 def late_sensor_frames(log: LogData, lo: int, hi: int, period_s: float) -> int:
     """LEG_STATE frames of cycles [lo, hi) on the bus more than STALL_LATE_FRAME_PERIODS after
     their cycle's SYNC."""
@@ -119,12 +138,6 @@ def late_sensor_frames(log: LogData, lo: int, hi: int, period_s: float) -> int:
 def in_us(stats: dict) -> dict:
     """Seconds -> microseconds (0.1 us) for the float entries of a `percentiles` result."""
     return {k: (round(v * 1e6, 1) if isinstance(v, float) else v) for k, v in stats.items()}
-
-
-def fault_codes(log: LogData) -> list[int]:
-    """Every non-zero FAULT_CODE the controller reported in CTRL_STATUS, sorted."""
-    code = log.get("CTRL_STATUS")["FAULT_CODE"]
-    return sorted({int(c) for c in code[code != 0]})
 
 
 def last_value_before(series_cycles, series_values, cycle: int, default=np.nan):

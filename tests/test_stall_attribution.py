@@ -7,7 +7,14 @@ import numpy as np
 import pytest
 
 from hil.logdata import LogData, Series
-from hil.metrics import STALL_WINDOW_CYCLES, after_machine_stall, fault_transitions, overrun_counts
+from hil.metrics import (
+    STALL_WINDOW_CYCLES,
+    after_machine_stall,
+    fault_transitions,
+    overrun_counts,
+    realtime_paced,
+    split_faults,
+)
 from protocol.enums import Fault, State
 
 PERIOD_S = 0.002
@@ -73,3 +80,21 @@ def test_sensor_frames_late_after_their_sync_are_a_stall_of_the_nodes(late_s, st
     in the log)."""
     log = status_log(fault_at=800, leg_delay_s={k: late_s for k in range(785, 790)})
     assert after_machine_stall(log, 800, PERIOD_S) is stall
+
+
+@pytest.mark.parametrize("lockstep", [False, True])
+def test_split_faults_counts_a_stall_only_where_the_syncs_kept_the_period(lockstep):
+    """A realtime log: the fault after late sensor frames is the machine's, the one with nothing
+    before it is not. The same log paced lockstep (SYNCs as soon as each exchange ends, here
+    0.7 ms apart) has no machine stall: both faults are the controller's."""
+    log = status_log(fault_at=800, leg_delay_s={k: 8e-3 for k in range(785, 790)})
+    if lockstep:
+        log.sync_time_s[:] = np.arange(N) * 0.7e-3
+    assert realtime_paced(log, PERIOD_S) is not lockstep
+    stalls, others = split_faults(log, PERIOD_S)
+    expected = [(800, "SENSOR_TIMEOUT")]
+    assert (stalls, others) == (([], expected) if lockstep else (expected, []))
+    stalls, others = split_faults(status_log(fault_at=800), PERIOD_S)
+    assert (stalls, others) == ([], expected)
+    stalls, _ = split_faults(status_log(fault_at=800, code=Fault.OVERRUN), PERIOD_S)
+    assert stalls == [(800, "OVERRUN")]                  # the stall watchdog itself

@@ -11,10 +11,11 @@ import numpy as np
 
 from firmware_py.geometry import default_geometry
 from firmware_py.kinematics import DirectKinematics
-from protocol.enums import WaypointFlag
+from protocol.enums import Fault, State, WaypointFlag
 
+from ..host import HostError
 from ..logdata import LogData
-from ..metrics import fault_codes, iae
+from ..metrics import iae, split_faults
 from ..motions import Motion, circle_motion, diagonal_motion
 from ..plotting import plt, save
 from ..reference import rebuild
@@ -26,6 +27,9 @@ SETTLE_AFTER_S = 0.5            # the IAE window ends this long after the moveme
 RETURN_TIME_S, RETURN_ACCEL_S = 1.5, 0.3
 APPROACH_SPEED_M_S = 0.2
 THESIS_NAMES = {"adaptive": "iae_pi_plus_p", "model-based": "iae_model_based"}
+# realtime: a movement a fault cut short is repeated (after RESET + ENABLE) at most this often;
+# the analysis judges from the log whether a machine stall caused the fault
+MAX_ATTEMPTS = 3
 
 
 class PlatformMovement(Scenario):
@@ -51,25 +55,40 @@ class PlatformMovement(Scenario):
         return replace(m, ta_s=m.ta_s * self.time_scale, tm_s=m.tm_s * self.time_scale)
 
     def script(self, run) -> None:
-        geometry = default_geometry()
         motion = self.motion()
-        home = geometry.home_position_m
         for controller in self.chosen(run):
             run.select(controller)
-            # to the exact home pose first, so the movement starts from a known reference
-            run.host.waypoint(home, segment_time_s=RETURN_TIME_S, accel_time_s=RETURN_ACCEL_S,
-                              flags=WaypointFlag.LAST | WaypointFlag.START)
-            run.wait_s(RETURN_TIME_S + 0.3)
-            duration = 0.0
-            for p, part in enumerate(motion.parts):
-                for k, point in enumerate(part[1:]):
-                    flags = (WaypointFlag.START if k == 0 else 0) | (WaypointFlag.LAST if k == len(part) - 2 else 0)
-                    tm = segment_time(motion, p, part[k], point)
-                    run.host.waypoint(point, segment_time_s=tm, accel_time_s=motion.ta_s, flags=flags)
-                    duration += tm
-            run.wait_s(duration + 0.2)
-            run.wait_motion_done(5.0)
-            run.wait_s(SETTLE_AFTER_S + 0.2)
+            for attempt in range(1, MAX_ATTEMPTS + 1):
+                try:
+                    self._move(run, motion)
+                    if run.host.state is not State.FAULT:
+                        break
+                    error: Exception = HostError("the controller faulted during the movement")
+                except HostError as failure:
+                    error = failure
+                if run.pacing != "realtime" or run.host.state is not State.FAULT or attempt == MAX_ATTEMPTS:
+                    raise error
+                run.notes.append(f"{controller}: fault {Fault(run.host.fault_code).name} during attempt {attempt} "
+                                 f"(realtime; whether a machine stall caused it is judged from the log): "
+                                 f"recovered, the movement repeated")
+                run.recover_from_fault()
+
+    def _move(self, run, motion: Motion) -> None:
+        """To the exact home pose, so the movement starts from a known reference; then the
+        movement, queued, and its settling."""
+        run.host.waypoint(default_geometry().home_position_m, segment_time_s=RETURN_TIME_S,
+                          accel_time_s=RETURN_ACCEL_S, flags=WaypointFlag.LAST | WaypointFlag.START)
+        run.wait_s(RETURN_TIME_S + 0.3)
+        duration = 0.0
+        for p, part in enumerate(motion.parts):
+            for k, point in enumerate(part[1:]):
+                flags = (WaypointFlag.START if k == 0 else 0) | (WaypointFlag.LAST if k == len(part) - 2 else 0)
+                tm = segment_time(motion, p, part[k], point)
+                run.host.waypoint(point, segment_time_s=tm, accel_time_s=motion.ta_s, flags=flags)
+                duration += tm
+        run.wait_s(duration + 0.2)
+        run.wait_motion_done(5.0)
+        run.wait_s(SETTLE_AFTER_S + 0.2)
 
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
         period = 1.0 / rate_hz
@@ -89,6 +108,10 @@ class PlatformMovement(Scenario):
         status = log.get("CTRL_STATUS")
         fault_cycles = status.cycle[status["FAULT_CODE"] != 0]
         for controller, motions in runs.items():
+            # a repeated movement: the attempts before the last fault were cut short by it
+            span = (fault_cycles >= motions[0].start) & (fault_cycles <= motions[-1].end_cycle)
+            if span.any():
+                motions = [m for m in motions if m.start > fault_cycles[span].max()] or motions
             first = motions[0].start
             end = motions[-1].end_cycle + int(SETTLE_AFTER_S / period)
             last = min(end, log.n_cycles - 1)
@@ -109,9 +132,11 @@ class PlatformMovement(Scenario):
             }
             series[controller] = ((cycles - first) * period, x_ref, x_true, x_dk)
         checks = []
-        faults = fault_codes(log)
-        checks.append(Check("no controller fault during the run", not faults,
-                            f"fault codes {faults}" if faults else "none", "none"))
+        stalls, others = split_faults(log, period)
+        checks.append(Check("no controller fault without a machine stall before it", not others,
+                            f"{[name for _, name in others] or 'none'}", "none"))
+        checks.append(Check("faults after a machine stall (realtime: recovered, the movement repeated)", not stalls,
+                            f"{[name for _, name in stalls] or 'none'}", "none", required=False))
         if not runs:
             checks.append(Check(f"{self.motion_name} movement found in the log", False, "0 runs", ">= 1"))
         if "adaptive" in results and "model-based" in results:

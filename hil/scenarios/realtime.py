@@ -17,17 +17,16 @@ import numpy as np
 
 from firmware_py.geometry import default_geometry
 from physics.constants import MM
-from protocol.enums import Fault, State, WaypointFlag
+from protocol.enums import State, WaypointFlag
 
 from ..host import HostError
 from ..logdata import LogData
 from ..metrics import (
-    after_machine_stall,
     ctrl_status_timing,
-    fault_transitions,
     in_us,
     late_sensor_frames,
     percentiles,
+    split_faults,
 )
 from ..plotting import plt, save
 from ..scenario import Analysis, Check, Figure, Scenario
@@ -85,10 +84,8 @@ class Realtime(Scenario):
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
         period = 1.0 / rate_hz
         seconds = log.n_cycles * period
-        stalled, unexplained = [], []
-        for _, cycle, code in fault_transitions(log):
-            stall = code == Fault.OVERRUN or after_machine_stall(log, cycle, period)
-            (stalled if stall else unexplained).append(Fault(code).name)
+        stalls, others = split_faults(log, period)
+        stalled, unexplained = [name for _, name in stalls], [name for _, name in others]
         checks = [Check("ran for the requested time", seconds >= 0.95 * self.requested_s,
                         f"{seconds:.1f} s of cycles", f">= {self.requested_s:g} s"),
                   Check("no controller fault without a machine stall before it", not unexplained,
