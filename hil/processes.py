@@ -26,19 +26,11 @@ class Child:
         self.proc: subprocess.Popen | None = None
         self.stopping = False
 
-    def start(self, realtime_priority: int | None = None) -> list[str]:
-        """Launch; with `realtime_priority`, try SCHED_FIFO for it (notes say what was not permitted)."""
+    def start(self) -> None:
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         with open(self.stdout_path, "w") as out, open(self.stderr_path, "w") as err:
             self.proc = subprocess.Popen([sys.executable, *self.argv], stdout=out, stderr=err, env=env,
                                          stdin=subprocess.DEVNULL)
-        notes = []
-        if realtime_priority is not None:
-            try:
-                os.sched_setscheduler(self.proc.pid, os.SCHED_FIFO, os.sched_param(realtime_priority))
-            except (OSError, AttributeError) as error:
-                notes.append(f"{self.name}: SCHED_FIFO not applied ({error})")
-        return notes
 
     @property
     def returncode(self) -> int | None:

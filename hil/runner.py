@@ -124,7 +124,7 @@ class Run:
                              "--summary", str(self.out / f"{name}.json"),
                              *(["--realtime"] if self.pacing == "realtime" else [])], self.out)
         heartbeats = self.host.node_heartbeats
-        self.notes += child.start(realtime_priority=70 if self.pacing == "realtime" else None)
+        child.start()                # --realtime: it locks its memory and runs SCHED_FIFO itself
         self.children.append(child)
         # its boot-up heartbeats: the controller's 5 s activation window starts only then
         self.host.wait_until(lambda: self.host.node_heartbeats > heartbeats, 10**9,
