@@ -11,7 +11,7 @@ import json
 import sys
 
 from protocol.cliutil import StopFlag
-from protocol.realtime import freeze_gc, lock_memory, pin_cpu, set_fifo, thaw_gc
+from protocol.realtime import applied, freeze_gc, lock_memory, pin_cpu, set_fifo, thaw_gc
 
 from .config import ControllerConfig, load_config
 from .control import CONTROLLER_NAMES
@@ -26,14 +26,11 @@ def realtime_setup(cfg: ControllerConfig, realtime: bool) -> list[str]:
     freeze_gc(disable=True)
     if not realtime:
         return []
-    problems = {f"SCHED_FIFO priority {cfg.realtime_priority}": set_fifo(cfg.realtime_priority),
+    measures = {f"SCHED_FIFO priority {cfg.realtime_priority}": set_fifo(cfg.realtime_priority),
                 "mlockall": lock_memory()}
     if cfg.cpu >= 0:
-        problems[f"CPU {cfg.cpu}"] = pin_cpu(cfg.cpu)
-    for problem in problems.values():
-        if problem:
-            log(problem)
-    return [done for done, problem in problems.items() if problem is None]
+        measures[f"CPU {cfg.cpu}"] = pin_cpu(cfg.cpu)
+    return applied(measures, log)
 
 
 def realtime_teardown() -> None:

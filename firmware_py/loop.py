@@ -459,4 +459,3 @@ class ControllerLoop:
                 "missing_frames": s.missing_frames, "faults": s.faults, "fault_code": c.sup.fault_code.name,
                 "state": c.state.name, "emergencies": s.emergencies, "host_commands": s.host_commands,
                 "frames_sent": s.frames_sent, "timing": self.timing()}
-

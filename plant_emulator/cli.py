@@ -8,7 +8,7 @@ import json
 import sys
 
 from protocol.cliutil import StopFlag, number_in_range, output_file
-from protocol.realtime import freeze_gc, lock_memory, set_fifo
+from protocol.realtime import applied, freeze_gc, lock_memory, set_fifo
 
 from .params import load_config
 
@@ -34,14 +34,9 @@ def load_run_config(args) -> object:
 def realtime_setup(cfg) -> list[str]:
     """Memory locked and SCHED_FIFO at the config's priority; returns what was applied and
     logs each measure that is not permitted (never fatal)."""
-    applied = []
-    for name, problem in (("mlockall", lock_memory()),
-                          (f"SCHED_FIFO priority {cfg.realtime_priority}", set_fifo(cfg.realtime_priority))):
-        if problem:
-            print(f"emulator: {problem}", file=sys.stderr, flush=True)
-        else:
-            applied.append(name)
-    return applied
+    return applied({"mlockall": lock_memory(),
+                    f"SCHED_FIFO priority {cfg.realtime_priority}": set_fifo(cfg.realtime_priority)},
+                   lambda text: print(f"emulator: {text}", file=sys.stderr, flush=True))
 
 
 def run_emulator(args) -> int:

@@ -21,7 +21,6 @@ wall clock with the valves in FAULT_HOLD, and EMU_TRUTH reports where the mechan
 from __future__ import annotations
 
 import json
-import math
 import sys
 import time
 from dataclasses import dataclass, field
@@ -42,7 +41,7 @@ from . import hydraulics as hy
 from .params import EmulatorConfig
 from .valve_node import Emergency, ValveDriver, ValveState
 
-# per SYNC (seconds each, `phase_s`): from the SYNC's arrival to the last sampled frame sent;
+# per SYNC (seconds each, `phase_s`): from the SYNC's handling to the last sampled frame sent;
 # the valve nodes' SYNC handling; sampling, encoding and sending; the physics step; the whole
 SYNC_PHASES = ("response", "nodes", "send", "physics", "total")
 SP_RESPONSE, SP_NODES, SP_SEND, SP_PHYSICS, SP_TOTAL = range(len(SYNC_PHASES))
@@ -131,7 +130,6 @@ class Emulator:
                 self._period[name] = override or dbc_period
         self._overflow = sync_counter_overflow()
         self.phase_s = np.zeros((SYNC_HISTORY, len(SYNC_PHASES)))     # per SYNC, seconds
-        self._received = math.nan                           # when the frame being handled came in
 
     def _tx_names(self) -> list[str]:
         names = []
@@ -398,9 +396,8 @@ class Emulator:
         self.rig.advance(self.cfg.sync_period_s)
         stepped = self.clock()
         self._count_down_faults()
-        received = self._received if not math.isnan(self._received) else now
-        phase[SP_RESPONSE], phase[SP_NODES], phase[SP_SEND] = sent - received, nodes - now, sent - nodes
-        phase[SP_PHYSICS], phase[SP_TOTAL] = stepped - sent, self.clock() - received
+        phase[SP_RESPONSE], phase[SP_NODES], phase[SP_SEND] = sent - now, nodes - now, sent - nodes
+        phase[SP_PHYSICS], phase[SP_TOTAL] = stepped - sent, self.clock() - now
 
     def _apply_valves(self) -> None:
         """Spool commands to the rig, and the load-holding valves open only while ACTIVE."""
@@ -513,7 +510,7 @@ class Emulator:
             timeout = min(max(wait, 0.0005), 0.05)
             wake = self.clock() + timeout
             msg = self.bus.recv(timeout=timeout)
-            received = self._received = self.clock()
+            received = self.clock()
             if received - wake > self.cfg.sync_period_s:         # woken this late: not scheduled
                 self.pause_node_clocks(received - wake)
             if msg is not None:

@@ -72,10 +72,10 @@ def lock_memory() -> str | None:
     return None
 
 
-def set_fifo(priority: int, pid: int = 0) -> str | None:
-    """SCHED_FIFO at `priority` for `pid` (0: this process); None when done, else why not."""
+def set_fifo(priority: int) -> str | None:
+    """SCHED_FIFO at `priority` for this process; None when done, else why not."""
     try:
-        os.sched_setscheduler(pid, os.SCHED_FIFO, os.sched_param(priority))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except (OSError, AttributeError) as exc:
         return f"SCHED_FIFO not permitted ({exc}); running with normal scheduling"
     return None
@@ -87,6 +87,14 @@ def pin_cpu(cpu: int) -> str | None:
     except (OSError, AttributeError) as exc:
         return f"CPU affinity {cpu} not permitted ({exc})"
     return None
+
+
+def applied(measures: dict[str, str | None], log) -> list[str]:
+    """{measure: None when done, else why not}: `log` each reason; the names of those done."""
+    for problem in measures.values():
+        if problem:
+            log(problem)
+    return [name for name, problem in measures.items() if problem is None]
 
 
 def percentiles_us(seconds) -> dict:
