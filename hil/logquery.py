@@ -30,6 +30,12 @@ class LogView:
         k = np.flatnonzero(valid & (self.sync_t >= t))
         return int(k[0]) if len(k) else None
 
+    def cycle_of_sync(self, counter: int, t: float) -> int | None:
+        """The cycle of the SYNC with this counter nearest to time `t` (counters wrap)."""
+        sync = self.log.get("SYNC")
+        k = np.flatnonzero(sync["COUNTER"] == counter)
+        return int(sync.cycle[k[np.argmin(np.abs(sync.time_s[k] - t))]]) if len(k) else None
+
     def faults_between(self, t0: float, t1: float) -> list[str]:
         s = self.status
         ok = (s.time_s >= t0) & (s.time_s <= t1) & (s["FAULT_CODE"] != 0)

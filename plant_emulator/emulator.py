@@ -54,6 +54,9 @@ FREE_RUN_CATCH_UP_STEPS = 25         # free run: periods of physics per poll at 
 VALUE_PARAM_FAULTS = (EmuFault.BABBLE, EmuFault.OUT_OF_RANGE)
 KNOWN_FAULTS = frozenset(int(kind) for kind in EmuFault if kind is not EmuFault.NONE)
 SYNC_TIMEOUT_EVENT = "emulator: event sync_timeout"   # a stderr line per SYNC-watchdog trip (JSON after it)
+# a stderr line per injected fault, at the first SYNC that sees it: the fault's onset cycle
+# (the host's EMU_CTRL and the controller's SYNC race to this process: only it knows the order)
+FAULT_ONSET_EVENT = "emulator: event fault_onset"
 
 
 def attitude_rpy(quat_wxyz) -> np.ndarray:
@@ -79,13 +82,14 @@ class Counters:
     # every SYNC-watchdog trip: when (epoch s), and how late this process woke for it (ms): a
     # real node's hardware timer fires on time; ours is this process's wake-up (hil faults, case 1)
     sync_timeouts: list = field(default_factory=list)
+    fault_onsets: list = field(default_factory=list)    # every injection: its SYNC counter and epoch time
 
     def as_dict(self) -> dict:
         return {k: getattr(self, k) for k in ("syncs", "frames_in", "frames_out", "e2e_errors",
                                               "sync_sequence_errors", "valve_faults", "emergencies",
                                               "unknown_frames", "host_stalls", "free_run_steps")} | {
             "host_stall_max_ms": round(self.host_stall_max_s * 1e3, 3), "injected": dict(self.injected),
-            "sync_timeouts": list(self.sync_timeouts)}
+            "sync_timeouts": list(self.sync_timeouts), "fault_onsets": list(self.fault_onsets)}
 
 
 class Emulator:
@@ -119,6 +123,7 @@ class Emulator:
         self._free_run_next: float | None = None           # wall time of the next free-run step
         self._delayed: list[can.Message] = []              # DELAY: frames sent at the next SYNC
         self._stuck: dict[int, tuple] = {}
+        self._onsets: list[dict] = []                      # injected since the last SYNC
         self._ignore_commands = 0
         divisors = {"LEG_PRESSURE": cfg.leg_pressure_divisor, "VALVE_STATUS": cfg.valve_status_divisor,
                     "IMU": cfg.imu_divisor}
@@ -339,6 +344,7 @@ class Emulator:
             self.faults[(target, kind)] = [lasts, param]
             self.counters.injected[kind.name] = self.counters.injected.get(kind.name, 0) + 1
             self._apply_state_fault(target, kind, True)
+            self._onsets.append({"target": target, "fault": kind.name})
         elif command == EmuCommand.CLEAR_FAULT:
             if self.faults.pop((target, kind), None) is not None:
                 self._apply_state_fault(target, kind, False)
@@ -398,6 +404,15 @@ class Emulator:
         self._count_down_faults()
         phase[SP_RESPONSE], phase[SP_NODES], phase[SP_SEND] = sent - now, nodes - now, sent - nodes
         phase[SP_PHYSICS], phase[SP_TOTAL] = stepped - sent, self.clock() - now
+        if self._onsets:                          # after the response: a print takes its time
+            self._report_onsets(counter)
+
+    def _report_onsets(self, counter: int) -> None:
+        for onset in self._onsets:
+            onset |= {"sync_counter": counter, "t_epoch_s": time.time()}
+            self.counters.fault_onsets.append(onset)
+            print(f"{FAULT_ONSET_EVENT} {json.dumps(onset)}", file=sys.stderr, flush=True)
+        self._onsets.clear()
 
     def _apply_valves(self) -> None:
         """Spool commands to the rig, and the load-holding valves open only while ACTIVE."""

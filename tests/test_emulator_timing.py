@@ -5,12 +5,13 @@ that really went silent."""
 from __future__ import annotations
 
 import copy
+import json
 
 import can
 import numpy as np
 import pytest
 
-from plant_emulator.emulator import Emulator
+from plant_emulator.emulator import FAULT_ONSET_EVENT, Emulator
 from plant_emulator.params import load_config
 from plant_emulator.rigs import make_rig
 from protocol.outbox import Outbox
@@ -167,3 +168,19 @@ def test_repeat_resends_the_previous_frame_and_leg_jam_seizes_the_rod(cfg):
     emulator.rig.command[0] = 0.3
     emulator.rig.advance(0.2)
     assert emulator.rig.stroke_m[0] == y0
+
+
+def test_an_injection_reports_its_onset_at_the_first_sync_that_sees_it(cfg, capsys):
+    """The host's EMU_CTRL and the controller's SYNC race to the emulator: the onset the fault
+    matrix judges from is the SYNC the emulator handled first after the fault, not the log's."""
+    bus = ScriptedBus([])
+    emulator = Emulator(bus, make_rig("testbench", cfg), cfg, clock=bus.clock)
+    emulator.on_sync(7)
+    assert emulator.counters.fault_onsets == []
+    emulator._emu_ctrl(2, 1, 13, 0.0, 0)                      # INJECT LEG_JAM on leg 1
+    emulator.on_sync(8)
+    emulator.on_sync(9)
+    (onset,) = emulator.counters.fault_onsets
+    assert (onset["target"], onset["fault"], onset["sync_counter"]) == (1, "LEG_JAM", 8)
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert line.startswith(FAULT_ONSET_EVENT) and json.loads(line[len(FAULT_ONSET_EVENT):]) == onset

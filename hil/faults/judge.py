@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from plant_emulator.emulator import SYNC_TIMEOUT_EVENT
+from plant_emulator.emulator import FAULT_ONSET_EVENT, SYNC_TIMEOUT_EVENT
 from protocol.enums import AckKind, Command
 
 from ..logquery import LogView
@@ -57,7 +57,7 @@ def judge_transient(view: LogView, mark: Marks, baseline: Marks | None, run_dir:
 def judge_fault(view: LogView, mark: Marks, baseline: Marks | None, run_dir: Path | None):
     """Persistent and plant faults: the reason, the cycles to the reaction, the excursion."""
     c = mark.case
-    k0 = first_affected_cycle(view, mark, c)
+    k0 = first_affected_cycle(view, mark, c, run_dir)
     reaction = view.reaction_cycle(k0, "CW_M")
     code = view.fault_code_after(k0)
     cycles = None if reaction is None or k0 is None else reaction - k0 + 1
@@ -174,21 +174,37 @@ def judge_kill(view: LogView, mark: Marks, baseline: Marks | None, run_dir: Path
                               "periods_after_last_sync_or_command": from_applied, "emulator_trip_late_ms": late_ms,
                               "node_periods": node_periods, "excursion_m": excursion}
 
-def emulator_trip_late_ms(run_dir: Path | None, t0: float, t1: float) -> float | None:
-    """The emulator's own record of its SYNC-watchdog trips in [t0, t1] (None: no run)."""
-    if run_dir is None:
-        return None
-    late = []
-    for path in run_dir.glob("emulator*.stderr.log"):     # a killed emulator leaves no summary
+def emulator_events(run_dir: Path | None, event: str, t0: float, t1: float) -> list[dict]:
+    """The emulators' own event lines of one kind (JSON after `event`) stamped in [t0, t1]:
+    from stderr, which a killed emulator has written too (it leaves no summary)."""
+    found = []
+    for path in sorted(run_dir.glob("emulator*.stderr.log")) if run_dir is not None else ():
         for line in path.read_text(errors="replace").splitlines():
-            if line.startswith(SYNC_TIMEOUT_EVENT):
+            if line.startswith(event):
                 try:
-                    trip = json.loads(line[len(SYNC_TIMEOUT_EVENT):])
+                    record = json.loads(line[len(event):])
                 except ValueError:
                     continue
-                if t0 <= trip["t_epoch_s"] <= t1:
-                    late.append(trip["late_ms"])
+                if t0 <= record["t_epoch_s"] <= t1:
+                    found.append(record)
+    return found
+
+
+def emulator_trip_late_ms(run_dir: Path | None, t0: float, t1: float) -> float | None:
+    """The emulator's own record of its SYNC-watchdog trips in [t0, t1] (None: none)."""
+    late = [trip["late_ms"] for trip in emulator_events(run_dir, SYNC_TIMEOUT_EVENT, t0, t1)]
     return max(late) if late else None
+
+
+def onset_cycle(view: LogView, mark: Marks, run_dir: Path | None) -> int | None:
+    """The first cycle that sees an injected fault: the SYNC the emulator handled first after
+    the EMU_CTRL (its onset event), found in the log by its counter and time."""
+    c = mark.case
+    for onset in emulator_events(run_dir, FAULT_ONSET_EVENT, mark.t_inject, mark.t_inject + OBSERVE_S):
+        if onset["fault"] == c.fault and onset["target"] == c.target:
+            return view.cycle_of_sync(onset["sync_counter"], onset["t_epoch_s"])
+    return None
+
 
 def judge_kill_emulator(view: LogView, mark: Marks, baseline: Marks | None, run_dir: Path | None):
     k0 = view.cycle_at(mark.t_inject)
@@ -203,11 +219,13 @@ def judge_kill_emulator(view: LogView, mark: Marks, baseline: Marks | None, run_
     return passed, measured, {"code": code, "cycles": cycles, "held": held}
 
 
-def first_affected_cycle(view: LogView, mark: Marks, case: Case) -> int | None:
+def first_affected_cycle(view: LogView, mark: Marks, case: Case, run_dir: Path | None) -> int | None:
     """Frame faults: the first cycle from the injection without an OK LEG_STATE of the
-    target; plant faults: the first SYNC after the EMU_CTRL."""
+    target; plant faults: the fault's onset cycle (None: the emulator never applied it)."""
+    if case.kind is CaseKind.PLANT:
+        return onset_cycle(view, mark, run_dir)
     k0 = view.cycle_at(mark.t_inject)
-    if k0 is None or case.kind is CaseKind.PLANT:
+    if k0 is None:
         return k0
     s = view.log.get(f"LEG_STATE_{case.target}")
     present = set(s.cycle[s.cycle >= k0].tolist())
