@@ -213,7 +213,7 @@ class HexapodRig(_RigBase):
         self.geometry = geometry or read_rig_geometry()
         self.mechanism = Mechanism(self.geometry, timestep_s=cfg.mujoco_timestep_s, stroke_limits=True)
         mech, model = self.mechanism, self.mechanism.model
-        self._home_length = np.array([leg.length_m for leg in mech.legs_home])
+        self.home_length_m = np.array([leg.length_m for leg in mech.legs_home])
         self._cylinder_body = model.body_parentid[model.site_bodyid[mech.rod_site]]
         self._platform_mass0 = float(model.body_mass[mech.platform_body])
         self._solref_default = model.dof_solref[mech.slide_dof].copy()
@@ -249,7 +249,7 @@ class HexapodRig(_RigBase):
 
     def _read_legs(self) -> None:
         mech = self.mechanism
-        np.add(mech.data.qpos[mech.slide_qpos], self._home_length - self.geometry.leg_min_m, out=self._stroke)
+        np.add(mech.data.qpos[mech.slide_qpos], self.home_length_m - self.geometry.leg_min_m, out=self._stroke)
         self._velocity[:] = mech.data.qvel[mech.slide_dof]
 
     def advance(self, period_s: float) -> None:

@@ -34,6 +34,7 @@ BAD_TEXT = {
     "log": ("/nonexistent/run.blf", "/nonexistent/run.blf"),
     "--plants": ("/nonexistent/metrics.json", "/nonexistent/metrics.json"),
     "--nominal": ("120;6", "120;6"),
+    "--pose": ("0,0,631", "0,0,631"),
     "--controller-config": ("/nonexistent/schedule.toml", "/nonexistent/schedule.toml"),
 }
 OUTPUT_DIRS = ("--out", "--plot")          # given a path below a regular file: cannot be created

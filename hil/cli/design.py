@@ -2,6 +2,8 @@
 
     hydrapod design robustness [--plants SRC] [--nominal MM,KG] [--kp --ki] [--out DIR] [--json]
     hydrapod design schedule [--plants SRC] [--out FILE] [--ki-scale] [--kp-fraction] [--ti-fraction] [--json]
+    hydrapod design modes [--pose X,Y,Z,ROLL,PITCH,YAW] [--payload-kg M] [--supply-bar P] [--along] [--json]
+                          [--plot DIR]
 
 SRC: `table-a3` (the thesis's plants), `emulator` (the emulator's linearisation) or the
 metrics.json of a `hil run sha-identification`.
@@ -11,7 +13,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
+
+import numpy as np
 
 from protocol.cliutil import number_in_range, output_file
 from protocol.errors import UserInputError
@@ -78,8 +83,56 @@ def _schedule(args) -> int:
     return 0 if doc["every_loop_stable_with_detuned_ki"] else 1
 
 
+def _pose(text: str) -> tuple[np.ndarray, np.ndarray]:
+    """argparse `type=`: X,Y,Z,ROLL,PITCH,YAW in mm and degrees."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 6 or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r} is not X,Y,Z,ROLL,PITCH,YAW (mm, deg; e.g. 0,0,631,0,0,0)")
+    return np.array(values[:3]) * 1e-3, np.radians(values[3:])
+
+
+def _modes(args) -> int:
+    from firmware_py.geometry import default_geometry
+    from firmware_py.workspace import check_poses
+    from plant_emulator.params import load_config
+
+    from ..design.modes import (
+        along_movements,
+        format_along,
+        format_modes,
+        modal_model,
+        model_doc,
+        plot_modes,
+        pose_quaternion,
+    )
+    geometry = default_geometry()
+    position, rpy = args.pose if args.pose is not None else (geometry.home_position_m, np.zeros(3))
+    report = check_poses(geometry, position, pose_quaternion(rpy))
+    if not report.reachable[0]:
+        raise UserInputError(f"--pose {', '.join(f'{v:g}' for v in np.r_[position * 1e3, np.degrees(rpy)])}: "
+                             f"outside the hexapod's workspace")
+    out = _out_dir(args.plot, args.plot) if args.plot is not None else None
+    cfg = load_config()
+    supply = None if args.supply_bar is None else args.supply_bar * 1e5
+    doc = model_doc(modal_model(cfg, position, rpy, args.payload_kg, supply))
+    along = along_movements(cfg, args.payload_kg, supply) if args.along else None
+    if along is not None:
+        doc["along"] = along
+    if out is not None:
+        doc["figures"] = [str(out / name) for name in plot_modes(doc, along, out)]
+    if args.json:
+        print(json.dumps(doc, indent=1))
+    else:
+        print(format_modes(doc) + ("\n" + format_along(along) if along is not None else ""))
+    return 0 if doc["converged"] else 1
+
+
 def add_parsers(sub: argparse._SubParsersAction) -> None:
-    design = sub.add_parser("design", help="design tools: robustness of the PI, gain schedule (chapter 7)")
+    design = sub.add_parser("design", help="design tools: robustness of the PI, gain schedule (chapter 7), "
+                                           "the hexapod's modes")
     design_sub = design.add_subparsers(dest="design_command", required=True, metavar="TOOL")
     plants_help = "table-a3 (default), emulator, or a sha-identification metrics.json"
 
@@ -110,3 +163,16 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="Ti = this x Tu (Ziegler-Nichols PI: 1/1.2)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_schedule)
+
+    p = design_sub.add_parser("modes", help="the emulated hexapod's linearised modes at a pose: joint-space "
+                                            "inertia, leg stiffness, flow gain, frequencies, damping, shapes")
+    p.add_argument("--pose", type=_pose, default=None, metavar="X,Y,Z,ROLL,PITCH,YAW",
+                   help="platform pose in mm and degrees (default: home)")
+    p.add_argument("--payload-kg", type=number_in_range(float, 0.0, 65.0), default=0.0,
+                   help="mass on the platform (default 0)")
+    p.add_argument("--supply-bar", type=number_in_range(float, 1.0, 40.0), default=None,
+                   help="supply pressure (default: the emulator's, 25 bar)")
+    p.add_argument("--along", action="store_true", help="also at every waypoint of both movements (11.3)")
+    p.add_argument("--plot", metavar="DIR", default=None, help="write modes.png (and modes_along.png) here")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_modes)

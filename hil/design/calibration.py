@@ -93,14 +93,14 @@ def moving_mass_kg(cfg: EmulatorConfig, load_kg: float) -> float:
     return cfg.piston_rod_mass_kg + cfg.guide.slide_mass_kg + load_kg
 
 
-def linearise(cfg: EmulatorConfig, position_mm: float, load_kg: float) -> OperatingPoint:
+def holding_point(cfg: EmulatorConfig, y: float, force_n: float, supply_pa: float | None = None
+                  ) -> tuple[float, float, float, bool]:
+    """Chamber pressures PA, PB [Pa] and the spool offset [fraction] that hold the piston at
+    rest at stroke `y` against `force_n` (the hydraulic force it must give): no flow into
+    either chamber. Returns (PA, PB, spool, converged)."""
     from scipy.optimize import fsolve
-    y = position_mm * MM
-    mass = moving_mass_kg(cfg, load_kg)
-    fp = cfg.friction
-    damping = 0.5 * (fp[lugre.S2_POS] + fp[lugre.S2_NEG]) + cfg.guide.viscous_ns_m
-    ps = cfg.supply_pressure_pa
-    hold = mass * GRAVITY_M_S2 / cfg.area_a_m2          # load pressure that holds it
+    ps = cfg.supply_pressure_pa if supply_pa is None else supply_pa
+    hold = force_n / cfg.area_a_m2                      # load pressure PA - alpha PB
 
     def residual(q):
         pa, pb, spool = q[0] * BAR, q[1] * BAR, q[2] * SPOOL_UNIT
@@ -112,8 +112,16 @@ def linearise(cfg: EmulatorConfig, position_mm: float, load_kg: float) -> Operat
 
     guess = [(0.5 * ps + hold) / BAR, 0.5 * ps / BAR, 0.0]
     solution, _, ier, _ = fsolve(residual, guess, full_output=True, xtol=1e-12)
-    pa, pb, spool = solution[0] * BAR, solution[1] * BAR, solution[2] * SPOOL_UNIT
     converged = ier == 1 and np.max(np.abs(residual(solution))) < 1e-6
+    return solution[0] * BAR, solution[1] * BAR, solution[2] * SPOOL_UNIT, bool(converged)
+
+
+def linearise(cfg: EmulatorConfig, position_mm: float, load_kg: float) -> OperatingPoint:
+    y = position_mm * MM
+    mass = moving_mass_kg(cfg, load_kg)
+    fp = cfg.friction
+    damping = 0.5 * (fp[lugre.S2_POS] + fp[lugre.S2_NEG]) + cfg.guide.viscous_ns_m
+    pa, pb, spool, converged = holding_point(cfg, y, mass * GRAVITY_M_S2)
     x0 = np.array([0.0, pa, pb, spool])
     u0 = spool * cfg.valve_full_scale_v
     steps = np.array([1e-6, 10.0, 10.0, 1e-7])
