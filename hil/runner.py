@@ -9,6 +9,7 @@ the log back and analyse it -> metrics.json, plots, report.md.
 
 from __future__ import annotations
 
+import copy
 import json
 import secrets
 import socket
@@ -56,6 +57,7 @@ class RunOptions:
     valve_watchdog_periods: float | None = None   # realtime: the emulated valves' SYNC watchdog
     start_timeout_s: float = START_TIMEOUT_S       # a slow machine (a VM in software emulation) needs more
     plots: bool = True                             # False: metrics and report only (batch runs, slow machines)
+    time_scale: float | None = None                # the movements (pm-*): this many times the thesis's ta, tm
     # a controller config file's sections (e.g. `hydrapod design schedule`), over the
     # scenario's own overrides: validated by the caller before the run
     controller_config: dict = field(default_factory=dict)
@@ -262,6 +264,12 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
                                  f"(it runs: {', '.join(scenario.controllers)})")
     if options.loads and not scenario.sweeps_loads:
         raise UserInputError(f"--loads: {scenario.name} does not run at several loads")
+    if options.time_scale is not None:
+        if not scenario.time_scalable:
+            raise UserInputError(f"--time-scale: {scenario.name} has no movement timing to scale "
+                                 f"(the pm-* scenarios have)")
+        scenario = copy.copy(scenario)               # the registered instance keeps its default
+        scenario.time_scale = options.time_scale
     pacing = options.pacing or scenario.pacing
     if pacing not in scenario.pacings:
         raise UserInputError(f"--pacing {pacing}: {scenario.name} runs in {' or '.join(scenario.pacings)} pacing")

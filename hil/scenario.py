@@ -52,6 +52,7 @@ class Scenario(ABC):
     controllers: tuple[str, ...] = ("pi", "adaptive")
     load_kg = 0.0                             # the emulator's load at start
     sweeps_loads = False                      # runs its script at several loads (`--loads` picks them)
+    time_scalable = False                     # its movements' timing scales (`--time-scale`)
     controller_overrides: dict = {}           # controller TOML sections for this experiment
     emulator_overrides: dict = {}
 

@@ -64,7 +64,8 @@ def _run(args) -> int:
                          controllers=_controllers(args.controllers), loads=_loads(args.loads),
                          duration_s=args.duration_s, plots=not args.no_plots,
                          valve_watchdog_periods=args.valve_watchdog_periods, start_timeout_s=args.start_timeout_s,
-                         controller_config=_controller_config(args.controller_config))
+                         controller_config=_controller_config(args.controller_config),
+                         time_scale=args.time_scale)
     if args.controller_config:
         options.notes.append(f"controller config {args.controller_config}: "
                              f"[{'], ['.join(options.controller_config)}] over the scenario's own")
@@ -155,6 +156,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="comma-separated loads in kg, for the scenarios that run at several (sha-step, sha-tracking)")
     p.add_argument("--duration-s", type=number_in_range(float, 1.0, 86400.0), default=None,
                    help="realtime scenarios: seconds of running (default 60; 10 with --short)")
+    p.add_argument("--time-scale", type=number_in_range(float, 0.5, 10.0), default=None,
+                   help="pm-circle, pm-diagonal: the movement at this many times the thesis's ta and tm "
+                        "(1 = the thesis's timing; default 2)")
     p.add_argument("--valve-watchdog-periods", type=number_in_range(float, 1.0, 10000.0), default=None,
                    help="realtime: the emulated valves' SYNC watchdog in periods (default 25 on a shared host; "
                         "3 is the valves' own, for an RT kernel)")
