@@ -392,7 +392,7 @@ class Emulator:
                 continue
             emergency = valve.on_sync()
             if emergency is None:
-                emergency = valve.check_spool(float(self.rig.state[n - 1, hy.S_SPOOL]))
+                emergency = valve.check_spool(float(self.rig.state[n - 1, hy.S_SPOOL]), float(self.rig.command[n - 1]))
             if emergency is not None:
                 self._emergency(n, emergency)
         nodes = self.clock()

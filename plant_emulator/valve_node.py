@@ -119,12 +119,14 @@ class ValveDriver:
             return self._fault(FaultReason.SYNC_TIMEOUT, int(periods))
         return None
 
-    def check_spool(self, actual: float) -> Emergency | None:
-        """Control-deviation monitor, once per SYNC while powered."""
+    def check_spool(self, actual: float, demand: float) -> Emergency | None:
+        """Control-deviation monitor, once per SYNC while powered: the actual spool against
+        the demand it followed over the last period (a setpoint received since is not yet
+        the spool's: against it any ramp faster than the threshold per period would trip)."""
         if self.state not in POWERED_STATES:
             self._jam_count = 0
             return None
-        if abs(self.setpoint - actual) > self.jam_threshold:
+        if abs(demand - actual) > self.jam_threshold:
             self._jam_count += 1
             if self._jam_count >= self.jam_syncs:
                 return self._fault(FaultReason.SPOOL_JAM, self._jam_count)

@@ -290,5 +290,19 @@ def test_spool_jam_detected():
     valve.boot()
     drive(valve, True, True, True, setpoint=0.5)
     drive(valve, True, True, True, setpoint=0.5)
-    results = [valve.check_spool(0.0) for _ in range(4)]
+    results = [valve.check_spool(0.0, 0.5) for _ in range(4)]
     assert results[:3] == [None] * 3 and results[3].reason is FaultReason.SPOOL_JAM
+
+
+def test_a_fast_ramp_the_spool_follows_is_not_a_jam():
+    """The monitor compares the spool with the demand it followed over the last period: a
+    ramp of 15 % per SYNC (each new setpoint 15 % from the spool) is followed, not jammed."""
+    valve = ValveDriver(jam_threshold=0.1, jam_syncs=4)
+    valve.boot()
+    drive(valve, True, True, True, setpoint=0.0)
+    demand = 0.0
+    for k in range(1, 12):
+        drive(valve, True, True, True, setpoint=0.15 * k)
+        actual = demand - 0.02                               # lagging its demand a little
+        assert valve.check_spool(actual, demand) is None
+        demand = valve.spool_command
