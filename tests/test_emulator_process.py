@@ -97,9 +97,13 @@ class Peer:
 def emulator_process(tmp_path):
     spec = f"udp_multicast:{GROUP}:{free_port()}"
     summary = tmp_path / "summary.json"
+    # this test drives the command timeout (3 SYNCs without VALVE_CMD); the wall-clock SYNC
+    # watchdog would trip whenever this process is not scheduled for 6 ms (a loaded machine)
+    config = tmp_path / "emulator.toml"
+    config.write_text("[nodes]\nsync_timeout_periods = 1000.0\n")
     peer = Peer(spec)
     proc = subprocess.Popen([sys.executable, "-m", "plant_emulator", "--bus", spec, "--rig", "testbench",
-                             "--load-kg", "3", "--summary", str(summary)],
+                             "--load-kg", "3", "--summary", str(summary), "--config", str(config)],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=dict(os.environ, PYTHONUNBUFFERED="1"))
     try:
