@@ -17,7 +17,7 @@ from physics import lugre
 from physics.actuator import cylinder_areas
 from physics.constants import BAR, MM
 from protocol.errors import UserInputError
-from protocol.tomlconfig import load_layered
+from protocol.tomlconfig import TABLE, load_layered
 
 RANGES: dict[str, dict[str, object]] = {
     "timing": {
@@ -59,6 +59,12 @@ RANGES: dict[str, dict[str, object]] = {
         "kp_6kg_v_mm": None, "ki_6kg_v_mm_s": None,
     },
     "model_based": {"feedforward_scale": (0.0, 10.0)},
+    "computed_torque": {
+        "bandwidth_hz": (0.1, 50.0), "damping": (0.1, 5.0), "integral_fraction": (0.0, 5.0),
+        "velocity_gain_per_s": (0.0, 1000.0), "force_gain_pct_n": (0.0, 10.0), "stiffness_n_mm": (0.1, 1e6),
+        "velocity_filter_hz": (0.5, 200.0),
+    },
+    "valve_map": {"force_n": None, "velocity_mm_s": None, "spool_pct": TABLE},
     "limits": {
         "stroke_margin_mm": (0.0, 100.0), "velocity_max_mm_s": (1.0, 1e4), "force_max_n": (1.0, 1e6),
         "tracking_error_max_mm": (0.1, 1000.0), "spool_max_pct": (1.0, 100.0),
@@ -148,6 +154,17 @@ class ControllerConfig:
     table_kp: np.ndarray              # (3, n_pos) V/m
     table_ki: np.ndarray              # (3, n_pos) V/(m s), as printed (ki_scale applied by the schedule)
     feedforward_scale: float
+    # computed torque (hexapod): task-space PID through the inverse dynamics, a valve map
+    ct_bandwidth_rad_s: float
+    ct_damping: float
+    ct_integral_fraction: float       # Ki = fraction x bandwidth^3
+    ct_velocity_gain_per_s: float     # joint error -> commanded piston velocity
+    ct_force_gain_per_n: float        # spool fraction per N of load-cell force error
+    ct_stiffness_n_m: float           # oil-column stiffness of a leg: compliance flow F' / K
+    ct_velocity_filter_hz: float      # low-pass of the measured twist (the D term)
+    valve_map_force_n: np.ndarray     # (n_f,)
+    valve_map_velocity_m_s: np.ndarray    # (n_v,)
+    valve_map_spool: np.ndarray       # (n_f, n_v) steady-state spool, fraction of full input
     # limits and supervisor
     stroke_margin_m: float
     velocity_max_m_s: float
@@ -198,6 +215,24 @@ def _schedule_tables(a: dict, source: str) -> tuple[np.ndarray, np.ndarray, np.n
     return positions, loads, kp, ki
 
 
+def _valve_map(vm: dict, source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    where = f"config {source}: [valve_map]"
+    forces, velocities = np.array(vm["force_n"], dtype=float), np.array(vm["velocity_mm_s"], dtype=float) * MM
+    for name, axis in (("force_n", forces), ("velocity_mm_s", velocities)):
+        if axis.ndim != 1 or len(axis) < 2 or np.any(np.diff(axis) <= 0) or not np.all(np.isfinite(axis)):
+            raise ConfigError(f"{where}.{name} must hold >= 2 strictly increasing numbers")
+    try:
+        spool = np.array(vm["spool_pct"], dtype=float) / 100.0
+    except ValueError:
+        raise ConfigError(f"{where}.spool_pct must be a table of numbers, one row per force") from None
+    if spool.shape != (len(forces), len(velocities)):
+        raise ConfigError(f"{where}.spool_pct is {'x'.join(map(str, spool.shape))}, force_n x velocity_mm_s "
+                          f"is {len(forces)}x{len(velocities)}")
+    if not np.all(np.abs(spool) <= 1.0):
+        raise ConfigError(f"{where}.spool_pct holds a value outside [-100, 100] (or not a number)")
+    return forces, velocities, np.ascontiguousarray(spool)
+
+
 def build(raw: dict, source: str = "config") -> ControllerConfig:
     t, a, tb, f, k, m = (raw[s] for s in ("timing", "actuator", "testbench", "friction", "kalman", "mass_estimator"))
     ident = raw["identification"]
@@ -209,6 +244,8 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         raise ConfigError(f"config {source}: [mass_estimator].covariance_initial = {m['covariance_initial']} "
                           f"exceeds covariance_max = {m['covariance_max']}")
     positions, loads, kp, ki = _schedule_tables(ad, source)
+    ct = raw["computed_torque"]
+    map_forces, map_velocities, map_spool = _valve_map(raw["valve_map"], source)
     area, ratio = cylinder_areas(a["bore_radius_mm"] * MM, a["rod_radius_mm"] * MM)
     try:
         friction = lugre.from_table(f)
@@ -243,6 +280,12 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         pi_kp=pi["kp_v_mm"] / MM, pi_ki=pi["ki_v_mm_s"] / MM, saturation_v=pi["saturation_v"],
         kpl_v_pa=ad["kpl_v_bar"] / BAR, ki_scale=ad["ki_scale"], table_position_m=positions, table_load_kg=loads,
         table_kp=kp, table_ki=ki, feedforward_scale=raw["model_based"]["feedforward_scale"],
+        ct_bandwidth_rad_s=2 * math.pi * ct["bandwidth_hz"], ct_damping=ct["damping"],
+        ct_integral_fraction=ct["integral_fraction"], ct_velocity_gain_per_s=ct["velocity_gain_per_s"],
+        ct_force_gain_per_n=ct["force_gain_pct_n"] / 100.0, ct_stiffness_n_m=ct["stiffness_n_mm"] / MM,
+        ct_velocity_filter_hz=ct["velocity_filter_hz"],
+
+        valve_map_force_n=map_forces, valve_map_velocity_m_s=map_velocities, valve_map_spool=map_spool,
         stroke_margin_m=lim["stroke_margin_mm"] * MM, velocity_max_m_s=lim["velocity_max_mm_s"] * MM,
         force_max_n=lim["force_max_n"], tracking_error_max_m=lim["tracking_error_max_mm"] * MM,
         spool_max=lim["spool_max_pct"] / 100.0,

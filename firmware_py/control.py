@@ -44,6 +44,7 @@ from .estimation import (
 )
 
 PI, ADAPTIVE, MODEL_BASED = int(ControllerKind.PI), int(ControllerKind.ADAPTIVE), int(ControllerKind.MODEL_BASED)
+COMPUTED_TORQUE = int(ControllerKind.COMPUTED_TORQUE)      # the hexapod's, computed_torque.py
 # command-line names of the controllers, from CTRL_STATUS.CONTROLLER's value table
 CONTROLLER_NAMES = {kind.name.lower().replace("_", "-"): int(kind) for kind in ControllerKind}
 

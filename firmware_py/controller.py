@@ -20,8 +20,9 @@ from physics.actuator import piston_force
 from physics.constants import GRAVITY_M_S2
 from protocol.enums import Ack, Command, Fault, State, TestMode, WaypointFlag
 
+from .computed_torque import ComputedTorque
 from .config import ControllerConfig
-from .control import MODEL_BASED, JointController
+from .control import COMPUTED_TORQUE, MODEL_BASED, JointController
 from .geometry import Geometry, default_geometry
 from .hostlink import HostLink
 from .identification import TEST_MODES, IdentificationSignal
@@ -43,6 +44,8 @@ class Controller:
                  geometry: Geometry | None = None):
         if rig not in RIGS:
             raise ValueError(f"unknown rig {rig!r} (known: {', '.join(RIGS)})")
+        if controller == COMPUTED_TORQUE and rig != "hexapod":
+            raise ValueError("the computed-torque controller runs on the hexapod only")
         self.cfg, self.rig, self.period_s = cfg, rig, period_s
         self.hexapod = rig == "hexapod"
         self.n = n = 6 if self.hexapod else 1
@@ -58,6 +61,7 @@ class Controller:
             check = HexapodCheck(cfg, self.geometry)
             self.gravity_axial = self.platform.gravity_axial
             self.tau_n = self.platform.force_n
+            self.computed_torque = ComputedTorque(cfg, self.geometry, period_s)
         else:
             self.geometry = None
             self.platform = None
@@ -69,6 +73,7 @@ class Controller:
             check = TestbenchCheck(cfg, cfg.stroke_m)
             self.gravity_axial = np.full(n, GRAVITY_M_S2)
             self.tau_n = np.zeros(n)
+            self.computed_torque = None
         self.joint = JointController(cfg, n, period_s, moving_mass_kg=moving_mass, mass_offset_kg=mass_offset,
                                      kp_factor=kp_factor, ki_factor=ki_factor)
         self.sup = Supervisor(controller)
@@ -131,6 +136,9 @@ class Controller:
             self.platform.estimate(self.home_strokes)
             self.platform.reset_reference(self.home_strokes)
             self.platform.reference_forces(self.home_strokes, ref.vr)
+            self.computed_torque.update(self.platform, meas.position_m, meas.position_m, ref.vr, meas.force_n,
+                                        cmd.spool)
+            self.computed_torque.reset()
             self.platform.dk.reset()
         self.frames.reset()
         self.plausibility.reset()
@@ -149,6 +157,8 @@ class Controller:
     def host_command(self, command: int, argument: int) -> Ack:
         if self.reinitialise and command in MOTION_COMMANDS:
             return Ack.BAD_STATE             # after RESET: not before every sensor has reported again
+        if command == Command.SELECT_CONTROLLER and argument == COMPUTED_TORQUE and not self.hexapod:
+            return Ack.BAD_ARGUMENT
         result = self.sup.command(command, argument)
         if result is Ack.ACCEPTED:
             self._do_action()
@@ -309,14 +319,21 @@ class Controller:
             ref.held()
         else:                                        # valves locked: follow the measurement
             ref.follow(joint.position_estimate)
-        if self.hexapod and sup.controller == MODEL_BASED:
+        computed_torque = self.hexapod and sup.controller == COMPUTED_TORQUE
+        if self.hexapod and (sup.controller == MODEL_BASED or computed_torque):
             if not self.platform.reference_forces(ref.yr, ref.vr) and active:
                 sup.fault(Fault.SINGULARITY)
-        # estimation and control
+        # estimation and control (computed torque: the joint pipeline estimates, its PI idles)
         if joint.mode != sup.controller:
             joint.set_mode(sup.controller)
         joint.update(meas.position_m, meas.fresh, meas.force_n, ref.yr, ref.ar, self.gravity_axial, self.tau_n,
-                     sup.state in ACTIVE)
+                     sup.state in ACTIVE and not computed_torque)
+        if computed_torque:
+            if sup.state not in ACTIVE:
+                self.computed_torque.reset()
+            elif not self.computed_torque.update(self.platform, joint.velocity_estimate, joint.error_m, ref.vr,
+                                                 meas.force_n, joint.u_v):
+                sup.fault(Fault.SINGULARITY)
         if testing:
             u, done = self.test.output(self.cycles, meas.position_m[0], self.piston_force_n())
             joint.u_v[0] = u

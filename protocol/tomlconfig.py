@@ -33,6 +33,9 @@ def read_toml(path: Path, error: type[UserInputError] = UserInputError) -> dict:
         raise error(f"config {path}: cannot read: {exc.strerror}") from None
 
 
+TABLE = "table"             # a schema entry: a list of rows of numbers (a 2-D table)
+
+
 def check_value(schema: Schema, source: str, section: str, key: str, value,
                 error: type[UserInputError] = UserInputError):
     spec = schema[section][key]
@@ -45,6 +48,12 @@ def check_value(schema: Schema, source: str, section: str, key: str, value,
         if not isinstance(value, str):
             raise error(f"{where} = {value!r} must be a string")
         return value
+    if spec == TABLE:                                 # rows of numbers, checked by its user
+        if not isinstance(value, list) or not value or not all(
+                isinstance(row, list) and row and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                                      and math.isfinite(v) for v in row) for row in value):
+            raise error(f"{where} must be a non-empty list of rows of finite numbers")
+        return [[float(v) for v in row] for row in value]
     if spec is None:                                  # numeric list, checked by its user
         if not isinstance(value, list) or not value or not all(
                 isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value):

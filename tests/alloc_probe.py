@@ -9,20 +9,29 @@ from collections.abc import Callable
 import numpy as np
 
 
-def allocations(run: Callable[[], None]) -> tuple[list, int]:
+def allocations(run: Callable[[], None], sources: tuple[str, ...] | None = None) -> tuple[list, int]:
     """Run `run()` with the garbage collector off under tracemalloc: (the NumPy-domain traces
-    that grew, by line; the traced bytes gained). A cycle that allocates nothing gives ([], ~0)."""
+    that grew, by line; the traced bytes gained). A cycle that allocates nothing gives ([], ~0).
+    `sources` (path patterns): count the bytes gained only in those files (a plant stepped
+    in the same process keeps its own garbage)."""
     gc.collect()
     gc.disable()
     tracemalloc.start()
     try:
         numpy_only = [tracemalloc.DomainFilter(True, np.lib.tracemalloc_domain)]
-        baseline = tracemalloc.take_snapshot().filter_traces(numpy_only)
+        ours = [tracemalloc.Filter(True, pattern) for pattern in sources or ()]
+        full = tracemalloc.take_snapshot()
+        baseline = full.filter_traces(numpy_only)
         before, _ = tracemalloc.get_traced_memory()
         run()
         after, _ = tracemalloc.get_traced_memory()
-        grown = tracemalloc.take_snapshot().filter_traces(numpy_only).compare_to(baseline, "lineno")
+        end = tracemalloc.take_snapshot()
+        grown = end.filter_traces(numpy_only).compare_to(baseline, "lineno")
+        if ours:
+            gained = sum(s.size_diff for s in end.filter_traces(ours).compare_to(full.filter_traces(ours), "lineno"))
+        else:
+            gained = after - before
     finally:
         tracemalloc.stop()
         gc.enable()
-    return [s for s in grown if s.count_diff > 0 or s.size_diff > 0], after - before
+    return [s for s in grown if s.count_diff > 0 or s.size_diff > 0], gained

@@ -109,7 +109,7 @@ class FakeBus:
             values[2] = self.valve[leg]
             values[3] = 0.0
             values[4] = self.stuck.get(leg, round(self.y[leg] / self.res) * self.res)
-            values[5] = self.mass * (self.a[leg] + 9.81)
+            values[5] = self.force_n(leg)
             codec.encode_into(values, msg.data)
             if leg in self.corrupt:
                 msg.data[0] ^= 0xFF
@@ -120,6 +120,10 @@ class FakeBus:
             codec.encode_into(values, msg.data)
             self.queue.append(msg)
         self._advance()
+
+    def force_n(self, leg: int) -> float:
+        """The load cell: the leg's own mass accelerated, against gravity."""
+        return self.mass * (self.a[leg] + 9.81)
 
     def _advance(self) -> None:
         steps = 20
@@ -134,3 +138,28 @@ class FakeBus:
                 y += h * v
             self.y[leg], self.v[leg], self.a[leg] = y, v, a
 
+
+
+class EmulatedHexapodBus(FakeBus):
+    """As FakeBus, with the emulator's hexapod behind the legs (MuJoCo and the hydraulics):
+    for a controller that needs the platform's dynamics (computed torque). The rig allocates
+    while it steps; what it frees again leaves no growth for the allocation probe to see."""
+
+    def __init__(self, rig, strokes_m, **kwargs):
+        super().__init__(6, strokes_m, **kwargs)
+        self.rig = rig
+        self.y = [float(s) for s in rig.stroke_m]
+        self.imu_rpy = [0.0, 0.0, 0.0]
+
+    def force_n(self, leg: int) -> float:
+        return float(self.rig.rod_force_n[leg])
+
+    def _advance(self) -> None:
+        from plant_emulator.emulator import attitude_rpy
+        for leg in range(6):
+            self.rig.command[leg] = self.spool[leg]
+            self.rig.ports_open[leg] = 1.0 if self.valve[leg] == 3 else 0.0
+        self.rig.advance(self.period)
+        for leg in range(6):
+            self.y[leg] = float(self.rig.stroke_m[leg])
+        self.imu_rpy = [float(v) for v in attitude_rpy(self.rig.platform_pose()[1])]

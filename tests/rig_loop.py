@@ -9,14 +9,20 @@ from firmware_py.controller import Controller
 from firmware_py.loop import ControllerLoop
 from protocol.enums import State
 from protocol.nodes import rig_nodes
-from tests.fake_bus import FakeBus
+from tests.fake_bus import EmulatedHexapodBus, FakeBus
 
 
-def make_loop(rig: str, controller: str, overrides: dict | None = None):
-    """(loop, controller, bus), activated: the controller READY at home."""
+def make_loop(rig: str, controller: str, overrides: dict | None = None, emulated: bool = False):
+    """(loop, controller, bus), activated: the controller READY at home; `emulated`: the
+    emulator's hexapod behind the bus instead of independent identified legs."""
     cfg = load_config(overrides=overrides)
     ctl = Controller(cfg, rig, 0.002, CONTROLLER_NAMES[controller])
-    bus = FakeBus(ctl.n, ctl.home_strokes.copy(), nodes=rig_nodes(ctl.n))
+    if emulated:
+        from plant_emulator.params import load_config as load_emulator_config
+        from plant_emulator.rigs import HexapodRig
+        bus = EmulatedHexapodBus(HexapodRig(load_emulator_config()), ctl.home_strokes, nodes=rig_nodes(6))
+    else:
+        bus = FakeBus(ctl.n, ctl.home_strokes.copy(), nodes=rig_nodes(ctl.n))
     loop = ControllerLoop(bus, ctl, 500.0, "lockstep", log=lambda _: None)
     loop.activate()
     return loop, ctl, bus

@@ -21,14 +21,21 @@ def moving_trajectory(ctl):
     return through_points(points, 0.1, 0.5)
 
 
-@pytest.mark.parametrize("rig", ["testbench", "hexapod"])
-@pytest.mark.parametrize("controller", list(CONTROLLER_NAMES))
+CASES = [(rig, controller) for rig in ("testbench", "hexapod") for controller in CONTROLLER_NAMES
+         if rig == "hexapod" or controller != "computed-torque"]
+
+
+@pytest.mark.parametrize("rig,controller", CASES)
 def test_steady_cycles_allocate_no_numpy_memory(rig, controller):
     # tracemalloc slows everything down: a loaded CI machine must not fail this test on a
     # late heartbeat (the heartbeat supervision has its own tests)
-    loop, ctl, bus = make_loop(rig, controller, {"timing": {"heartbeat_timeout_ms": 60000.0}})
+    # computed torque drives the legs through the platform's dynamics: the emulator's hexapod
+    # behind the bus (on independent legs, which the fake's are, its yaw loop has no inertia
+    # to act on and goes unstable within ~900 cycles)
+    loop, ctl, bus = make_loop(rig, controller, {"timing": {"heartbeat_timeout_ms": 60000.0}},
+                               emulated=controller == "computed-torque")
     assert ctl.state is State.READY
-    if ctl.hexapod:
+    if ctl.hexapod and bus.imu_rpy is None:
         bus.imu_rpy = [0.0, 0.0, 0.0]              # the attitude cross-check runs in the window too
     trajectory = moving_trajectory(ctl)
 
@@ -41,11 +48,16 @@ def test_steady_cycles_allocate_no_numpy_memory(rig, controller):
 
     run(500)
     # replays happen at cycle multiples of the trajectory length; the window starts on one
-    grown, gained = allocations(lambda: run(CYCLES))
+    # with the emulator stepping in this process: the bytes gained by the controller's code
+    sources = ("*/firmware_py/*", "*/protocol/*") if controller == "computed-torque" else None
+    grown, gained = allocations(lambda: run(CYCLES), sources)
     assert grown == []
     assert gained < 8192, f"traced memory grew by {gained} bytes"
     # and the loop really ran: no faults, tracking, E2E clean
     assert ctl.state in (State.RUNNING, State.READY), ctl.sup.fault_code.name
     assert loop.stats.e2e_errors == 0 and loop.stats.missing_frames == 0
-    assert not ctl.hexapod or ctl.attitude_check.angle_rad < 2e-3          # IMU frames were compared
+    # IMU frames were compared (the emulator's IMU reads the true attitude, the encoders' DK
+    # is quantised: a few mrad apart)
+    limit = ctl.cfg.attitude_mismatch_rad if controller == "computed-torque" else 2e-3
+    assert not ctl.hexapod or ctl.attitude_check.angle_rad < limit
     assert np.max(np.abs(ctl.joint.error_m)) < 2e-3             # tracking within 2 mm

@@ -25,6 +25,9 @@ def run(args):
     ("[adaptive]\ntable_load_kg = [0.0, 6.0, 3.0]\n", "table_load_kg must hold 3 increasing"),
     ("[actuator]\nrod_radius_mm = 7.0\n", "rod_radius_mm = 7.0 must be smaller than bore_radius_mm"),
     ("[timing\n", "not valid TOML"),
+    ("[valve_map]\nspool_pct = [[1.0, 2.0]]\n", "[valve_map].spool_pct is 1x2, force_n x velocity_mm_s is 26x25"),
+    ("[valve_map]\nforce_n = [1.0, 0.5]\n", "[valve_map].force_n must hold >= 2 strictly increasing"),
+    ("[valve_map]\nspool_pct = 3\n", "[valve_map].spool_pct must be a non-empty list of rows"),
 ])
 def test_config_errors_name_key_value_and_range(tmp_path, text, culprit):
     path = tmp_path / "bad.toml"
@@ -42,6 +45,7 @@ def test_config_errors_name_key_value_and_range(tmp_path, text, culprit):
     (["controller", "--rate-hz", "0"], "--rate-hz"),
     (["controller", "--rig", "crane"], "--rig"),
     (["controller", "--controller", "pid"], "--controller"),
+    (["controller", "--rig", "testbench", "--controller", "computed-torque"], "hexapod only"),
     (["controller", "--config", "/nonexistent.toml"], "no such file"),
 ])
 def test_cli_errors_are_one_line_exit_2(args, culprit):
@@ -62,7 +66,8 @@ def test_bench_prints_every_controller_and_rig_as_json():
     assert result.returncode == 0, result.stderr
     rows = json.loads(result.stdout)["update_step_us"]
     assert {(r["rig"], r["controller"]) for r in rows} == {
-        (rig, c) for rig in ("testbench", "hexapod") for c in ("pi", "adaptive", "model-based")}
+        (rig, c) for rig in ("testbench", "hexapod") for c in ("pi", "adaptive", "model-based")} | {
+        ("hexapod", "computed-torque")}
     for r in rows:
         assert 0 < r["p50_us"] <= r["p99_us"] <= r["max_us"] and r["state"] == "RUNNING"
 

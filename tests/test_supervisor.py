@@ -25,7 +25,7 @@ def test_state_machine_table():
     assert s.state is State.IDLE
     assert s.command(Command.START, 0) is Ack.BAD_STATE
     assert s.command(Command.ENABLE, 0) is Ack.ACCEPTED and s.state is State.READY
-    assert s.command(Command.SELECT_CONTROLLER, 3) is Ack.BAD_ARGUMENT
+    assert s.command(Command.SELECT_CONTROLLER, 4) is Ack.BAD_ARGUMENT
     assert s.command(Command.SELECT_CONTROLLER, 2) is Ack.ACCEPTED and s.controller == 2
     assert s.command(Command.HOME, 0) is Ack.ACCEPTED and s.state is State.HOMING
     assert s.command(Command.SELECT_CONTROLLER, 0) is Ack.BAD_STATE

@@ -4,6 +4,8 @@
     hydrapod design schedule [--plants SRC] [--out FILE] [--ki-scale] [--kp-fraction] [--ti-fraction] [--json]
     hydrapod design modes [--pose X,Y,Z,ROLL,PITCH,YAW] [--payload-kg M] [--supply-bar P] [--along] [--json]
                           [--plot DIR]
+    hydrapod design computed-torque [--out FILE] [--bandwidth-hz] [--damping] [--integral-fraction]
+                                    [--velocity-gain] [--force-gain-pct-n] [--velocity-filter-hz] [--json]
 
 SRC: `table-a3` (the thesis's plants), `emulator` (the emulator's linearisation) or the
 metrics.json of a `hil run sha-identification`.
@@ -130,6 +132,31 @@ def _modes(args) -> int:
     return 0 if doc["converged"] else 1
 
 
+def _computed_torque(args) -> int:
+    from plant_emulator.params import load_config
+
+    from ..design.computed_torque import computed_torque_toml, leg_stiffness_n_m, valve_map
+    cfg = load_config()
+    spool, unreachable = valve_map(cfg)
+    stiffness = leg_stiffness_n_m(cfg)
+    gains = {"bandwidth_hz": args.bandwidth_hz, "damping": args.damping, "integral_fraction": args.integral_fraction,
+             "velocity_gain_per_s": args.velocity_gain, "force_gain_pct_n": args.force_gain_pct_n,
+             "velocity_filter_hz": args.velocity_filter_hz}
+    text = computed_torque_toml(spool, stiffness, gains, "the emulator's configuration")
+    out = Path(args.out)
+    try:
+        out.write_text(text)
+    except OSError as error:
+        raise UserInputError(f"--out {out}: cannot write ({error.strerror})") from None
+    doc = {"file": str(out), "stiffness_n_mm": round(stiffness * 1e-3, 3), "map_points": int(spool.size),
+           "map_points_beyond_supply": unreachable, "gains": gains}
+    print(json.dumps(doc, indent=1) if args.json else
+          f"computed-torque config written to {out}: leg stiffness {doc['stiffness_n_mm']:g} N/mm (median along "
+          f"the movements), valve map {spool.shape[0]} forces x {spool.shape[1]} velocities ({unreachable} beyond "
+          f"the supply, held at the nearest reachable spool); load it with --controller-config or --config")
+    return 0
+
+
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     design = sub.add_parser("design", help="design tools: robustness of the PI, gain schedule (chapter 7), "
                                            "the hexapod's modes")
@@ -176,3 +203,21 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--plot", metavar="DIR", default=None, help="write modes.png (and modes_along.png) here")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_modes)
+
+    p = design_sub.add_parser("computed-torque", help="the hexapod's computed-torque controller: its valve map "
+                                                      "and leg stiffness from the emulator's model, and its gains")
+    p.add_argument("--out", type=output_file, default="hil-out/computed_torque.toml", metavar="FILE",
+                   help="the controller config file to write (default: hil-out/computed_torque.toml)")
+    p.add_argument("--bandwidth-hz", type=number_in_range(float, 0.1, 50.0), default=3.0,
+                   help="task-space loop: Kp = w^2, Kd = 2 zeta w (default 3)")
+    p.add_argument("--damping", type=number_in_range(float, 0.1, 5.0), default=0.8, help="zeta (default 0.8)")
+    p.add_argument("--integral-fraction", type=number_in_range(float, 0.0, 5.0), default=0.4,
+                   help="Ki = this x w^3 (default 0.4)")
+    p.add_argument("--velocity-gain", type=number_in_range(float, 0.0, 1000.0), default=20.0,
+                   help="joint error to commanded piston velocity, 1/s (default 20)")
+    p.add_argument("--force-gain-pct-n", type=number_in_range(float, 0.0, 10.0), default=0.03,
+                   help="spool %% per N of load-cell force error (default 0.03)")
+    p.add_argument("--velocity-filter-hz", type=number_in_range(float, 0.5, 200.0), default=15.0,
+                   help="low-pass of the measured twist (default 15)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_computed_torque)

@@ -93,25 +93,27 @@ def moving_mass_kg(cfg: EmulatorConfig, load_kg: float) -> float:
     return cfg.piston_rod_mass_kg + cfg.guide.slide_mass_kg + load_kg
 
 
-def holding_point(cfg: EmulatorConfig, y: float, force_n: float, supply_pa: float | None = None
-                  ) -> tuple[float, float, float, bool]:
-    """Chamber pressures PA, PB [Pa] and the spool offset [fraction] that hold the piston at
-    rest at stroke `y` against `force_n` (the hydraulic force it must give): no flow into
-    either chamber. Returns (PA, PB, spool, converged)."""
+def holding_point(cfg: EmulatorConfig, y: float, force_n: float, supply_pa: float | None = None,
+                  velocity_m_s: float = 0.0, guess=None) -> tuple[float, float, float, bool]:
+    """Chamber pressures PA, PB [Pa] and the spool [fraction] of the steady state at stroke
+    `y`, piston velocity `velocity_m_s` and hydraulic force `force_n`: the pressures do not
+    change (at rest: the spool offset that holds the load). `guess` (PA, PB [Pa], spool)
+    starts the solver. Returns (PA, PB, spool, converged)."""
     from scipy.optimize import fsolve
     ps = cfg.supply_pressure_pa if supply_pa is None else supply_pa
     hold = force_n / cfg.area_a_m2                      # load pressure PA - alpha PB
 
     def residual(q):
         pa, pb, spool = q[0] * BAR, q[1] * BAR, q[2] * SPOOL_UNIT
-        rate_a, rate_b, _, _ = hy.pressure_rates(y, 0.0, pa, pb, spool, ps, cfg.hp, 1.0)
+        rate_a, rate_b, _, _ = hy.pressure_rates(y, velocity_m_s, pa, pb, spool, ps, cfg.hp, 1.0)
         va, vb = hy.chamber_volumes(y, cfg.hp)
         return [(pa - cfg.alpha * pb - hold) / BAR,
                 rate_a * va / hy.bulk_modulus(pa, cfg.hp) * 1e6 / cfg.area_a_m2,
                 rate_b * vb / hy.bulk_modulus(pb, cfg.hp) * 1e6 / cfg.area_a_m2]
 
-    guess = [(0.5 * ps + hold) / BAR, 0.5 * ps / BAR, 0.0]
-    solution, _, ier, _ = fsolve(residual, guess, full_output=True, xtol=1e-12)
+    start = ([(0.5 * ps + hold) / BAR, 0.5 * ps / BAR, 0.0] if guess is None
+             else [guess[0] / BAR, guess[1] / BAR, guess[2] / SPOOL_UNIT])
+    solution, _, ier, _ = fsolve(residual, start, full_output=True, xtol=1e-12)
     converged = ier == 1 and np.max(np.abs(residual(solution))) < 1e-6
     return solution[0] * BAR, solution[1] * BAR, solution[2] * SPOOL_UNIT, bool(converged)
 

@@ -1,0 +1,174 @@
+"""Computed-torque control of the hexapod through its hydraulics (beyond the thesis).
+
+The thesis's controllers close a PI per leg. On this platform the legs stand near vertical:
+a leg sees ~100 kg of joint-space inertia sideways and under 1 kg upwards, and a per-leg
+loop cannot suit both (`hydrapod design modes`). Here the loop is closed on the platform's
+pose, and the legs are driven through the inverse of their dynamics, in three steps:
+
+1. task space (pose error e, twist error, reference acceleration a_r, eq. 10.5's virtual-work
+   dynamics at the measured pose and twist):
+       a_cmd = a_r + Kd (xd_r - xd) + Kp e + Ki int(e),   Kp = w^2, Kd = 2 zeta w, Ki = f w^3
+       F_cmd = tau(pose, xd, a_cmd)                       (the legs' forces for a_cmd)
+   the same closed-loop poles in every direction, whatever its inertia;
+2. each valve through its steady-state map (the spool that holds a leg at force F and
+   piston velocity v), with the commanded velocity v_r + lambda e_leg and the compliance flow
+   F_r' / K of the oil column (F_r the forces along the reference, differenced):
+       x = map(F_cmd, v_r + lambda e_leg + F_r' / K) + k_F (F_cmd - F_load cell)
+   lambda keeps the light directions stiff (the valve is a velocity source there), k_F closes
+   a force loop on the load cells around the map's error and the seals' friction;
+3. the spool to volts, saturated; the integral stops while a valve saturates.
+Allocation-free; every array is made here.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .config import ControllerConfig
+from .dynamics import InverseDynamics, gauss_solve_into
+from .estimation import filter_step, second_order_filter
+from .geometry import N_LEGS, Geometry
+
+
+@njit(cache=True)
+def pose_error_into(reference, measured, out) -> None:
+    """out[0:3] = p_r - p, out[3:6] = rotation vector of R_r R^T (base frame); poses are
+    (x, y, z, qw, qx, qy, qz)."""
+    for k in range(3):
+        out[k] = reference[k] - measured[k]
+    aw, ax, ay, az = reference[3], reference[4], reference[5], reference[6]
+    bw, bx, by, bz = measured[3], -measured[4], -measured[5], -measured[6]          # conjugate
+    w = aw * bw - ax * bx - ay * by - az * bz
+    x = aw * bx + ax * bw + ay * bz - az * by
+    y = aw * by - ax * bz + ay * bw + az * bx
+    z = aw * bz + ax * by - ay * bx + az * bw
+    if w < 0.0:                                       # the shorter way round
+        w, x, y, z = -w, -x, -y, -z
+    norm = math.sqrt(x * x + y * y + z * z)
+    scale = 2.0 * math.atan2(norm, w) / norm if norm > 1e-12 else 2.0
+    out[3], out[4], out[5] = scale * x, scale * y, scale * z
+
+
+@njit(cache=True)
+def valve_map_eval(forces, velocities, spool, force, velocity) -> float:
+    """Bilinear interpolation of the map, held at its edges."""
+    nf, nv = forces.shape[0], velocities.shape[0]
+    f = min(max(force, forces[0]), forces[nf - 1])
+    v = min(max(velocity, velocities[0]), velocities[nv - 1])
+    i = 0
+    while i < nf - 2 and f > forces[i + 1]:
+        i += 1
+    j = 0
+    while j < nv - 2 and v > velocities[j + 1]:
+        j += 1
+    s = (f - forces[i]) / (forces[i + 1] - forces[i])
+    t = (v - velocities[j]) / (velocities[j + 1] - velocities[j])
+    return ((1.0 - s) * ((1.0 - t) * spool[i, j] + t * spool[i, j + 1])
+            + s * ((1.0 - t) * spool[i + 1, j] + t * spool[i + 1, j + 1]))
+
+
+@njit(cache=True)
+def task_acceleration_into(accel_ref, twist_ref, twist, error, integral, kp, kd, ki, out) -> None:
+    """a_cmd = a_r + Kd (xd_r - xd) + Kp e + Ki int(e)."""
+    for k in range(6):
+        out[k] = accel_ref[k] + kd * (twist_ref[k] - twist[k]) + kp * error[k] + ki * integral[k]
+
+
+@njit(cache=True)
+def spool_commands_into(force_cmd, force_ref, force_ref_prev, force_measured, velocity_ref, joint_error, period_s,
+                        velocity_gain, stiffness, force_gain, forces, velocities, spool, u_max, out) -> bool:
+    """Each valve's spool (fraction of full input, saturated at u_max) from the map and the
+    force loop; True when one saturated."""
+    saturated = False
+    for i in range(out.shape[0]):
+        compliance = (force_ref[i] - force_ref_prev[i]) / period_s / stiffness
+        velocity = velocity_ref[i] + velocity_gain * joint_error[i] + compliance
+        x = (valve_map_eval(forces, velocities, spool, force_cmd[i], velocity)
+             + force_gain * (force_cmd[i] - force_measured[i]))
+        if abs(x) >= u_max:
+            saturated = True
+            x = u_max if x > 0.0 else -u_max
+        out[i] = x
+    return saturated
+
+
+@njit(cache=True)
+def low_pass_into(raw, state, ad, bd, wn, zeta, out) -> None:
+    """out = F(s) raw per component (2nd order, state rows [x, x', u_prev]); advances F."""
+    for k in range(raw.shape[0]):
+        filter_step(state[k], ad, bd, wn, zeta, raw[k])
+        out[k] = state[k, 0]
+
+
+@njit(cache=True)
+def integrate_into(integral, error, period_s) -> None:
+    for k in range(integral.shape[0]):
+        integral[k] += error[k] * period_s
+
+
+FILTER_ZETA = 0.7                     # the measured twist's low-pass: Butterworth-like
+
+
+class ComputedTorque:
+    """The controller's state and scratch arrays; `update(...)` writes the valve inputs."""
+
+    def __init__(self, cfg: ControllerConfig, geometry: Geometry, period_s: float):
+        w = cfg.ct_bandwidth_rad_s
+        self.kp, self.kd, self.ki = w * w, 2.0 * cfg.ct_damping * w, cfg.ct_integral_fraction * w ** 3
+        self.period_s = period_s
+        self.velocity_gain = cfg.ct_velocity_gain_per_s
+        self.force_gain = cfg.ct_force_gain_per_n
+        self.stiffness = cfg.ct_stiffness_n_m
+        self.forces, self.velocities, self.spool = (cfg.valve_map_force_n, cfg.valve_map_velocity_m_s,
+                                                    cfg.valve_map_spool)
+        self.u_max = cfg.spool_max
+        self.full_scale_v = cfg.valve_full_scale_v
+        self.dynamics = InverseDynamics(geometry)
+        self.error = np.zeros(6)              # pose error: m, rad
+        self.integral = np.zeros(6)
+        self.twist_raw = np.zeros(6)          # measured, from the legs' velocity estimates
+        self.twist = np.zeros(6)              # ... low-passed: the encoders' counts make it jump
+        self._twist_filter = np.zeros((6, 3))
+        self.filter_wn, self.filter_zeta = 2 * math.pi * cfg.ct_velocity_filter_hz, FILTER_ZETA
+        self.filter_ad, self.filter_bd = second_order_filter(period_s, cfg.ct_velocity_filter_hz, FILTER_ZETA)
+        self.accel_cmd = np.zeros(6)
+        self.force_cmd = self.dynamics.force_n
+        self.force_ref_prev = np.zeros(N_LEGS)
+        self.spool_cmd = np.zeros(N_LEGS)
+        self._lu = np.empty((6, 6))
+        self._fresh = True                    # no previous reference force yet
+
+    def reset(self) -> None:
+        """Valves locked or a fault: the integral and the reference-force history start again."""
+        self.integral[:] = 0.0
+        self._twist_filter[:] = 0.0
+        self._fresh = True
+
+    def update(self, platform, velocity_estimate, joint_error, velocity_ref, force_measured, u_out) -> bool:
+        """One cycle from the platform model (measured and reference pose, the reference's
+        twist, acceleration and forces); writes u_out (V). False: singular (u_out held)."""
+        if self._fresh:
+            self.force_ref_prev[:] = platform.force_n
+            self._fresh = False
+        pose, ref_pose = platform.dk.pose, platform.ref_dk.pose
+        pose_error_into(ref_pose, pose, self.error)
+        if gauss_solve_into(platform.jacobian, velocity_estimate, self._lu, self.twist_raw, False) == 0.0:
+            return False
+        low_pass_into(self.twist_raw, self._twist_filter, self.filter_ad, self.filter_bd, self.filter_wn,
+                      self.filter_zeta, self.twist)
+        task_acceleration_into(platform.accel, platform.twist, self.twist, self.error, self.integral, self.kp,
+                               self.kd, self.ki, self.accel_cmd)
+        if not self.dynamics.forces(pose[0:3], pose[3:7], self.twist, self.accel_cmd):
+            return False
+        saturated = spool_commands_into(self.force_cmd, platform.force_n, self.force_ref_prev, force_measured,
+                                        velocity_ref, joint_error, self.period_s, self.velocity_gain,
+                                        self.stiffness, self.force_gain, self.forces, self.velocities, self.spool,
+                                        self.u_max, self.spool_cmd)
+        self.force_ref_prev[:] = platform.force_n
+        if not saturated:                     # conditional integration (anti-windup)
+            integrate_into(self.integral, self.error, self.period_s)
+        np.multiply(self.spool_cmd, self.full_scale_v, out=u_out)
+        return True

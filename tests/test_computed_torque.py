@@ -1,0 +1,97 @@
+"""The hexapod's computed-torque controller: its kernels against SciPy as the oracle, its
+packaged plant data against what `hydrapod design computed-torque` derives from the
+emulator, its outputs at rest, and where it may run."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.interpolate import RegularGridInterpolator
+from scipy.spatial.transform import Rotation
+
+from firmware_py.computed_torque import pose_error_into, valve_map_eval
+from firmware_py.config import load_config
+from firmware_py.control import COMPUTED_TORQUE, CONTROLLER_NAMES
+from firmware_py.controller import Controller
+from hil.cli import main
+from hil.design.computed_torque import leg_stiffness_n_m, valve_map
+from plant_emulator.params import load_config as load_emulator_config
+from protocol.enums import Ack, Command, State
+
+PERIOD_S = 0.002
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return load_config()
+
+
+def test_the_valve_map_interpolates_as_scipy_does_and_holds_its_edges(cfg):
+    f, v, spool = cfg.valve_map_force_n, cfg.valve_map_velocity_m_s, cfg.valve_map_spool
+    oracle = RegularGridInterpolator((f, v), spool)
+    rng = np.random.default_rng(3)
+    points = np.column_stack([rng.uniform(f[0] - 80, f[-1] + 80, 2000), rng.uniform(v[0] - 0.2, v[-1] + 0.2, 2000)])
+    clamped = np.column_stack([np.clip(points[:, 0], f[0], f[-1]), np.clip(points[:, 1], v[0], v[-1])])
+    ours = np.array([valve_map_eval(f, v, spool, a, b) for a, b in points])
+    np.testing.assert_allclose(ours, oracle(clamped), atol=1e-12)
+
+
+def test_the_pose_error_is_scipys_rotation_vector():
+    rng = np.random.default_rng(4)
+    out = np.empty(6)
+    for _ in range(200):
+        r_ref, r = Rotation.random(random_state=rng), Rotation.random(random_state=rng)
+        p_ref, p = rng.normal(size=3), rng.normal(size=3)
+        reference = np.r_[p_ref, r_ref.as_quat(scalar_first=True)]
+        measured = np.r_[p, r.as_quat(scalar_first=True)]
+        pose_error_into(reference, measured, out)
+        np.testing.assert_allclose(out[:3], p_ref - p, atol=1e-12)
+        np.testing.assert_allclose(out[3:], (r_ref * r.inv()).as_rotvec(), atol=1e-9)
+
+
+def test_the_packaged_plant_data_is_what_the_design_command_derives(cfg):
+    """The controller's [valve_map] and stiffness come from the emulator's model, not by hand."""
+    spool, _ = valve_map(load_emulator_config())
+    np.testing.assert_allclose(cfg.valve_map_spool, spool, atol=5e-7)       # the file's 4 decimals in %
+    assert cfg.ct_stiffness_n_m == pytest.approx(leg_stiffness_n_m(load_emulator_config()), rel=1e-3)
+
+
+def test_design_computed_torque_writes_a_config_the_controller_loads(tmp_path, capsys):
+    path = tmp_path / "ct.toml"
+    assert main(["design", "computed-torque", "--out", str(path), "--bandwidth-hz", "2.5", "--json"]) == 0
+    loaded = load_config(path)
+    assert loaded.ct_bandwidth_rad_s == pytest.approx(2 * np.pi * 2.5)
+    assert loaded.valve_map_spool.shape == (len(loaded.valve_map_force_n), len(loaded.valve_map_velocity_m_s))
+
+
+def test_at_rest_on_the_reference_the_valves_get_the_maps_holding_spool(cfg):
+    """Measured pose = reference, nothing moving, load cells reading the model's forces: the
+    spool is the map's at those forces and zero velocity (no feedback term acts)."""
+    ctl = Controller(cfg, "hexapod", PERIOD_S, COMPUTED_TORQUE)
+    meas, cmd = ctl.new_interfaces()
+    meas.position_m[:] = ctl.home_strokes
+    meas.fresh[:] = True
+    meas.valve_state[:] = 3
+    ctl.update(meas, cmd)
+    ctl.activated(True)
+    assert ctl.state is State.READY
+    meas.force_n[:] = ctl.tau_n
+    for _ in range(3):
+        ctl.update(meas, cmd)
+        meas.force_n[:] = ctl.computed_torque.force_cmd
+    ct = ctl.computed_torque
+    np.testing.assert_allclose(ct.error, 0.0, atol=1e-9)
+    expected = [valve_map_eval(cfg.valve_map_force_n, cfg.valve_map_velocity_m_s, cfg.valve_map_spool, f, 0.0)
+                for f in ct.force_cmd]
+    np.testing.assert_allclose(cmd.spool, expected, atol=1e-6)
+    np.testing.assert_allclose(ct.force_cmd, ctl.tau_n, rtol=1e-6, atol=1e-6)      # a_cmd = 0 at rest
+
+
+def test_computed_torque_is_the_hexapods_only(cfg, capsys):
+    with pytest.raises(ValueError, match="hexapod only"):
+        Controller(cfg, "testbench", PERIOD_S, COMPUTED_TORQUE)
+    bench = Controller(cfg, "testbench", PERIOD_S, CONTROLLER_NAMES["pi"])
+    assert bench.host_command(Command.SELECT_CONTROLLER, COMPUTED_TORQUE) is Ack.BAD_ARGUMENT
+    hexapod = Controller(cfg, "hexapod", PERIOD_S)
+    hexapod.activated(False)
+    assert hexapod.host_command(Command.SELECT_CONTROLLER, COMPUTED_TORQUE) is Ack.ACCEPTED
