@@ -1,6 +1,7 @@
 # hydrapod
 #   make demo    creates .venv if needed; the main job: emulator + controller on the default bus,
-#                pm-circle with both thesis controllers in realtime, metrics and plots in hil-out/
+#                pm-circle at the thesis's timing, the thesis's two controllers and computed torque,
+#                in realtime; metrics and plots in hil-out/
 #   make test    creates .venv if needed; the whole suite (what .ci/run runs)
 #   make check   the suite without the HIL runs and the VM (a few minutes)
 #   make lint    ruff over the tree

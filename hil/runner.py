@@ -291,7 +291,7 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
     started = time.monotonic()
     try:
         run.start_emulator()
-        run.start_controller(scenario.first_controller(options.controllers))
+        run.start_controller(scenario.first_controller(options.controllers, options.short))
         if pacing == "realtime":            # the recorder: no long collection while it records
             freeze_gc(disable=False)
         scenario.script(run)

@@ -56,11 +56,16 @@ class Scenario(ABC):
     controller_overrides: dict = {}           # controller TOML sections for this experiment
     emulator_overrides: dict = {}
 
-    def first_controller(self, chosen: tuple[str, ...] | None) -> str:
-        return (chosen or self.controllers)[0]
+    short_controllers: tuple[str, ...] | None = None     # --short runs only these (None: all)
+
+    def controllers_for(self, chosen: tuple[str, ...] | None, short: bool) -> tuple[str, ...]:
+        return chosen or (self.short_controllers if short and self.short_controllers else self.controllers)
+
+    def first_controller(self, chosen: tuple[str, ...] | None, short: bool = False) -> str:
+        return self.controllers_for(chosen, short)[0]
 
     def chosen(self, run) -> tuple[str, ...]:
-        return run.options.controllers or self.controllers
+        return self.controllers_for(run.options.controllers, run.options.short)
 
     def chosen_loads(self, run, planned: tuple[float, ...]) -> tuple[float, ...]:
         return run.options.loads or planned

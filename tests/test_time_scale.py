@@ -29,4 +29,4 @@ def test_a_scenario_without_movements_refuses_a_time_scale(tmp_path, capsys):
         run_scenario(SCENARIOS["sha-step"], RunOptions(out_dir=tmp_path, time_scale=1.0))
     assert main(["hil", "run", "sha-step", "--time-scale", "1", "--out", str(tmp_path)]) == 2
     assert "--time-scale" in capsys.readouterr().err
-    assert SCENARIOS["pm-circle"].time_scale == 2.0          # the registered default is untouched
+    assert SCENARIOS["pm-circle"].time_scale == 1.0          # the registered default: the thesis's timing
