@@ -210,14 +210,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="the controller config file to write (default: hil-out/computed_torque.toml)")
     p.add_argument("--bandwidth-hz", type=number_in_range(float, 0.1, 50.0), default=3.0,
                    help="task-space loop: Kp = w^2, Kd = 2 zeta w (default 3)")
-    p.add_argument("--damping", type=number_in_range(float, 0.1, 5.0), default=0.8, help="zeta (default 0.8)")
+    p.add_argument("--damping", type=number_in_range(float, 0.1, 5.0), default=0.6, help="zeta (default 0.6)")
     p.add_argument("--integral-fraction", type=number_in_range(float, 0.0, 5.0), default=0.4,
                    help="Ki = this x w^3 (default 0.4)")
     p.add_argument("--velocity-gain", type=number_in_range(float, 0.0, 1000.0), default=20.0,
                    help="joint error to commanded piston velocity, 1/s (default 20)")
     p.add_argument("--force-gain-pct-n", type=number_in_range(float, 0.0, 10.0), default=0.03,
                    help="spool %% per N of load-cell force error (default 0.03)")
-    p.add_argument("--velocity-filter-hz", type=number_in_range(float, 0.5, 200.0), default=15.0,
-                   help="low-pass of the measured twist (default 15)")
+    p.add_argument("--velocity-filter-hz", type=number_in_range(float, 0.5, 200.0), default=25.0,
+                   help="low-pass of the measured twist (default 25)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_computed_torque)
