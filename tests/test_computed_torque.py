@@ -14,8 +14,6 @@ from firmware_py.config import load_config
 from firmware_py.control import COMPUTED_TORQUE, CONTROLLER_NAMES
 from firmware_py.controller import Controller
 from hil.cli import main
-from hil.design.computed_torque import leg_stiffness_n_m, valve_map
-from plant_emulator.params import load_config as load_emulator_config
 from protocol.enums import Ack, Command, State
 
 PERIOD_S = 0.002
@@ -49,19 +47,17 @@ def test_the_pose_error_is_scipys_rotation_vector():
         np.testing.assert_allclose(out[3:], (r_ref * r.inv()).as_rotvec(), atol=1e-9)
 
 
-def test_the_packaged_plant_data_is_what_the_design_command_derives(cfg):
-    """The controller's [valve_map] and stiffness come from the emulator's model, not by hand."""
-    spool, _ = valve_map(load_emulator_config())
-    np.testing.assert_allclose(cfg.valve_map_spool, spool, atol=5e-7)       # the file's 4 decimals in %
-    assert cfg.ct_stiffness_n_m == pytest.approx(leg_stiffness_n_m(load_emulator_config()), rel=1e-3)
-
-
-def test_design_computed_torque_writes_a_config_the_controller_loads(tmp_path, capsys):
+def test_the_packaged_plant_data_is_what_the_design_command_derives(cfg, tmp_path, capsys):
+    """`design computed-torque` writes a config the controller loads, and the packaged
+    [valve_map] and stiffness are its output from the emulator's model, not set by hand."""
     path = tmp_path / "ct.toml"
     assert main(["design", "computed-torque", "--out", str(path), "--bandwidth-hz", "2.5", "--json"]) == 0
-    loaded = load_config(path)
-    assert loaded.ct_bandwidth_rad_s == pytest.approx(2 * np.pi * 2.5)
-    assert loaded.valve_map_spool.shape == (len(loaded.valve_map_force_n), len(loaded.valve_map_velocity_m_s))
+    derived = load_config(path)
+    assert derived.ct_bandwidth_rad_s == pytest.approx(2 * np.pi * 2.5)
+    np.testing.assert_allclose(cfg.valve_map_spool, derived.valve_map_spool, atol=5e-7)
+    np.testing.assert_array_equal(cfg.valve_map_force_n, derived.valve_map_force_n)
+    np.testing.assert_allclose(cfg.valve_map_velocity_m_s, derived.valve_map_velocity_m_s, atol=1e-12)
+    assert cfg.ct_stiffness_n_m == pytest.approx(derived.ct_stiffness_n_m, rel=1e-3)
 
 
 def test_at_rest_on_the_reference_the_valves_get_the_maps_holding_spool(cfg):
