@@ -177,7 +177,9 @@ def _assign_cycles(frames: list[tuple]) -> np.ndarray:
     truth_cycle = {}
     for i in truths:
         guess, phase = by_order[i], frames[i][1][1] >> 4
-        candidates = [k for k in range(guess - 8, guess + 8) if counter_of_cycle.get(k, -1) % 16 == phase]
+        # only cycles that had a SYNC (a default of -1 would match phase 15: -1 % 16 == 15)
+        candidates = [k for k in range(guess - 8, guess + 8) if k in counter_of_cycle
+                      and counter_of_cycle[k] % 16 == phase]
         truth_cycle[i] = min(candidates, key=lambda k: abs(k - guess)) if candidates else guess
     # walk backwards: an emulator cyclic frame belongs to the next EMU_TRUTH's cycle
     following = None
