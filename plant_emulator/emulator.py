@@ -242,8 +242,6 @@ class Emulator:
                     "sync_waited_ms": round(self.last_sync_waited_s * 1e3, 3),
                     "late_ms": round((woke_late + self.last_sync_waited_s) * 1e3, 3)}
             self.counters.sync_timeouts.append(trip)
-            # also on stderr at once: a process killed later never writes its summary
-            print(f"{SYNC_TIMEOUT_EVENT} {json.dumps(trip)}", file=sys.stderr, flush=True)
             # the valves go to FAULT_HOLD now, and say so at once (EMCY); the physics then
             # catches up to now with the setpoints the rig still has (the last SYNC
             # integrated one period, the valves kept their setpoints until the trip)
@@ -251,6 +249,9 @@ class Emulator:
                 emergency = valve.sync_lost((now - self.last_sync_time) / period)
                 if emergency is not None:
                     self._emergency(n, emergency)
+            # then on stderr (a process killed later never writes its summary): after the
+            # EMCYs, which a write to a busy disk must not delay
+            print(f"{SYNC_TIMEOUT_EVENT} {json.dumps(trip)}", file=sys.stderr, flush=True)
             self._free_run(int((now - self.last_sync_time) / period) - 1, apply_valves=False)
             self._free_run_next = now + period
         elif self.sync_lost_reported and self._free_run_next is not None and now >= self._free_run_next:
