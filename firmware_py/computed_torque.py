@@ -31,6 +31,7 @@ from .config import ControllerConfig
 from .dynamics import InverseDynamics, gauss_solve_into
 from .estimation import filter_step, second_order_filter
 from .geometry import N_LEGS, Geometry
+from .rotation import rotation_vector_between_into
 
 
 @njit(cache=True)
@@ -39,17 +40,7 @@ def pose_error_into(reference, measured, out) -> None:
     (x, y, z, qw, qx, qy, qz)."""
     for k in range(3):
         out[k] = reference[k] - measured[k]
-    aw, ax, ay, az = reference[3], reference[4], reference[5], reference[6]
-    bw, bx, by, bz = measured[3], -measured[4], -measured[5], -measured[6]          # conjugate
-    w = aw * bw - ax * bx - ay * by - az * bz
-    x = aw * bx + ax * bw + ay * bz - az * by
-    y = aw * by - ax * bz + ay * bw + az * bx
-    z = aw * bz + ax * by - ay * bx + az * bw
-    if w < 0.0:                                       # the shorter way round
-        w, x, y, z = -w, -x, -y, -z
-    norm = math.sqrt(x * x + y * y + z * z)
-    scale = 2.0 * math.atan2(norm, w) / norm if norm > 1e-12 else 2.0
-    out[3], out[4], out[5] = scale * x, scale * y, scale * z
+    rotation_vector_between_into(reference[3:7], measured[3:7], out[3:6])
 
 
 @njit(cache=True)

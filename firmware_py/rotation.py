@@ -10,6 +10,8 @@ controller's loop calls them); the plain functions are vectorised NumPy for swee
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -132,6 +134,23 @@ def quat_to_axis_angle(p) -> tuple[np.ndarray, np.ndarray]:
     axis = np.where(safe[..., None], p[..., 1:] / np.where(safe, sin_half, 1.0)[..., None],
                     np.array([1.0, 0.0, 0.0]))
     return axis, angle
+
+
+@njit(cache=True)
+def rotation_vector_between_into(p, q, out) -> None:
+    """out = rotation vector of R(p) R(q)^T (the rotation from q to p, base frame): the
+    relative quaternion p conj(q) taken the shorter way round."""
+    aw, ax, ay, az = p[0], p[1], p[2], p[3]
+    bw, bx, by, bz = q[0], -q[1], -q[2], -q[3]
+    w = aw * bw - ax * bx - ay * by - az * bz
+    x = aw * bx + ax * bw + ay * bz - az * by
+    y = aw * by - ax * bz + ay * bw + az * bx
+    z = aw * bz + ax * by - ay * bx + az * bw
+    if w < 0.0:
+        w, x, y, z = -w, -x, -y, -z
+    norm = math.sqrt(x * x + y * y + z * z)
+    scale = 2.0 * math.atan2(norm, w) / norm if norm > 1e-12 else 2.0
+    out[0], out[1], out[2] = scale * x, scale * y, scale * z
 
 
 def quat_multiply(a, b) -> np.ndarray:

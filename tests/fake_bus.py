@@ -146,8 +146,10 @@ class EmulatedHexapodBus(FakeBus):
     while it steps; what it frees again leaves no growth for the allocation probe to see."""
 
     def __init__(self, rig, strokes_m, **kwargs):
+        from plant_emulator.emulator import attitude_rpy
         super().__init__(6, strokes_m, **kwargs)
         self.rig = rig
+        self._attitude_rpy = attitude_rpy
         self.y = [float(s) for s in rig.stroke_m]
         self.imu_rpy = [0.0, 0.0, 0.0]
 
@@ -155,11 +157,10 @@ class EmulatedHexapodBus(FakeBus):
         return float(self.rig.rod_force_n[leg])
 
     def _advance(self) -> None:
-        from plant_emulator.emulator import attitude_rpy
         for leg in range(6):
             self.rig.command[leg] = self.spool[leg]
             self.rig.ports_open[leg] = 1.0 if self.valve[leg] == 3 else 0.0
         self.rig.advance(self.period)
         for leg in range(6):
             self.y[leg] = float(self.rig.stroke_m[leg])
-        self.imu_rpy = [float(v) for v in attitude_rpy(self.rig.platform_pose()[1])]
+        self.imu_rpy = [float(v) for v in self._attitude_rpy(self.rig.platform_pose()[1])]

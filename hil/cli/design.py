@@ -133,15 +133,18 @@ def _modes(args) -> int:
 
 
 def _computed_torque(args) -> int:
+    from firmware_py.config import load_config as load_controller_config
     from plant_emulator.params import load_config
 
     from ..design.computed_torque import computed_torque_toml, leg_stiffness_n_m, valve_map
     cfg = load_config()
     spool, unreachable = valve_map(cfg)
     stiffness = leg_stiffness_n_m(cfg)
-    gains = {"bandwidth_hz": args.bandwidth_hz, "damping": args.damping, "integral_fraction": args.integral_fraction,
+    packaged = load_controller_config().raw["computed_torque"]       # an option not given keeps its value
+    given = {"bandwidth_hz": args.bandwidth_hz, "damping": args.damping, "integral_fraction": args.integral_fraction,
              "velocity_gain_per_s": args.velocity_gain, "force_gain_pct_n": args.force_gain_pct_n,
              "velocity_filter_hz": args.velocity_filter_hz}
+    gains = {key: packaged[key] if value is None else value for key, value in given.items()}
     text = computed_torque_toml(spool, stiffness, gains, "the emulator's configuration")
     out = Path(args.out)
     try:
@@ -208,16 +211,16 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                                                       "and leg stiffness from the emulator's model, and its gains")
     p.add_argument("--out", type=output_file, default="hil-out/computed_torque.toml", metavar="FILE",
                    help="the controller config file to write (default: hil-out/computed_torque.toml)")
-    p.add_argument("--bandwidth-hz", type=number_in_range(float, 0.1, 50.0), default=3.0,
-                   help="task-space loop: Kp = w^2, Kd = 2 zeta w (default 3)")
-    p.add_argument("--damping", type=number_in_range(float, 0.1, 5.0), default=0.6, help="zeta (default 0.6)")
-    p.add_argument("--integral-fraction", type=number_in_range(float, 0.0, 5.0), default=0.4,
-                   help="Ki = this x w^3 (default 0.4)")
-    p.add_argument("--velocity-gain", type=number_in_range(float, 0.0, 1000.0), default=20.0,
-                   help="joint error to commanded piston velocity, 1/s (default 20)")
-    p.add_argument("--force-gain-pct-n", type=number_in_range(float, 0.0, 10.0), default=0.03,
-                   help="spool %% per N of load-cell force error (default 0.03)")
-    p.add_argument("--velocity-filter-hz", type=number_in_range(float, 0.5, 200.0), default=25.0,
-                   help="low-pass of the measured twist (default 25)")
+    # each gain defaults to the packaged controller.toml's [computed_torque]
+    p.add_argument("--bandwidth-hz", type=number_in_range(float, 0.1, 50.0),
+                   help="task-space loop: Kp = w^2, Kd = 2 zeta w")
+    p.add_argument("--damping", type=number_in_range(float, 0.1, 5.0), help="zeta")
+    p.add_argument("--integral-fraction", type=number_in_range(float, 0.0, 5.0), help="Ki = this x w^3")
+    p.add_argument("--velocity-gain", type=number_in_range(float, 0.0, 1000.0),
+                   help="joint error to commanded piston velocity, 1/s")
+    p.add_argument("--force-gain-pct-n", type=number_in_range(float, 0.0, 10.0),
+                   help="spool %% per N of load-cell force error")
+    p.add_argument("--velocity-filter-hz", type=number_in_range(float, 0.5, 200.0),
+                   help="low-pass of the measured twist")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_computed_torque)

@@ -60,13 +60,9 @@ def valve_map(cfg: EmulatorConfig, forces_n=MAP_FORCES_N, velocities_m_s=MAP_VEL
 
 def leg_stiffness_n_m(cfg: EmulatorConfig) -> float:
     """The median oil-column stiffness of the legs at the waypoints of both movements."""
-    from firmware_py.geometry import default_geometry
-
-    from ..motions import MOTIONS
-    from .modes import modal_model
-    geometry = default_geometry()
-    values = [modal_model(cfg, point).stiffness_n_m for motion in MOTIONS.values()
-              for point in motion(geometry).waypoints()]
+    from .modes import modal_model, movement_waypoints
+    values = [modal_model(cfg, point).stiffness_n_m for points in movement_waypoints().values()
+              for point in points]
     return float(np.median(np.concatenate(values)))
 
 

@@ -107,8 +107,8 @@ def _perturbed(quat0: np.ndarray, rotation_vector: np.ndarray) -> np.ndarray:
 
 
 def joint_space(rig: HexapodRig, position_m, quat) -> tuple[np.ndarray, ...]:
-    """At a pose at rest: strokes, static leg forces, J = d strokes / d pose, N = d qvel / d
-    strokes, M_q and K_g (joint space)."""
+    """At a pose at rest: strokes, static leg forces, J = d strokes / d pose, M_q and K_g
+    (joint space; N = d qvel / d strokes gives M_q = N^T M N)."""
     mech = rig.mechanism
     model, data = mech.model, mech.data
     nv = model.nv
@@ -144,7 +144,7 @@ def joint_space(rig: HexapodRig, position_m, quat) -> tuple[np.ndarray, ...]:
     inertia = 0.5 * (inertia + inertia.T)
     gravity_stiffness = d_force @ inverse
     mech.set_pose(position_m, quat)
-    return strokes, static, jacobian, n_mat, inertia, gravity_stiffness
+    return strokes, static, jacobian, inertia, gravity_stiffness
 
 
 def actuator_partials(cfg: EmulatorConfig, y: float, pa: float, pb: float, spool: float, supply_pa: float
@@ -238,7 +238,7 @@ def modal_model(cfg: EmulatorConfig, position_m, rpy_rad=(0.0, 0.0, 0.0), payloa
     rig = HexapodRig(cfg)
     rig.set_load(payload_kg)
     quat = pose_quaternion(rpy_rad)
-    strokes, static, jacobian, _, inertia, gravity_stiffness = joint_space(rig, position_m, quat)
+    strokes, static, jacobian, inertia, gravity_stiffness = joint_space(rig, position_m, quat)
     fp = cfg.friction
     friction_slope = 0.5 * (fp[lugre.S2_POS] + fp[lugre.S2_NEG])
     pa, pb, spool = np.empty(N_LEGS), np.empty(N_LEGS), np.empty(N_LEGS)
@@ -277,18 +277,19 @@ def model_doc(model: ModalModel, count: int = 6) -> dict:
     }
 
 
-def along_movements(cfg: EmulatorConfig, payload_kg: float = 0.0, supply_pa: float | None = None) -> dict:
-    """The platform modes at home and at every waypoint of both movements of the thesis."""
+def movement_waypoints() -> dict[str, np.ndarray]:
+    """Home and every waypoint of both movements of the thesis (chapter 11.3), by movement."""
     from firmware_py.geometry import default_geometry
 
     from ..motions import MOTIONS
     geometry = default_geometry()
-    out = {}
-    for name, motion in MOTIONS.items():
-        points = motion(geometry).waypoints()
-        out[name] = [model_doc(modal_model(cfg, point, payload_kg=payload_kg, supply_pa=supply_pa))
-                     for point in points]
-    return out
+    return {name: motion(geometry).waypoints() for name, motion in MOTIONS.items()}
+
+
+def along_movements(cfg: EmulatorConfig, payload_kg: float = 0.0, supply_pa: float | None = None) -> dict:
+    """The platform modes at home and at every waypoint of both movements of the thesis."""
+    return {name: [model_doc(modal_model(cfg, point, payload_kg=payload_kg, supply_pa=supply_pa))
+                   for point in points] for name, points in movement_waypoints().items()}
 
 
 def format_modes(doc: dict) -> str:
