@@ -122,6 +122,17 @@ def split_faults(log: LogData, period_s: float) -> tuple[list[tuple[int, str]], 
     return stalled, other
 
 
+def faults_in_windows(log: LogData, period_s: float, windows) -> list[str]:
+    """The faults in (start, end) wall-clock windows of repeated starts or recoveries that no
+    machine stall explains (a fault reaches CTRL_STATUS up to 16 cycles after it latched)."""
+    if not windows:
+        return []
+    _, others = split_faults(log, period_s)
+    times = {cycle: t for t, cycle, _ in fault_transitions(log)}
+    return [name for cycle, name in others
+            if any(start <= times[cycle] <= end + 16 * period_s for start, end in windows)]
+
+
 def late_sensor_frames(log: LogData, lo: int, hi: int, period_s: float) -> int:
     """LEG_STATE frames of cycles [lo, hi) on the bus more than STALL_LATE_FRAME_PERIODS after
     their cycle's SYNC."""

@@ -25,6 +25,7 @@ from protocol.realtime import freeze_gc, thaw_gc
 
 from .host import Host, HostError
 from .logdata import read_log
+from .metrics import faults_in_windows
 from .processes import Child, ChildFailed, describe_status
 from .report import write_outputs
 from .scenario import Scenario
@@ -42,6 +43,7 @@ LOCKSTEP_HEARTBEAT_TIMEOUT_MS = 10000.0
 # the realtime scenarios report every SYNC gap the 3-period watchdog would have tripped on.
 REALTIME_EMULATOR_SYNC_TIMEOUT_PERIODS = 25.0
 START_TIMEOUT_S = 90.0                             # imports, kernels, MuJoCo, activation
+START_TRIES = 3                                    # realtime: a start a machine stall faulted is recovered
 
 
 @dataclass
@@ -101,6 +103,7 @@ class Run:
         self.children: list[Child] = []
         self.controller: Child | None = None
         self.host: Host | None = None
+        self.start_retries: list[tuple[float, float]] = []    # wall-clock windows of recovered starts
 
     # -- children -------------------------------------------------------------------------
     def _watch(self) -> None:
@@ -157,13 +160,25 @@ class Run:
         self.controller = child
         self.host.new_controller()
         # FAULT ends the wait too: a controller that faults while starting never gets READY
+        started = time.time()
         self.host.wait_state(State.READY, State.FAULT, max_cycles=10**9, wall_timeout_s=self.options.start_timeout_s)
-        if self.host.state is State.FAULT:
+        for attempt in range(START_TRIES):
+            if self.host.state is not State.FAULT:
+                return
             try:
                 name = Fault(self.host.fault_code).name
             except ValueError:
                 name = f"code {self.host.fault_code}"
-            raise HostError(f"{controller}: the controller went to FAULT while starting ({name})")
+            if self.pacing != "realtime" or attempt == START_TRIES - 1:
+                raise HostError(f"{controller}: the controller went to FAULT while starting ({name})")
+            # realtime: a machine stall while the loop starts; recovered here, judged from the log
+            self.notes.append(f"{controller}: the controller went to FAULT while starting ({name}); "
+                              f"RESET + ENABLE")
+            try:
+                self.recover_from_fault()
+            except HostError as error:
+                self.notes.append(f"{controller}: recovery after the start: {error}")
+            self.start_retries.append((started, time.time()))
 
     def stop_controller(self) -> None:
         """SIGTERM: the controller holds, disables and exits 0; its last frames are recorded."""
@@ -312,6 +327,10 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
         thaw_gc()
     wall_s = time.monotonic() - started
     log = read_log(out / LOG_NAME)
+    unexplained = faults_in_windows(log, run.period_s, run.start_retries)
+    if unexplained:
+        failure = (failure + "\n" if failure else "") + \
+            f"the controller faulted {', '.join(unexplained)} while starting, with no machine stall before it"
     doc = write_outputs(scenario, log, out, extra={
         "bus": str(spec), "pacing": pacing, "rate_hz": options.rate_hz, "short": options.short,
         "wall_time_s": round(wall_s, 1), "frames_sent_by_host": run.host.frames_sent,

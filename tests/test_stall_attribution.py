@@ -11,6 +11,7 @@ from hil.metrics import (
     STALL_WINDOW_CYCLES,
     after_machine_stall,
     fault_transitions,
+    faults_in_windows,
     overrun_counts,
     realtime_paced,
     split_faults,
@@ -98,3 +99,14 @@ def test_split_faults_counts_a_stall_only_where_the_syncs_kept_the_period(lockst
     assert (stalls, others) == ([], expected)
     stalls, _ = split_faults(status_log(fault_at=800, code=Fault.OVERRUN), PERIOD_S)
     assert stalls == [(800, "OVERRUN")]                  # the stall watchdog itself
+
+
+def test_faults_in_windows_names_only_an_unexplained_fault_inside_a_window():
+    """A repeated start or recovery is judged by the faults in its wall-clock window: one a
+    machine stall explains is the machine's, one outside every window is not the window's."""
+    fault_s = 800 * PERIOD_S
+    plain, stalled = status_log(fault_at=800), status_log(overrun_at=[790], fault_at=800)
+    assert faults_in_windows(plain, PERIOD_S, [(fault_s - 0.1, fault_s + 0.1)]) == ["SENSOR_TIMEOUT"]
+    assert faults_in_windows(stalled, PERIOD_S, [(fault_s - 0.1, fault_s + 0.1)]) == []
+    assert faults_in_windows(plain, PERIOD_S, [(0.0, fault_s - 0.5)]) == []
+    assert faults_in_windows(plain, PERIOD_S, []) == []

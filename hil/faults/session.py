@@ -20,7 +20,7 @@ from protocol.enums import Command, EmuCommand, EmuFault, Fault, State, Waypoint
 from ..host import HostError
 from ..logdata import LogData
 from ..logquery import LogView
-from ..metrics import fault_transitions, split_faults
+from ..metrics import faults_in_windows
 from ..processes import ChildFailed
 from ..scenario import Analysis, Check, Scenario
 from .cases import (
@@ -108,7 +108,7 @@ class Session(Scenario):
         Realtime: a machine stall during the recovery trips the stall watchdog (OVERRUN), or
         starves the controller of its sensor frames; a recovery that faulted is repeated (noted),
         up to TRY_LIMIT times, and the analysis fails it unless the log shows a machine stall
-        before each of those faults (`retried_faults`).
+        before each of those faults (`metrics.faults_in_windows`).
         """
         host = run.host
         host.emulator(EmuCommand.CLEAR_ALL)
@@ -258,7 +258,7 @@ class Session(Scenario):
         for mark in self.marks:
             passed, measured, detail = JUDGES[mark.case.kind](view, mark, baseline, run_dir)
             recovered = mark.extra.get("recovered")
-            unexplained = retried_faults(log, 1.0 / rate_hz, mark.extra.get("retried", ()))
+            unexplained = faults_in_windows(log, 1.0 / rate_hz, mark.extra.get("retried", ()))
             if unexplained:
                 recovered = False
                 mark.notes.append(f"a repeated recovery faulted with no machine stall before: {unexplained}")
@@ -280,11 +280,3 @@ def _pump_for(host, seconds: float) -> None:
     while time.monotonic() < end:
         host.pump(min(0.01, max(end - time.monotonic(), 0.0)))
 
-
-def retried_faults(log: LogData, period_s: float, windows) -> list[str]:
-    """The faults in the (start, end) wall-clock windows of repeated recoveries that no machine
-    stall explains (a fault reaches CTRL_STATUS up to 16 cycles after it latched)."""
-    _, others = split_faults(log, period_s)
-    times = {cycle: t for t, cycle, _ in fault_transitions(log)}
-    return [name for cycle, name in others
-            if any(start <= times[cycle] <= end + 16 * period_s for start, end in windows)]

@@ -1,0 +1,90 @@
+"""The runner's controller start: in realtime a start that a fault ends (a machine stall
+while the loop starts) is recovered with RESET + ENABLE and noted, its window kept for the
+log's judgement; in lockstep, or after the last try, it is the run's failure."""
+
+from pathlib import Path
+
+import pytest
+
+import hil.runner as runner
+from hil.host import HostError
+from hil.runner import START_TRIES, Run, RunOptions
+from hil.scenarios import SCENARIOS
+from protocol.enums import Ack, Command, Fault, State
+
+
+class FakeChild:
+    def __init__(self, name, args, out):
+        self.name = name
+
+    def start(self):
+        pass
+
+
+class FakeHost:
+    """CTRL_STATUS says FAULT after each start or recovery, `faults` times, then READY."""
+
+    def __init__(self, faults: int):
+        self.faults = faults
+        self.state = None
+        self.fault_code = 0
+        self.commands = []
+
+    def new_controller(self):
+        pass
+
+    def _settle(self):
+        if self.faults:
+            self.faults -= 1
+            self.state, self.fault_code = State.FAULT, int(Fault.VALVE_FAULT)
+        else:
+            self.state, self.fault_code = State.READY, 0
+
+    def wait_state(self, *states, max_cycles=0, wall_timeout_s=None):
+        if State.READY in states and State.FAULT in states:      # the start's wait
+            self._settle()
+        elif State.IDLE in states:
+            self.state = State.IDLE
+
+    def command(self, command, argument=0, expect_ok=True):
+        self.commands.append(command)
+        if command is Command.ENABLE:
+            self._settle()
+            if self.state is State.READY:
+                return Ack.ACCEPTED
+        return Ack.ACCEPTED
+
+    def wait_cycles(self, cycles):
+        pass
+
+
+def make_run(tmp_path: Path, pacing: str, faults: int, monkeypatch) -> Run:
+    monkeypatch.setattr(runner, "Child", FakeChild)
+    options = RunOptions(out_dir=tmp_path, pacing=pacing)
+    run = Run(SCENARIOS["rt-hexapod"], options, runner.fresh_bus_spec(), tmp_path)
+    run.host = FakeHost(faults)
+    return run
+
+
+@pytest.mark.parametrize("faults", [1, START_TRIES - 1])
+def test_a_realtime_start_fault_is_recovered_noted_and_kept_for_the_log(tmp_path, monkeypatch, faults):
+    run = make_run(tmp_path, "realtime", faults, monkeypatch)
+    run.start_controller("model-based")
+    assert run.host.state is State.READY
+    assert len(run.start_retries) == faults
+    assert all(start <= end for start, end in run.start_retries)
+    assert sum("FAULT while starting (VALVE_FAULT); RESET + ENABLE" in n for n in run.notes) == faults
+    assert run.host.commands.count(Command.RESET) == faults
+
+
+def test_a_realtime_start_that_faults_every_time_fails_the_run(tmp_path, monkeypatch):
+    run = make_run(tmp_path, "realtime", START_TRIES, monkeypatch)
+    with pytest.raises(HostError, match="FAULT while starting \\(VALVE_FAULT\\)"):
+        run.start_controller("model-based")
+
+
+def test_a_lockstep_start_fault_fails_at_once(tmp_path, monkeypatch):
+    run = make_run(tmp_path, "lockstep", 1, monkeypatch)
+    with pytest.raises(HostError, match="FAULT while starting"):
+        run.start_controller("model-based")
+    assert run.start_retries == [] and Command.RESET not in run.host.commands
