@@ -27,6 +27,9 @@ import math
 import numpy as np
 from numba import njit
 
+from physics import lugre
+from physics.constants import GRAVITY_M_S2
+
 from .config import ControllerConfig
 from .dynamics import InverseDynamics, gauss_solve_into
 from .estimation import filter_step, second_order_filter
@@ -64,20 +67,21 @@ def valve_map_eval(forces, velocities, spool, force, velocity) -> float:
 @njit(cache=True)
 def task_acceleration_into(accel_ref, twist_ref, twist, error, integral, kp, kd, ki, out) -> None:
     """a_cmd = a_r + Kd (xd_r - xd) + Kp e + Ki int(e)."""
-    for k in range(6):
+    for k in range(out.shape[0]):
         out[k] = accel_ref[k] + kd * (twist_ref[k] - twist[k]) + kp * error[k] + ki * integral[k]
 
 
 @njit(cache=True)
-def spool_commands_into(force_cmd, force_ref, force_ref_prev, force_measured, velocity_ref, joint_error, period_s,
-                        velocity_gain, stiffness, force_gain, forces, velocities, spool, u_max, out) -> bool:
-    """Each valve's spool (fraction of full input, saturated at u_max) from the map and the
-    force loop; True when one saturated."""
+def spool_commands_into(force_map, force_cmd, force_ref, force_ref_prev, force_measured, velocity_ref, joint_error,
+                        period_s, velocity_gain, stiffness, force_gain, forces, velocities, spool, u_max, out) -> bool:
+    """Each valve's spool (fraction of full input, saturated at u_max) from the map at the
+    hydraulic force `force_map` and the force loop on the load cell (`force_cmd` its wanted
+    reading); True when one saturated."""
     saturated = False
     for i in range(out.shape[0]):
         compliance = (force_ref[i] - force_ref_prev[i]) / period_s / stiffness
         velocity = velocity_ref[i] + velocity_gain * joint_error[i] + compliance
-        x = (valve_map_eval(forces, velocities, spool, force_cmd[i], velocity)
+        x = (valve_map_eval(forces, velocities, spool, force_map[i], velocity)
              + force_gain * (force_cmd[i] - force_measured[i]))
         if abs(x) >= u_max:
             saturated = True
@@ -95,6 +99,32 @@ def low_pass_into(raw, state, ad, bd, wn, zeta, out) -> None:
 
 
 @njit(cache=True)
+def leg_forces_into(accel_cmd, accel_ref, load_force, force_measured, velocity_ref, joint_error, velocity_gain,
+                    rod_mass, friction, force_map, force_cmd, force_ref) -> None:
+    """One actuator lifting a load it weighs on its load cell (the test bench): the load's
+    mass from the cell's low-passed force F_lp, m = F_lp / g;
+        F_cmd = F + m a_cmd                   (the cell's wanted reading: the force loop adds m a_cmd)
+        F_map = F_lp + (m_rod + m) a_cmd + m_rod g + F_ss(v_r + lambda e)   (the piston's force)
+        F_ref = (m_rod + m) (a_r + g)                               (along the reference)
+    with F_ss the seals' steady friction (eq. 6.4) at the commanded velocity. The force loop
+    has no part that opposes the cell's own swings: on this leg that pressure feedback made
+    the steps overshoot more (13 % against 5 % with 6 kg, docs/MEASUREMENTS.md)."""
+    for i in range(force_map.shape[0]):
+        mass = max(load_force[i], 0.0) / GRAVITY_M_S2
+        force_cmd[i] = force_measured[i] + mass * accel_cmd[i]
+        seals = lugre.steady_friction(velocity_ref[i] + velocity_gain * joint_error[i], friction)
+        force_map[i] = load_force[i] + (rod_mass + mass) * accel_cmd[i] + rod_mass * GRAVITY_M_S2 + seals
+        force_ref[i] = (rod_mass + mass) * (accel_ref[i] + GRAVITY_M_S2)
+
+
+@njit(cache=True)
+def first_order_into(raw, alpha, state) -> None:
+    """state += alpha (raw - state): a first-order low-pass, alpha = 1 - exp(-w T)."""
+    for i in range(state.shape[0]):
+        state[i] += alpha * (raw[i] - state[i])
+
+
+@njit(cache=True)
 def integrate_into(integral, error, period_s) -> None:
     for k in range(integral.shape[0]):
         integral[k] += error[k] * period_s
@@ -103,28 +133,36 @@ def integrate_into(integral, error, period_s) -> None:
 FILTER_ZETA = 0.7                     # the measured twist's low-pass: Butterworth-like
 
 
-class ComputedTorque:
-    """The controller's state and scratch arrays; `update(...)` writes the valve inputs."""
+class _Gains:
+    """What both forms share: the PID's gains, the valve map and force loop, the velocity
+    low-pass (its filter's constants)."""
 
-    def __init__(self, cfg: ControllerConfig, geometry: Geometry, period_s: float):
+    def __init__(self, cfg: ControllerConfig, period_s: float, velocity_gain: float):
         w = cfg.ct_bandwidth_rad_s
         self.kp, self.kd, self.ki = w * w, 2.0 * cfg.ct_damping * w, cfg.ct_integral_fraction * w ** 3
         self.period_s = period_s
-        self.velocity_gain = cfg.ct_velocity_gain_per_s
+        self.velocity_gain = velocity_gain
         self.force_gain = cfg.ct_force_gain_per_n
         self.stiffness = cfg.ct_stiffness_n_m
         self.forces, self.velocities, self.spool = (cfg.valve_map_force_n, cfg.valve_map_velocity_m_s,
                                                     cfg.valve_map_spool)
         self.u_max = cfg.spool_max
         self.full_scale_v = cfg.valve_full_scale_v
+        self.filter_wn, self.filter_zeta = 2 * math.pi * cfg.ct_velocity_filter_hz, FILTER_ZETA
+        self.filter_ad, self.filter_bd = second_order_filter(period_s, cfg.ct_velocity_filter_hz, FILTER_ZETA)
+
+
+class ComputedTorque(_Gains):
+    """The controller's state and scratch arrays; `update(...)` writes the valve inputs."""
+
+    def __init__(self, cfg: ControllerConfig, geometry: Geometry, period_s: float):
+        super().__init__(cfg, period_s, cfg.ct_velocity_gain_per_s)
         self.dynamics = InverseDynamics(geometry)
         self.error = np.zeros(6)              # pose error: m, rad
         self.integral = np.zeros(6)
         self.twist_raw = np.zeros(6)          # measured, from the legs' velocity estimates
         self.twist = np.zeros(6)              # ... low-passed: the encoders' counts make it jump
         self._twist_filter = np.zeros((6, 3))
-        self.filter_wn, self.filter_zeta = 2 * math.pi * cfg.ct_velocity_filter_hz, FILTER_ZETA
-        self.filter_ad, self.filter_bd = second_order_filter(period_s, cfg.ct_velocity_filter_hz, FILTER_ZETA)
         self.accel_cmd = np.zeros(6)
         self.force_cmd = self.dynamics.force_n
         self.force_ref_prev = np.zeros(N_LEGS)
@@ -154,7 +192,8 @@ class ComputedTorque:
                                self.kd, self.ki, self.accel_cmd)
         if not self.dynamics.forces(pose[0:3], pose[3:7], self.twist, self.accel_cmd):
             return False
-        saturated = spool_commands_into(self.force_cmd, platform.force_n, self.force_ref_prev, force_measured,
+        saturated = spool_commands_into(self.force_cmd, self.force_cmd, platform.force_n, self.force_ref_prev,
+                                        force_measured,
                                         velocity_ref, joint_error, self.period_s, self.velocity_gain,
                                         self.stiffness, self.force_gain, self.forces, self.velocities, self.spool,
                                         self.u_max, self.spool_cmd)
@@ -163,3 +202,59 @@ class ComputedTorque:
             integrate_into(self.integral, self.error, self.period_s)
         np.multiply(self.spool_cmd, self.full_scale_v, out=u_out)
         return True
+
+
+LOAD_FILTER_HZ = 1.0                  # the load cell's low-pass: the load's weight, not its dynamics
+
+
+class LegComputedTorque(_Gains):
+    """The same control on one actuator per leg in joint space (the test bench): task-space
+    PID on the stroke, the load from its load cell, each valve through the map. Its own
+    velocity gain: the test bench's leg is light (its oil-column mode is far above the
+    hexapod's horizontal modes), so a stiffer velocity loop stays damped there."""
+
+    def __init__(self, cfg: ControllerConfig, n_legs: int, period_s: float):
+        super().__init__(cfg, period_s, cfg.ct_testbench_velocity_gain_per_s)
+        self.rod_mass = cfg.moving_mass_kg
+        self.friction = cfg.friction
+        self.load_alpha = 1.0 - math.exp(-2.0 * math.pi * LOAD_FILTER_HZ * period_s)
+        self.integral = np.zeros(n_legs)
+        self.velocity = np.zeros(n_legs)      # the estimate, low-passed
+        self._velocity_filter = np.zeros((n_legs, 3))
+        self.load_force = np.zeros(n_legs)    # the load cell, low-passed
+        self.accel_cmd = np.zeros(n_legs)
+        self.force_map = np.zeros(n_legs)
+        self.force_cmd = np.zeros(n_legs)
+        self.force_ref = np.zeros(n_legs)
+        self.force_ref_prev = np.zeros(n_legs)
+        self.spool_cmd = np.zeros(n_legs)
+        self._fresh = True
+
+    def reset(self) -> None:
+        self.integral[:] = 0.0
+        self._velocity_filter[:] = 0.0
+        self._fresh = True
+
+    def update(self, joint_error, velocity_estimate, velocity_ref, accel_ref, force_measured, u_out) -> None:
+        """One cycle: writes u_out (V)."""
+        if self._fresh:                       # the load's weight and the reference force start here
+            self.load_force[:] = force_measured
+        first_order_into(force_measured, self.load_alpha, self.load_force)
+        low_pass_into(velocity_estimate, self._velocity_filter, self.filter_ad, self.filter_bd, self.filter_wn,
+                      self.filter_zeta, self.velocity)
+        task_acceleration_into(accel_ref, velocity_ref, self.velocity, joint_error, self.integral, self.kp,
+                               self.kd, self.ki, self.accel_cmd)
+        leg_forces_into(self.accel_cmd, accel_ref, self.load_force, force_measured, velocity_ref, joint_error,
+                        self.velocity_gain, self.rod_mass, self.friction, self.force_map, self.force_cmd,
+                        self.force_ref)
+        if self._fresh:
+            self.force_ref_prev[:] = self.force_ref
+            self._fresh = False
+        saturated = spool_commands_into(self.force_map, self.force_cmd, self.force_ref, self.force_ref_prev,
+                                        force_measured, velocity_ref, joint_error, self.period_s,
+                                        self.velocity_gain, self.stiffness, self.force_gain, self.forces,
+                                        self.velocities, self.spool, self.u_max, self.spool_cmd)
+        self.force_ref_prev[:] = self.force_ref
+        if not saturated:
+            integrate_into(self.integral, joint_error, self.period_s)
+        np.multiply(self.spool_cmd, self.full_scale_v, out=u_out)

@@ -61,7 +61,8 @@ RANGES: dict[str, dict[str, object]] = {
     "model_based": {"feedforward_scale": (0.0, 10.0)},
     "computed_torque": {
         "bandwidth_hz": (0.1, 50.0), "damping": (0.1, 5.0), "integral_fraction": (0.0, 5.0),
-        "velocity_gain_per_s": (0.0, 1000.0), "force_gain_pct_n": (0.0, 10.0), "stiffness_n_mm": (0.1, 1e6),
+        "velocity_gain_per_s": (0.0, 1000.0),
+        "testbench_velocity_gain_per_s": (0.0, 1000.0), "force_gain_pct_n": (0.0, 10.0), "stiffness_n_mm": (0.1, 1e6),
         "velocity_filter_hz": (0.5, 200.0),
     },
     "valve_map": {"force_n": None, "velocity_mm_s": None, "spool_pct": TABLE},
@@ -159,6 +160,7 @@ class ControllerConfig:
     ct_damping: float
     ct_integral_fraction: float       # Ki = fraction x bandwidth^3
     ct_velocity_gain_per_s: float     # joint error -> commanded piston velocity
+    ct_testbench_velocity_gain_per_s: float   # ... on the test bench's light leg
     ct_force_gain_per_n: float        # spool fraction per N of load-cell force error
     ct_stiffness_n_m: float           # oil-column stiffness of a leg: compliance flow F' / K
     ct_velocity_filter_hz: float      # low-pass of the measured twist (the D term)
@@ -282,6 +284,7 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         table_kp=kp, table_ki=ki, feedforward_scale=raw["model_based"]["feedforward_scale"],
         ct_bandwidth_rad_s=2 * math.pi * ct["bandwidth_hz"], ct_damping=ct["damping"],
         ct_integral_fraction=ct["integral_fraction"], ct_velocity_gain_per_s=ct["velocity_gain_per_s"],
+        ct_testbench_velocity_gain_per_s=ct["testbench_velocity_gain_per_s"],
         ct_force_gain_per_n=ct["force_gain_pct_n"] / 100.0, ct_stiffness_n_m=ct["stiffness_n_mm"] / MM,
         ct_velocity_filter_hz=ct["velocity_filter_hz"],
 

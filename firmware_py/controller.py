@@ -20,7 +20,7 @@ from physics.actuator import piston_force
 from physics.constants import GRAVITY_M_S2
 from protocol.enums import Ack, Command, Fault, State, TestMode, WaypointFlag
 
-from .computed_torque import ComputedTorque
+from .computed_torque import ComputedTorque, LegComputedTorque
 from .config import ControllerConfig
 from .control import COMPUTED_TORQUE, MODEL_BASED, JointController
 from .geometry import Geometry, default_geometry
@@ -44,8 +44,6 @@ class Controller:
                  geometry: Geometry | None = None):
         if rig not in RIGS:
             raise ValueError(f"unknown rig {rig!r} (known: {', '.join(RIGS)})")
-        if controller == COMPUTED_TORQUE and rig != "hexapod":
-            raise ValueError("the computed-torque controller runs on the hexapod only")
         self.cfg, self.rig, self.period_s = cfg, rig, period_s
         self.hexapod = rig == "hexapod"
         self.n = n = 6 if self.hexapod else 1
@@ -73,7 +71,7 @@ class Controller:
             check = TestbenchCheck(cfg, cfg.stroke_m)
             self.gravity_axial = np.full(n, GRAVITY_M_S2)
             self.tau_n = np.zeros(n)
-            self.computed_torque = None
+            self.computed_torque = LegComputedTorque(cfg, n, period_s)
         self.joint = JointController(cfg, n, period_s, moving_mass_kg=moving_mass, mass_offset_kg=mass_offset,
                                      kp_factor=kp_factor, ki_factor=ki_factor)
         self.sup = Supervisor(controller)
@@ -138,8 +136,11 @@ class Controller:
             self.platform.reference_forces(self.home_strokes, ref.vr)
             self.computed_torque.update(self.platform, meas.position_m, meas.position_m, ref.vr, meas.force_n,
                                         cmd.spool)
-            self.computed_torque.reset()
             self.platform.dk.reset()
+        else:
+            self.computed_torque.update(self.joint.error_m, self.joint.velocity_estimate, ref.vr, ref.ar,
+                                        meas.force_n, cmd.spool)
+        self.computed_torque.reset()
         self.frames.reset()
         self.plausibility.reset()
         self.limits.recovery_left[0] = 0
@@ -157,8 +158,6 @@ class Controller:
     def host_command(self, command: int, argument: int) -> Ack:
         if self.reinitialise and command in MOTION_COMMANDS:
             return Ack.BAD_STATE             # after RESET: not before every sensor has reported again
-        if command == Command.SELECT_CONTROLLER and argument == COMPUTED_TORQUE and not self.hexapod:
-            return Ack.BAD_ARGUMENT
         result = self.sup.command(command, argument)
         if result is Ack.ACCEPTED:
             self._do_action()
@@ -319,7 +318,7 @@ class Controller:
             ref.held()
         else:                                        # valves locked: follow the measurement
             ref.follow(joint.position_estimate)
-        computed_torque = self.hexapod and sup.controller == COMPUTED_TORQUE
+        computed_torque = sup.controller == COMPUTED_TORQUE
         if self.hexapod and (sup.controller == MODEL_BASED or computed_torque):
             if not self.platform.reference_forces(ref.yr, ref.vr) and active:
                 sup.fault(Fault.SINGULARITY)
@@ -331,6 +330,9 @@ class Controller:
         if computed_torque:
             if sup.state not in ACTIVE:
                 self.computed_torque.reset()
+            elif not self.hexapod:
+                self.computed_torque.update(joint.error_m, joint.velocity_estimate, ref.vr, ref.ar, meas.force_n,
+                                            joint.u_v)
             elif not self.computed_torque.update(self.platform, joint.velocity_estimate, joint.error_m, ref.vr,
                                                  meas.force_n, joint.u_v):
                 sup.fault(Fault.SINGULARITY)

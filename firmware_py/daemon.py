@@ -11,7 +11,6 @@ import json
 import sys
 
 from protocol.cliutil import StopFlag
-from protocol.errors import UserInputError
 from protocol.realtime import applied, freeze_gc, lock_memory, pin_cpu, set_fifo, thaw_gc
 
 from .config import ControllerConfig, load_config
@@ -45,8 +44,6 @@ def run_daemon(args) -> int:
     from .loop import ActivationError, ControllerLoop
 
     spec = parse_bus_spec(args.bus) if args.bus is not None else None     # a bad string fails first
-    if args.controller == "computed-torque" and args.rig != "hexapod":
-        raise UserInputError("--controller computed-torque: runs on the hexapod only (--rig hexapod)")
     cfg = load_config(args.config)
     controller = Controller(cfg, args.rig, 1.0 / args.rate_hz, CONTROLLER_NAMES[args.controller])
     stop = StopFlag()

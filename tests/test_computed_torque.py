@@ -1,6 +1,6 @@
-"""The hexapod's computed-torque controller: its kernels against SciPy as the oracle, its
-packaged plant data against what `hydrapod design computed-torque` derives from the
-emulator, its outputs at rest, and where it may run."""
+"""The computed-torque controller: its kernels against SciPy as the oracle, its packaged
+plant data against what `hydrapod design computed-torque` derives from the emulator, its
+outputs at rest on the hexapod and on the test bench, and where it may run."""
 
 from __future__ import annotations
 
@@ -83,11 +83,55 @@ def test_at_rest_on_the_reference_the_valves_get_the_maps_holding_spool(cfg):
     np.testing.assert_allclose(ct.force_cmd, ctl.tau_n, rtol=1e-6, atol=1e-6)      # a_cmd = 0 at rest
 
 
-def test_computed_torque_is_the_hexapods_only(cfg, capsys):
-    with pytest.raises(ValueError, match="hexapod only"):
-        Controller(cfg, "testbench", PERIOD_S, COMPUTED_TORQUE)
-    bench = Controller(cfg, "testbench", PERIOD_S, CONTROLLER_NAMES["pi"])
-    assert bench.host_command(Command.SELECT_CONTROLLER, COMPUTED_TORQUE) is Ack.BAD_ARGUMENT
-    hexapod = Controller(cfg, "hexapod", PERIOD_S)
-    hexapod.activated(False)
-    assert hexapod.host_command(Command.SELECT_CONTROLLER, COMPUTED_TORQUE) is Ack.ACCEPTED
+@pytest.mark.parametrize("rig", ["testbench", "hexapod"])
+def test_computed_torque_is_selectable_on_both_rigs(cfg, rig):
+    ctl = Controller(cfg, rig, PERIOD_S, CONTROLLER_NAMES["pi"])
+    ctl.activated(False)
+    assert ctl.host_command(Command.SELECT_CONTROLLER, COMPUTED_TORQUE) is Ack.ACCEPTED
+
+
+def bench_at_rest(cfg, load_n: float):
+    """The test bench with computed torque READY at home, the load cell reading `load_n`."""
+    ctl = Controller(cfg, "testbench", PERIOD_S, COMPUTED_TORQUE)
+    meas, cmd = ctl.new_interfaces()
+    meas.position_m[:] = ctl.home_strokes
+    meas.force_n[:] = load_n
+    meas.fresh[:] = True
+    meas.valve_state[:] = 3
+    ctl.update(meas, cmd)
+    ctl.activated(True)
+    assert ctl.state is State.READY
+    return ctl, meas, cmd
+
+
+def test_the_test_benchs_valve_at_rest_gets_the_maps_spool_for_load_and_rod(cfg):
+    """On the reference at rest: the map's spool at zero velocity for the load cell's force
+    plus the rod's weight (the seals' friction is 0 at rest, the force loop has no a_cmd)."""
+    load_n = 60.0
+    ctl, meas, cmd = bench_at_rest(cfg, load_n)
+    for _ in range(5):
+        ctl.update(meas, cmd)
+    leg = ctl.computed_torque
+    np.testing.assert_allclose(ctl.joint.error_m, 0.0, atol=1e-9)
+    piston_n = load_n + cfg.moving_mass_kg * 9.81
+    assert leg.force_map[0] == pytest.approx(piston_n, abs=1e-6)
+    expected = valve_map_eval(cfg.valve_map_force_n, cfg.valve_map_velocity_m_s, cfg.valve_map_spool, piston_n, 0.0)
+    assert cmd.spool[0] == pytest.approx(expected, abs=1e-6)
+
+
+def test_the_test_benchs_leg_below_its_reference_opens_the_valve_upwards(cfg):
+    """The encoder 1 mm below the held reference: the velocity loop asks lambda x 1 mm/s up
+    through the map, and the PID's acceleration adds force: the spool opens beyond the
+    holding one, and more with the larger error."""
+    load_n = 60.0
+    ctl, meas, cmd = bench_at_rest(cfg, load_n)
+    ctl.update(meas, cmd)
+    holding = float(cmd.spool[0])
+    openings = []
+    for below_m in (1e-3, 2e-3):
+        ctl_b, meas_b, cmd_b = bench_at_rest(cfg, load_n)
+        meas_b.position_m[:] = ctl_b.home_strokes - below_m
+        ctl_b.update(meas_b, cmd_b)
+        openings.append(float(cmd_b.spool[0]))
+        assert ctl_b.joint.error_m[0] > 0.0
+    assert holding < openings[0] < openings[1]

@@ -21,19 +21,18 @@ def moving_trajectory(ctl):
     return through_points(points, 0.1, 0.5)
 
 
-CASES = [(rig, controller) for rig in ("testbench", "hexapod") for controller in CONTROLLER_NAMES
-         if rig == "hexapod" or controller != "computed-torque"]
+CASES = [(rig, controller) for rig in ("testbench", "hexapod") for controller in CONTROLLER_NAMES]
 
 
 @pytest.mark.parametrize("rig,controller", CASES)
 def test_steady_cycles_allocate_no_numpy_memory(rig, controller):
     # tracemalloc slows everything down: a loaded CI machine must not fail this test on a
     # late heartbeat (the heartbeat supervision has its own tests)
-    # computed torque drives the legs through the platform's dynamics: the emulator's hexapod
-    # behind the bus (on independent legs, which the fake's are, its yaw loop has no inertia
-    # to act on and goes unstable within ~900 cycles)
-    loop, ctl, bus = make_loop(rig, controller, {"timing": {"heartbeat_timeout_ms": 60000.0}},
-                               emulated=controller == "computed-torque")
+    # computed torque on the hexapod drives the legs through the platform's dynamics: the
+    # emulator's hexapod behind the bus (on independent legs, which the fake's are, its yaw
+    # loop has no inertia to act on and goes unstable within ~900 cycles)
+    emulated = rig == "hexapod" and controller == "computed-torque"
+    loop, ctl, bus = make_loop(rig, controller, {"timing": {"heartbeat_timeout_ms": 60000.0}}, emulated=emulated)
     assert ctl.state is State.READY
     if ctl.hexapod and bus.imu_rpy is None:
         bus.imu_rpy = [0.0, 0.0, 0.0]              # the attitude cross-check runs in the window too
@@ -49,7 +48,7 @@ def test_steady_cycles_allocate_no_numpy_memory(rig, controller):
     run(500)
     # replays happen at cycle multiples of the trajectory length; the window starts on one
     # with the emulator stepping in this process: the bytes gained by the controller's code
-    sources = ("*/firmware_py/*", "*/protocol/*") if controller == "computed-torque" else None
+    sources = ("*/firmware_py/*", "*/protocol/*") if emulated else None
     grown, gained = allocations(lambda: run(CYCLES), sources)
     assert grown == []
     assert gained < 8192, f"traced memory grew by {gained} bytes"
@@ -58,6 +57,6 @@ def test_steady_cycles_allocate_no_numpy_memory(rig, controller):
     assert loop.stats.e2e_errors == 0 and loop.stats.missing_frames == 0
     # IMU frames were compared (the emulator's IMU reads the true attitude, the encoders' DK
     # is quantised: a few mrad apart)
-    limit = ctl.cfg.attitude_mismatch_rad if controller == "computed-torque" else 2e-3
+    limit = ctl.cfg.attitude_mismatch_rad if emulated else 2e-3
     assert not ctl.hexapod or ctl.attitude_check.angle_rad < limit
     assert np.max(np.abs(ctl.joint.error_m)) < 2e-3             # tracking within 2 mm

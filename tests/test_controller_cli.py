@@ -45,7 +45,6 @@ def test_config_errors_name_key_value_and_range(tmp_path, text, culprit):
     (["controller", "--rate-hz", "0"], "--rate-hz"),
     (["controller", "--rig", "crane"], "--rig"),
     (["controller", "--controller", "pid"], "--controller"),
-    (["controller", "--rig", "testbench", "--controller", "computed-torque"], "hexapod only"),
     (["controller", "--config", "/nonexistent.toml"], "no such file"),
 ])
 def test_cli_errors_are_one_line_exit_2(args, culprit):

@@ -12,6 +12,8 @@ from hil.logdata import frames_by_sender, frames_counted_by_senders, read_log
 from protocol.dbc import dbc_path
 from tests.cli_run import hydrapod
 
+CONTROLLERS = ("pi", "adaptive", "computed-torque")     # sha-step and sha-tracking run all three
+
 # the tests reading the one run share a worker (make test distributes with --dist loadgroup)
 SHA_STEP_GROUP = pytest.mark.xdist_group("sha-step-run")
 
@@ -34,11 +36,15 @@ def test_sha_step_short_passes_with_zero_e2e_errors(sha_step_run):
     assert doc["e2e_errors"] == 0 and doc["log"]["lost_frames"] == 0
     assert doc["failure"] is None
     steps = doc["metrics"]["steps"]
-    # 2 controllers x 2 loads x 2 positions, each a square wave +10, -10, +10 mm; the last is measured
-    assert {s["controller"] for s in steps} == {"pi", "adaptive"} and len(steps) == 24
-    assert [round(s["step_mm"]) for s in steps] == [10, -10, 10] * 8
-    assert [s["measured"] for s in steps] == [False, False, True] * 8
-    assert all(doc["metrics"]["summary"][c]["steps"] == 4 for c in ("pi", "adaptive"))
+    # 3 controllers x 2 loads x 2 positions, each a square wave +10, -10, +10 mm; the last is measured
+    controllers = CONTROLLERS
+    assert {s["controller"] for s in steps} == set(controllers) and len(steps) == 36
+    assert [round(s["step_mm"]) for s in steps] == [10, -10, 10] * 12
+    assert [s["measured"] for s in steps] == [False, False, True] * 12
+    assert all(doc["metrics"]["summary"][c]["steps"] == 4 for c in controllers)
+    # beyond the thesis: computed torque meets its adaptive claim on every step (< 14 %, <= 1 s)
+    ct = {c["name"]: c for c in doc["checks"] if c["name"].startswith("computed-torque")}
+    assert len(ct) == 2 and all(c["passed"] and c["required"] for c in ct.values()), ct
     for name in ("emulator", "controller"):
         assert doc["children"][name]["exit_status"] == 0
     assert (out / "report.md").read_text().count("thesis") >= 3
@@ -123,7 +129,7 @@ def test_list_names_the_scenarios():
 # scenario, arguments, what its metrics must hold (besides passing with a clean bus)
 SCENARIO_RUNS = {
     "sha-tracking": (["--short"], lambda m: {(r["controller"], r["load_kg"], round(r["w_rad_s"], 1))
-                                            for r in m["runs"]} == {(c, load, w) for c in ("pi", "adaptive")
+                                            for r in m["runs"]} == {(c, load, w) for c in CONTROLLERS
                                                                     for load in (0.0, 6.0) for w in (0.5, 2.0)}),
     "sha-perturbation": ([], lambda m: all(len(r["load_changes"]) == 3 for r in m["runs"].values())
                          and set(m["runs"]) == {"pi", "adaptive"}),

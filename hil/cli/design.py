@@ -5,7 +5,8 @@
     hydrapod design modes [--pose X,Y,Z,ROLL,PITCH,YAW] [--payload-kg M] [--supply-bar P] [--along] [--json]
                           [--plot DIR]
     hydrapod design computed-torque [--out FILE] [--bandwidth-hz] [--damping] [--integral-fraction]
-                                    [--velocity-gain] [--force-gain-pct-n] [--velocity-filter-hz] [--json]
+                                    [--velocity-gain] [--testbench-velocity-gain] [--force-gain-pct-n]
+                                    [--velocity-filter-hz] [--json]
 
 SRC: `table-a3` (the thesis's plants), `emulator` (the emulator's linearisation) or the
 metrics.json of a `hil run sha-identification`.
@@ -142,7 +143,8 @@ def _computed_torque(args) -> int:
     stiffness = leg_stiffness_n_m(cfg)
     packaged = load_controller_config().raw["computed_torque"]       # an option not given keeps its value
     given = {"bandwidth_hz": args.bandwidth_hz, "damping": args.damping, "integral_fraction": args.integral_fraction,
-             "velocity_gain_per_s": args.velocity_gain, "force_gain_pct_n": args.force_gain_pct_n,
+             "velocity_gain_per_s": args.velocity_gain,
+             "testbench_velocity_gain_per_s": args.testbench_velocity_gain, "force_gain_pct_n": args.force_gain_pct_n,
              "velocity_filter_hz": args.velocity_filter_hz}
     gains = {key: packaged[key] if value is None else value for key, value in given.items()}
     text = computed_torque_toml(spool, stiffness, gains, "the emulator's configuration")
@@ -207,7 +209,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_modes)
 
-    p = design_sub.add_parser("computed-torque", help="the hexapod's computed-torque controller: its valve map "
+    p = design_sub.add_parser("computed-torque", help="the computed-torque controller: its valve map "
                                                       "and leg stiffness from the emulator's model, and its gains")
     p.add_argument("--out", type=output_file, default="hil-out/computed_torque.toml", metavar="FILE",
                    help="the controller config file to write (default: hil-out/computed_torque.toml)")
@@ -218,6 +220,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--integral-fraction", type=number_in_range(float, 0.0, 5.0), help="Ki = this x w^3")
     p.add_argument("--velocity-gain", type=number_in_range(float, 0.0, 1000.0),
                    help="joint error to commanded piston velocity, 1/s")
+    p.add_argument("--testbench-velocity-gain", type=number_in_range(float, 0.0, 1000.0),
+                   help="the same on the test bench's leg, 1/s")
     p.add_argument("--force-gain-pct-n", type=number_in_range(float, 0.0, 10.0),
                    help="spool %% per N of load-cell force error")
     p.add_argument("--velocity-filter-hz", type=number_in_range(float, 0.5, 200.0),

@@ -23,7 +23,6 @@ from ..motions import circle_motion, concatenate
 
 GOALS_US = {("hexapod", "model-based"): {"p99": 300.0, "max": 1000.0},
             ("hexapod", "computed-torque"): {"p99": 300.0, "max": 1000.0}}
-HEXAPOD_ONLY = ("computed-torque",)
 
 
 class Bench:
@@ -84,8 +83,6 @@ def _run(cfg: ControllerConfig, cycles: int, warmup: int) -> list[dict]:
     rows = []
     for rig in RIGS:
         for controller in CONTROLLER_NAMES:
-            if rig != "hexapod" and controller in HEXAPOD_ONLY:
-                continue
             bench = Bench(cfg, rig, controller)
             for _ in range(warmup):
                 bench.step()
