@@ -55,6 +55,7 @@ class Host:
         self._rot = Outbox("HOST_WAYPOINT_ROT")
         self._time = Outbox("HOST_WAYPOINT_TIME")
         self._emu = Outbox("EMU_CTRL")
+        self._kick = Outbox("EMU_KICK")
         self._test = Outbox("HOST_TEST")
         self._cmd_seq = 0
         self._test_seq = 0
@@ -208,6 +209,12 @@ class Host:
 
     def set_load(self, load_kg: float) -> None:
         self.emulator(EmuCommand.SET_LOAD, load_kg=load_kg)
+
+    def kick(self, axis: int, value: float, duration_s: float) -> None:
+        """EMU_KICK: push the emulated platform (N along X-Z, N m about ROLL-YAW)."""
+        v, i = self._kick.values, self._kick.index
+        v[i["AXIS"]], v[i["FORCE"]], v[i["DURATION"]] = axis, value, duration_s
+        self.send(self._kick)
 
     def close(self) -> None:
         self.writer.stop()

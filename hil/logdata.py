@@ -93,7 +93,7 @@ class LogData:
 
 
 EVENT_MESSAGES = ("NMT", "HOST_CMD", "HOST_TEST", "HOST_WAYPOINT_POS", "HOST_WAYPOINT_ROT", "HOST_WAYPOINT_TIME",
-                  "CTRL_ACK", "EMU_CTRL") + tuple(n for n in CODECS if n.startswith("EMCY_"))
+                  "CTRL_ACK", "EMU_CTRL", "EMU_KICK") + tuple(n for n in CODECS if n.startswith("EMCY_"))
 
 
 def _empty(name: str) -> Series:

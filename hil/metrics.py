@@ -5,6 +5,8 @@ Pure functions of arrays (SI in, SI out); the scenarios pick the windows.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from protocol.enums import Fault, State
@@ -28,6 +30,56 @@ def step_response(t_s, y, y0: float, step: float, band: float = SETTLING_BAND) -
     final = float(np.mean(response[-max(len(response) // 10, 1):]))
     return {"overshoot_pct": overshoot, "settling_s": settling, "rise_s": rise,
             "steady_error_pct": (final - 1.0) * 100.0}
+
+
+def _free_response(t, params, count):
+    """sum_k A_k e^(-zeta_k w_k t) sin(w_k sqrt(1 - zeta_k^2) t + phi_k) + c0 + c1 t."""
+    out = params[-2] + params[-1] * t
+    for k in range(count):
+        amplitude, zeta, frequency, phase = params[4 * k:4 * k + 4]
+        w = 2 * math.pi * frequency
+        out = out + amplitude * np.exp(-zeta * w * t) * np.sin(w * math.sqrt(max(1.0 - zeta * zeta, 1e-9)) * t + phase)
+    return out
+
+
+def damped_oscillation(t_s, y, count: int = 1) -> dict:
+    """The least-squares fit of `count` (1 or 2) damped modes on a slow drift to a free
+    response: per mode frequency_hz (undamped, w / 2 pi), damping_ratio, amplitude (largest
+    first), and the fit's r2. Started from several frequencies around the zero crossings'
+    estimate (two modes: pairs a fifth to an octave apart)."""
+    from scipy.optimize import curve_fit
+    t_s, y = np.asarray(t_s, float), np.asarray(y, float)
+    ok = np.isfinite(y)
+    t_s, y = t_s[ok], y[ok]
+    centred = y - np.mean(y)
+    total = float(np.sum(centred ** 2))
+    crossings = np.flatnonzero(np.diff(np.sign(centred)) != 0)
+    span = t_s[-1] - t_s[0] if len(t_s) > 1 else 1.0
+    guess = max(len(crossings), 1) / (2 * span)
+    size = float(np.max(np.abs(centred))) if len(centred) else 0.0
+    if count == 1:
+        starts = [[f] for f in (0.5 * guess, guess, 2 * guess, 4 * guess)]
+    else:
+        starts = [[f, r * f] for f in (0.7 * guess, guess) for r in (1.5, 2.0)]
+    lower = [0.0, 0.0, 0.0, -np.inf] * count + [-np.inf, -np.inf]
+    upper = [np.inf, 0.99, np.inf, np.inf] * count + [np.inf, np.inf]
+    best, best_residual = None, np.inf
+    for frequencies in starts:
+        for phase in (0.5, 2.0, -1.0):
+            p0 = [v for f in frequencies for v in (size / count, 0.1, f, phase)] + [float(np.mean(y)), 0.0]
+            try:
+                p, _ = curve_fit(lambda t, *q: _free_response(t, q, count), t_s, y, p0=p0, bounds=(lower, upper),
+                                 maxfev=5000)
+            except (RuntimeError, ValueError):
+                continue
+            residual = float(np.sum((_free_response(t_s, p, count) - y) ** 2))
+            if residual < best_residual:
+                best, best_residual = p, residual
+    if best is None or total == 0.0:
+        return {"modes": [], "r2": math.nan}
+    modes = sorted(({"frequency_hz": float(best[4 * k + 2]), "damping_ratio": float(best[4 * k + 1]),
+                     "amplitude": float(best[4 * k])} for k in range(count)), key=lambda m: -m["amplitude"])
+    return {"modes": modes, "r2": 1.0 - best_residual / total}
 
 
 def iae(error, period_s: float) -> float:

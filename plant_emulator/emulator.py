@@ -78,6 +78,7 @@ class Counters:
     host_stalls: int = 0              # this process not scheduled for > 1 SYNC period (node clocks paused)
     host_stall_max_s: float = 0.0
     free_run_steps: int = 0           # periods of physics run on the wall clock after a lost SYNC
+    kicks: int = 0                    # EMU_KICK pushes applied to the platform
     injected: dict = field(default_factory=dict)
     # every SYNC-watchdog trip: when (epoch s), and how late this process woke for it (ms): a
     # real node's hardware timer fires on time; ours is this process's wake-up (hil faults, case 1)
@@ -87,7 +88,8 @@ class Counters:
     def as_dict(self) -> dict:
         return {k: getattr(self, k) for k in ("syncs", "frames_in", "frames_out", "e2e_errors",
                                               "sync_sequence_errors", "valve_faults", "emergencies",
-                                              "unknown_frames", "host_stalls", "free_run_steps")} | {
+                                              "unknown_frames", "host_stalls", "free_run_steps",
+                                              "kicks")} | {
             "host_stall_max_ms": round(self.host_stall_max_s * 1e3, 3), "injected": dict(self.injected),
             "sync_timeouts": list(self.sync_timeouts), "fault_onsets": list(self.fault_onsets)}
 
@@ -105,7 +107,7 @@ class Emulator:
         self.valves = {n: ValveDriver(cfg.command_timeout_syncs, cfg.spool_jam_threshold, cfg.spool_jam_syncs)
                        for n in self.legs}
         self.nmt = {n: NmtState.BOOTUP for n in self.nodes}
-        names = ["NMT", "SYNC", "EMU_CTRL"] + [f"VALVE_CMD_{n}" for n in self.legs]
+        names = ["NMT", "SYNC", "EMU_CTRL", "EMU_KICK"] + [f"VALVE_CMD_{n}" for n in self.legs]
         self.decoder = FrameDecoder(names)
         self._cmd_slot = {CODECS[f"VALVE_CMD_{n}"].frame_id: n for n in self.legs}
         self._ids = {name: CODECS[name].frame_id for name in names}
@@ -314,6 +316,15 @@ class Emulator:
             self.valves[node].receive(bool(d), bool(h), bool(m), bool(r), float(setpoint))
         elif frame_id == self._ids["EMU_CTRL"]:
             self._emu_ctrl(*(self.decoder.values["EMU_CTRL"][2:]))
+        elif frame_id == self._ids["EMU_KICK"]:
+            self._kick(*(self.decoder.values["EMU_KICK"][2:]))
+
+    def _kick(self, axis: float, value: float, duration_s: float) -> None:
+        if not hasattr(self.rig, "kick"):
+            print("emulator: EMU_KICK ignored: the test bench has no platform to push", file=sys.stderr, flush=True)
+            return
+        self.rig.kick(int(axis), float(value), float(duration_s))
+        self.counters.kicks += 1
 
     def _nmt(self, command: int, node: int) -> None:
         if command == NmtCommand.START:      # the NMT master (re)started: its alive counters start afresh

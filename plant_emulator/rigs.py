@@ -220,6 +220,8 @@ class HexapodRig(_RigBase):
         self._solimp_default = model.dof_solimp[mech.slide_dof].copy()
         self.set_load(cfg.payload_kg)
         self._force = np.zeros(6)
+        self._wrench = np.zeros(6)                # an external push on the platform (EMU_KICK)
+        self._kick_left_s = 0.0
         self._damping = np.zeros(6)
         self._velocity = np.zeros(6)
         self._stroke = np.zeros(6)
@@ -247,6 +249,13 @@ class HexapodRig(_RigBase):
         model.dof_solref[dof] = SEIZED_SOLREF if seized else self._solref_default[leg]
         model.dof_solimp[dof] = SEIZED_SOLIMP if seized else self._solimp_default[leg]
 
+    def kick(self, axis: int, value: float, duration_s: float) -> None:
+        """Push the platform for `duration_s`, from the next step on: a force [N] along base
+        axis 0-2 or a torque [N m] about 3-5, at its centre of mass (MuJoCo's xfrc_applied)."""
+        self._wrench[:] = 0.0
+        self._wrench[axis] = value
+        self._kick_left_s = duration_s
+
     def _read_legs(self) -> None:
         mech = self.mechanism
         np.add(mech.data.qpos[mech.slide_qpos], self.home_length_m - self.geometry.leg_min_m, out=self._stroke)
@@ -260,6 +269,13 @@ class HexapodRig(_RigBase):
         sub = cfg.hydraulic_substeps
         h = model.opt.timestep / sub
         for _ in range(steps):
+            if self._kick_left_s > 0.0:
+                data.xfrc_applied[mech.platform_body] = self._wrench
+                self._kick_left_s -= model.opt.timestep
+                if self._kick_left_s <= 0.0:
+                    self._wrench[:] = 0.0         # the next step runs without it
+            else:
+                data.xfrc_applied[mech.platform_body] = self._wrench
             legs_drive_into(self.state, self._velocity, cfg.hp, cfg.friction, self._force, self._damping)
             model.dof_damping[mech.slide_dof] = self._damping
             data.ctrl[:] = self._force

@@ -55,6 +55,7 @@ NmtCommand = _enum("NmtCommand", value_table("NMT", "COMMAND"))              # C
 NmtState = _enum("NmtState", _same_table(_messages("HEARTBEAT_"), "STATE"))  # CiA 301 NMT states
 EmuCommand = _enum("EmuCommand", value_table("EMU_CTRL", "COMMAND"))
 EmuFault = _enum("EmuFault", value_table("EMU_CTRL", "FAULT"))               # faults the emulator injects
+KickAxis = _enum("KickAxis", value_table("EMU_KICK", "AXIS"))                # EMU_KICK's push
 
 VALVE_FAULT_STATES = (ValveState.FAULT_HOLD, ValveState.FAULT_DISABLED)
 TestMode.__test__ = False            # an enum, not a pytest class despite its name

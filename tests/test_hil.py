@@ -138,6 +138,10 @@ SCENARIO_RUNS = {
     # diagonal's short variant: computed torque alone (the thesis's two fault there)
     "pm-circle": ([], lambda m: set(m["controllers"]) == {"adaptive", "model-based", "computed-torque"}
                   and m["time_scale"] == 1.0 and all(r["complete"] for r in m["controllers"].values())),
+    # the modal kick test at home (the full run adds the circle's start): both pushes found,
+    # fitted (r2 >= 0.95, a required check) and set beside the sealed model's mode
+    "hex-kick": (["--short"], lambda m: [k["axis"] for k in m["kicks"]] == ["X", "Y"]
+                 and all(k["model_frequency_hz"] and 2.0 < k["frequency_hz"] < 8.0 for k in m["kicks"])),
     "pm-diagonal": (["--short"], lambda m: set(m["controllers"]) == {"computed-torque"} and m["time_scale"] == 1.0
                     and m["controllers"]["computed-torque"]["complete"]),
     # realtime pacing, their short 10 s (the full runs are 60 s; the soak runs a minute): jitter,

@@ -11,7 +11,7 @@ import pytest
 from scipy.linalg import expm
 
 from hil.cli import main
-from hil.design.modes import blocks, modal_model, pose_quaternion, state_matrices
+from hil.design.modes import blocks, modal_model, pose_quaternion, sealed_modes, state_matrices
 from plant_emulator import hydraulics as hy
 from plant_emulator.params import load_config
 from plant_emulator.rigs import HexapodRig
@@ -43,6 +43,45 @@ def test_one_leg_without_leakage_oscillates_at_the_oil_columns_frequency():
     assert len(pair) == 2
     assert np.abs(pair.imag).max() == pytest.approx(math.sqrt(k_hand / mass), rel=1e-4)
     assert np.abs(pair.real).max() < 1e-6 * math.sqrt(k_hand / mass)
+
+
+def test_one_sealed_leg_adds_the_seals_bristles_in_parallel_with_its_oil_columns():
+    """Load-holding valves closed (ports 0: no valve flow, no valve-side leak), the seals in
+    pre-sliding: omega^2 = (K_oil + sigma0) / m, damping 2 zeta omega m = sigma1 + sigma2; the
+    leg keeps its oil-column stiffness, the spool no longer reaches it."""
+    cfg = load_config(overrides={"chambers": {"seal_leakage_l_min_per_bar": 0.0, "air_fraction_pct": 0.0}})
+    mass, y, pa, pb, sigma0, damping = 5.0, 0.1, 12e5, 9e5, 2e5, 1500.0
+    a, _, stiffness, flow_gain = state_matrices(cfg, np.array([[mass]]), np.zeros((1, 1)), np.array([y]),
+                                                np.array([pa]), np.array([pb]), np.zeros(1), cfg.supply_pressure_pa,
+                                                damping, ports=0.0, seal_stiffness=sigma0)
+    beta = 1.0 / (1.0 / cfg.hp[hy.HP_BETA_OIL] + 1.0 / cfg.hp[hy.HP_BETA_WALL])
+    area, alpha = cfg.area_a_m2, cfg.alpha
+    va = cfg.hp[hy.HP_VA0] + area * y
+    vb = cfg.hp[hy.HP_VB0] + alpha * area * (cfg.hp[hy.HP_STROKE] - y)
+    k_oil = area ** 2 * (beta / va + alpha ** 2 * beta / vb)
+    assert stiffness[0] == pytest.approx(k_oil, rel=1e-6) and flow_gain[0] == 0.0
+    values = np.linalg.eigvals(a)
+    pair = values[np.abs(values.imag) > 1e-6]
+    assert len(pair) == 2
+    w = math.sqrt((k_oil + sigma0) / mass)
+    assert abs(pair[0]) == pytest.approx(w, rel=1e-4)
+    assert -pair[0].real == pytest.approx(damping / (2 * mass), rel=1e-4)
+
+
+def test_the_sealed_modes_combine_both_bristle_sides_half_a_period_each():
+    """`sealed_modes`: frequency 2 / (1/f+ + 1/f-) of the two sides' models, paired one to one;
+    at home x and y alike (the platform's symmetry)."""
+    cfg = load_config()
+    home = HexapodRig(cfg).geometry.home_position_m
+    modes = sealed_modes(cfg, home)
+    by_axis = {m["axis"]: m for m in modes}
+    assert {"x", "y", "yaw"} <= set(by_axis)
+    for m in modes:
+        f_plus, f_minus = m["frequency_hz_sides"]
+        assert m["frequency_hz"] == pytest.approx(2.0 / (1.0 / f_plus + 1.0 / f_minus))
+        assert min(f_plus, f_minus) < m["frequency_hz"] < max(f_plus, f_minus)
+    assert by_axis["x"]["frequency_hz"] == pytest.approx(by_axis["y"]["frequency_hz"], rel=1e-3)
+    assert by_axis["x"]["damping_ratio"] == pytest.approx(by_axis["y"]["damping_ratio"], rel=1e-3)
 
 
 def test_the_linear_model_predicts_the_emulators_response_to_a_valve_step():

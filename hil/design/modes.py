@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 from scipy.spatial.transform import Rotation
 
 from physics import lugre
@@ -89,9 +90,10 @@ class ModalModel:
     modes: list[Mode] = field(default_factory=list)
     converged: bool = True
 
-    def platform_modes(self, count: int = 6) -> list[Mode]:
-        """The slowest oscillating modes that move the platform (leg part dominant)."""
-        moving = [m for m in self.modes if m.oscillating and m.platform_share >= 0.5]
+    def platform_modes(self, count: int = 6, min_share: float = 0.5) -> list[Mode]:
+        """The slowest oscillating modes that move the platform (leg part dominant; sealed
+        chambers compress exactly as the legs move: share 0.5)."""
+        moving = [m for m in self.modes if m.oscillating and m.platform_share >= min_share]
         return moving[:count]
 
 
@@ -147,27 +149,30 @@ def joint_space(rig: HexapodRig, position_m, quat) -> tuple[np.ndarray, ...]:
     return strokes, static, jacobian, inertia, gravity_stiffness
 
 
-def actuator_partials(cfg: EmulatorConfig, y: float, pa: float, pb: float, spool: float, supply_pa: float
-                      ) -> np.ndarray:
-    """(2, 4) d(PA', PB') / d(v, PA, PB, spool) of `hydraulics.pressure_rates`, central differences."""
+def actuator_partials(cfg: EmulatorConfig, y: float, pa: float, pb: float, spool: float, supply_pa: float,
+                      ports: float = 1.0) -> np.ndarray:
+    """(2, 4) d(PA', PB') / d(v, PA, PB, spool) of `hydraulics.pressure_rates`, central differences
+    (`ports` 0: the load-holding valves closed, the chambers sealed)."""
     x0 = np.array([0.0, pa, pb, spool])
     steps = np.array([1e-6, 10.0, 10.0, 1e-7])
     out = np.empty((2, 4))
     for j in range(4):
         dx = np.zeros(4)
         dx[j] = steps[j]
-        hi = hy.pressure_rates(y, *(x0 + dx), supply_pa, cfg.hp, 1.0)[:2]
-        lo = hy.pressure_rates(y, *(x0 - dx), supply_pa, cfg.hp, 1.0)[:2]
+        hi = hy.pressure_rates(y, *(x0 + dx), supply_pa, cfg.hp, ports)[:2]
+        lo = hy.pressure_rates(y, *(x0 - dx), supply_pa, cfg.hp, ports)[:2]
         out[:, j] = (np.array(hi) - np.array(lo)) / (2 * steps[j])
     return out
 
 
 def state_matrices(cfg: EmulatorConfig, inertia: np.ndarray, gravity_stiffness: np.ndarray, strokes: np.ndarray,
-                   pa: np.ndarray, pb: np.ndarray, spool: np.ndarray, supply_pa: float, friction_slope: float
+                   pa: np.ndarray, pb: np.ndarray, spool: np.ndarray, supply_pa: float, friction_slope: float,
+                   ports: float = 1.0, seal_stiffness: float = 0.0
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """A (5n, 5n), B (5n, n) of n legs on a mechanism of joint-space inertia `inertia` (n, n);
     and per leg the hydraulic stiffness and the flow gain (piston velocity per unit spool
-    with the load force held)."""
+    with the load force held). `seal_stiffness`: the seals' bristles as a spring per leg
+    (pre-sliding), `friction_slope` then their damping."""
     area, alpha = cfg.area_a_m2, cfg.alpha
     n = inertia.shape[0]
     Q, QD, PA, PB, SPOOL = blocks(n)
@@ -176,13 +181,13 @@ def state_matrices(cfg: EmulatorConfig, inertia: np.ndarray, gravity_stiffness: 
     b = np.zeros((5 * n, n))
     a[Q, QD] = np.eye(n)
     # M_q q'' = A (PA - alpha PB) - sigma2 q' - K_g q
-    a[QD, Q] = -m_inv @ gravity_stiffness
+    a[QD, Q] = -m_inv @ (gravity_stiffness + seal_stiffness * np.eye(n))
     a[QD, QD] = -m_inv * friction_slope
     a[QD, PA] = m_inv * area
     a[QD, PB] = -m_inv * area * alpha
     stiffness, flow_gain = np.empty(n), np.empty(n)
     for i in range(n):
-        d = actuator_partials(cfg, float(strokes[i]), float(pa[i]), float(pb[i]), float(spool[i]), supply_pa)
+        d = actuator_partials(cfg, float(strokes[i]), float(pa[i]), float(pb[i]), float(spool[i]), supply_pa, ports)
         for row, block in ((0, PA), (1, PB)):
             r = block.start + i
             a[r, QD.start + i] = d[row, 0]
@@ -232,8 +237,11 @@ def modes_of(a: np.ndarray, jacobian: np.ndarray, radius_m: float, area_m2: floa
 
 
 def modal_model(cfg: EmulatorConfig, position_m, rpy_rad=(0.0, 0.0, 0.0), payload_kg: float = 0.0,
-                supply_pa: float | None = None) -> ModalModel:
-    """The linearised hexapod at a pose held at rest (see the module docstring)."""
+                supply_pa: float | None = None, sealed_side: int = 0) -> ModalModel:
+    """The linearised hexapod at a pose held at rest (see the module docstring). `sealed_side`
+    +1 or -1: the valves in HOLD with the load-holding valves closed and the seals in
+    pre-sliding, their bristles deflected to that side (LuGre's sigma0, sigma1 of that side):
+    what a small push then meets."""
     supply = cfg.supply_pressure_pa if supply_pa is None else float(supply_pa)
     rig = HexapodRig(cfg)
     rig.set_load(payload_kg)
@@ -241,19 +249,46 @@ def modal_model(cfg: EmulatorConfig, position_m, rpy_rad=(0.0, 0.0, 0.0), payloa
     strokes, static, jacobian, inertia, gravity_stiffness = joint_space(rig, position_m, quat)
     fp = cfg.friction
     friction_slope = 0.5 * (fp[lugre.S2_POS] + fp[lugre.S2_NEG])
+    ports, seal_stiffness = 1.0, 0.0
+    if sealed_side:
+        positive = sealed_side > 0
+        ports = 0.0
+        seal_stiffness = fp[lugre.S0_POS] if positive else fp[lugre.S0_NEG]
+        friction_slope = (fp[lugre.S1_POS] + fp[lugre.S2_POS]) if positive else (fp[lugre.S1_NEG] + fp[lugre.S2_NEG])
     pa, pb, spool = np.empty(N_LEGS), np.empty(N_LEGS), np.empty(N_LEGS)
     converged = True
     for i in range(N_LEGS):
         pa[i], pb[i], spool[i], ok = holding_point(cfg, float(strokes[i]), float(static[i]), supply)
         converged = converged and ok
     a, b, stiffness, flow_gain = state_matrices(cfg, inertia, gravity_stiffness, strokes, pa, pb, spool, supply,
-                                                friction_slope)
+                                                friction_slope, ports, seal_stiffness)
     radius = float(np.linalg.norm(rig.geometry.platform_anchor_m[0]))
     model = ModalModel(np.asarray(position_m, dtype=float), np.asarray(rpy_rad, dtype=float), float(payload_kg),
                        supply, strokes, static, pa, pb, spool, jacobian, inertia, gravity_stiffness, stiffness,
                        flow_gain, friction_slope, a, b, converged=converged)
     model.modes = modes_of(a, jacobian, radius, cfg.area_a_m2, cfg.alpha, stiffness)
     return model
+
+
+def sealed_modes(cfg: EmulatorConfig, position_m, rpy_rad=(0.0, 0.0, 0.0), payload_kg: float = 0.0,
+                 count: int = 6) -> list[dict]:
+    """The platform's modes with the valves in HOLD (chambers sealed), for a small push: the
+    seals' bristles swing from one side to the other every half period, so each mode is the
+    model's with either side's bristles, each for half a period: frequency 2 / (1/f+ + 1/f-),
+    damping ratio the mean. Paired one to one by the legs' mode shapes."""
+    plus, minus = (modal_model(cfg, position_m, rpy_rad, payload_kg, sealed_side=side).platform_modes(count, 0.45)
+                   for side in (1, -1))
+    similarity = np.array([[abs(float(np.dot(p.leg_shape, m.leg_shape))) for m in minus] for p in plus])
+    rows, cols = linear_sum_assignment(-similarity)
+    out = []
+    for row, col in sorted(zip(rows, cols)):
+        mode, other = plus[row], minus[col]
+        out.append({"axis": mode.axis, "frequency_hz": 2.0 / (1.0 / mode.frequency_hz + 1.0 / other.frequency_hz),
+                    "damping_ratio": 0.5 * (mode.damping_ratio + other.damping_ratio),
+                    "frequency_hz_sides": (mode.frequency_hz, other.frequency_hz),
+                    "damping_ratio_sides": (mode.damping_ratio, other.damping_ratio),
+                    "shape": mode.shape})
+    return out
 
 
 def model_doc(model: ModalModel, count: int = 6) -> dict:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from ..scenario import Scenario
 from .friction import FrictionPresliding, FrictionSteady
+from .kick import HexapodKick
 from .pm import PmCircle, PmDiagonal
 from .realtime import RealtimeHexapod, RealtimeTestbench
 from .sha_identification import ShaIdentification
@@ -13,4 +14,4 @@ from .soak import Soak
 
 SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
     ShaStep(), ShaTracking(), ShaPerturbation(), ShaIdentification(), PmDiagonal(), PmCircle(),
-    RealtimeTestbench(), RealtimeHexapod(), Soak(), FrictionSteady(), FrictionPresliding())}
+    RealtimeTestbench(), RealtimeHexapod(), Soak(), FrictionSteady(), FrictionPresliding(), HexapodKick())}
