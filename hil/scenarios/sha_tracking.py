@@ -172,8 +172,11 @@ class ShaTracking(Scenario):
                                 worst <= self.thesis["max_error_low_w_mm"], f"{worst:.2f} mm",
                                 f"thesis <= {self.thesis['max_error_low_w_mm']:g} mm", required=False))
             grows = [summary[controller][str(w)] for w in ws]
+            # Fig. 7.19's shape is its controllers'; computed torque's error is nearly flat up to
+            # w = 5 (1.1-1.6 mm with 6 kg: the load through the valve's null), reported
             checks.append(Check(f"{controller}: error grows with w", grows[-1] >= grows[0],
-                                " -> ".join(f"{g:.2f}" for g in grows) + " mm", "Fig. 7.19: increasing"))
+                                " -> ".join(f"{g:.2f}" for g in grows) + " mm", "Fig. 7.19: increasing",
+                                required=controller != NEW_CONTROLLER))
         slow = [r for r in runs if r["controller"] == NEW_CONTROLLER and r["w_rad_s"] <= NEW_MAX_ERROR_UP_TO_W]
         if slow:
             worst = max(slow, key=lambda r: r["max_error_mm"])
