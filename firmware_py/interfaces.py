@@ -28,7 +28,8 @@ class Measurements:
         self.attitude_rad = np.zeros(3)
         self.attitude_fresh = False                    # a valid sample arrived since the last cycle
         # node events
-        self.emergency = False                         # an EMCY with an error code arrived
+        self.emergency = False                         # an EMCY with an error code from a valve node
+        self.imu_emergency = False                     # ... from the IMU
         self.heartbeat_age_s = np.zeros(n_nodes)       # since each node's last heartbeat
         self.stalled = False                           # the loop's clock ran past the stall limit
         self.overrun = False                           # the previous cycle missed its deadline

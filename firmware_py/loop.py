@@ -37,11 +37,12 @@ from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import ImuStatus, NmtCommand, NmtState
-from protocol.nodes import CONTROLLER_NODE, SENDER_OF_NODE, rig_nodes
+from protocol.nodes import CONTROLLER_NODE, IMU_NODE, SENDER_OF_NODE, rig_nodes
 from protocol.outbox import Outbox
 from protocol.realtime import percentiles_us
 
 from .controller import RESET_GRACE_CYCLES, Controller
+from .supervisor import LATCHED, emergency_code
 
 PACINGS = ("realtime", "lockstep")
 HISTORY = 1 << 16                       # cycles kept for the timing percentiles
@@ -117,6 +118,7 @@ class ControllerLoop:
         self.out_status = Outbox("CTRL_STATUS")
         self.out_ack = Outbox("CTRL_ACK")
         self.out_heartbeat = Outbox(f"HEARTBEAT_{CONTROLLER_NODE}")
+        self.out_emcy = Outbox(f"EMCY_{CONTROLLER_NODE}")
         self._status_schedule = CODECS["CTRL_STATUS"].schedule
         c = CODECS["VALVE_CMD_1"].index
         self._i_d, self._i_h, self._i_m, self._i_r, self._i_sp = (c[k] for k in ("CW_D", "CW_H", "CW_M", "CW_R",
@@ -138,7 +140,9 @@ class ControllerLoop:
         self._overrun = False
         self._next_deadline = math.inf          # realtime: the next SYNC's deadline (lockstep: none)
         self._stalled = False                        # seen since the last read
-        self._emergency = False
+        self._emergency = False                     # an EMCY from a valve node ...
+        self._imu_emergency = False                 # ... from the IMU
+        self._latched = False                       # the last EMCY_16 said: a fault is latched
         self._attitude_new = False
         self._stall_s = self.cfg.stall_fault_periods * self.period_s if pacing == "realtime" else math.inf
         self._forced: bool | None = None            # shutdown: True HOLD, False DISABLED
@@ -187,7 +191,10 @@ class ControllerLoop:
         if node is not None:
             self.stats.emergencies += 1
             if self.decoder.values[f"EMCY_{node}"][0] != 0:     # ERROR_CODE 0 announces a reset
-                self._emergency = True
+                if node == IMU_NODE:
+                    self._imu_emergency = True
+                else:
+                    self._emergency = True
             return
         name = self._host_ids.get(frame_id)
         if name is not None:
@@ -265,6 +272,7 @@ class ControllerLoop:
         np.subtract(now, self.heartbeat_seen, out=meas.heartbeat_age_s)
         meas.attitude_fresh, self._attitude_new = self._attitude_new, False
         meas.emergency, self._emergency = self._emergency, False
+        meas.imu_emergency, self._imu_emergency = self._imu_emergency, False
         meas.stalled, self._stalled = self._stalled, False
         meas.overrun = self._overrun
 
@@ -372,10 +380,28 @@ class ControllerLoop:
         self.stats.cycles += 1
         if self.controller.sup.faults != faults_before:
             self._log_fault(now)
+        self._report_latch()
         # after the write: its cost never delays VALVE_CMD, and it waits when the SYNC is near
         self.controller.after_write(self._next_deadline - self.clock())
         self._cycle_end = self.clock()
         phase[PH_HOST_WORK] = self._cycle_end - written
+
+    def _report_latch(self) -> None:
+        """EMCY_16 when the controller latches a fault or an e-stop (its code in DETAIL), and
+        with ERROR_CODE 0 when a RESET clears it: what a CANopen watcher listens for."""
+        sup = self.controller.sup
+        latched = sup.state in LATCHED
+        if latched == self._latched:
+            return
+        self._latched = latched
+        v, i = self.out_emcy.values, self.out_emcy.index
+        v[i["ERROR_CODE"]] = emergency_code(sup.fault_code) if latched else 0
+        v[i["ERROR_REGISTER"]] = 1 if latched else 0          # CiA 301 bit 0: generic error
+        v[i["STATE"]] = int(sup.state)
+        v[i["DETAIL"]] = int(sup.fault_code) if latched else 0
+        v[i["SYNC_COUNTER"]] = self.sync_counter
+        v[i["INFO"]] = self.stats.cycles & 0xFFFF
+        self._send(self.out_emcy)
 
     def _log_fault(self, sync_time: float) -> None:
         """One stderr line when the controller faults (an event, not the steady cycle): which

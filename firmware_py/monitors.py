@@ -78,10 +78,13 @@ class NodeMonitor:
         return Fault.HEARTBEAT_LOST if any_above(heartbeat_age_s, self.cfg.heartbeat_timeout_s) else Fault.NONE
 
     @staticmethod
-    def check_emergency(emergency: bool, in_reset: bool) -> Fault:
-        """An EMCY with an error code, except while the valves' faults are being reset (they
-        announce the reset with EMCYs of their own)."""
-        return Fault.VALVE_FAULT if emergency and not in_reset else Fault.NONE
+    def check_emergency(valve: bool, imu: bool, in_reset: bool) -> Fault:
+        """An EMCY with an error code, named by its source (a valve node: VALVE_FAULT, the IMU:
+        SENSOR_FAULT), except while the nodes' faults are being reset (they announce the reset
+        with EMCYs of their own)."""
+        if in_reset:
+            return Fault.NONE
+        return Fault.VALVE_FAULT if valve else Fault.SENSOR_FAULT if imu else Fault.NONE
 
     def check_valves(self, valve_state: np.ndarray) -> Fault:
         """A valve that reports a fault state in its LEG_STATE."""

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from enum import IntEnum
 
-from protocol.enums import Ack, Command, ControllerKind, Fault, State
+from protocol.enums import Ack, Command, ControllerKind, EmcyCode, Fault, State
 
 
 class Action(IntEnum):
@@ -37,6 +37,19 @@ class Action(IntEnum):
 MOVING = (State.HOMING, State.RUNNING, State.STOPPING)
 ACTIVE = (State.READY,) + MOVING          # valves ACTIVE, the joint controller runs
 LATCHED = (State.FAULT, State.ESTOP)
+# the CiA 301 error class of the controller's EMCY for each latched fault (GENERIC otherwise)
+EMCY_OF_FAULT = {Fault.SENSOR_TIMEOUT: EmcyCode.RPDO_TIMEOUT, Fault.E2E_ERROR: EmcyCode.PROTOCOL,
+                 Fault.HEARTBEAT_LOST: EmcyCode.COMMUNICATION, Fault.OVERRUN: EmcyCode.SOFTWARE,
+                 Fault.NOT_FINITE: EmcyCode.SOFTWARE, Fault.DK_FAILURE: EmcyCode.SOFTWARE,
+                 Fault.SUPPLY_PRESSURE: EmcyCode.SUPPLY_LOW, Fault.TRACKING_ERROR: EmcyCode.CONTROL_DEVIATION,
+                 Fault.POSITION_LIMIT: EmcyCode.CONTROL_DEVIATION, Fault.FORCE_LIMIT: EmcyCode.CONTROL_DEVIATION,
+                 Fault.VELOCITY_LIMIT: EmcyCode.CONTROL_DEVIATION,
+                 Fault.MOTION_PLAUSIBILITY: EmcyCode.CONTROL_DEVIATION,
+                 Fault.ATTITUDE_MISMATCH: EmcyCode.CONTROL_DEVIATION}
+
+
+def emergency_code(fault: Fault) -> EmcyCode:
+    return EMCY_OF_FAULT.get(fault, EmcyCode.GENERIC)
 CONTROLLER_VALUES = frozenset(int(kind) for kind in ControllerKind)
 
 

@@ -9,6 +9,7 @@ are SI (the codecs' units).
 
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +24,9 @@ from protocol.enums import NmtCommand
 from protocol.errors import UserInputError
 
 LOG_SUFFIXES = (".blf", ".asc")
+# the emulator sends EMU_TRUTH right after the frames of the same SYNC; a stall of it in
+# between has been 27 ms at most here, a restart takes over 0.8 s
+TRUTH_AFTER_FRAMES_MAX_S = 0.25
 
 
 @dataclass
@@ -181,13 +185,16 @@ def _assign_cycles(frames: list[tuple]) -> np.ndarray:
         candidates = [k for k in range(guess - 8, guess + 8) if k in counter_of_cycle
                       and counter_of_cycle[k] % 16 == phase]
         truth_cycle[i] = min(candidates, key=lambda k: abs(k - guess)) if candidates else guess
-    # walk backwards: an emulator cyclic frame belongs to the next EMU_TRUTH's cycle
-    following = None
+    # walk backwards: an emulator cyclic frame belongs to the next EMU_TRUTH's cycle, if that
+    # comes right after it (an emulator killed between its frames and their EMU_TRUTH left
+    # them to the next process's first truth, seconds later: they keep their SYNC's cycle)
+    following, following_t = None, math.inf
     for i in range(n - 1, -1, -1):
         if i in truth_cycle:
-            following = truth_cycle[i]
+            following, following_t = truth_cycle[i], frames[i][2]
             out[i] = following
-        elif frames[i][0] in emulator_ids and following is not None:
+        elif frames[i][0] in emulator_ids and following is not None \
+                and following_t - frames[i][2] <= TRUTH_AFTER_FRAMES_MAX_S:
             out[i] = following
     return out
 

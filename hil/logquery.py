@@ -154,10 +154,14 @@ class LogView:
         return float(np.max(np.linalg.norm(self.truth[sel] - start, axis=1)))
 
     def emergencies_after(self, t0: float, t1: float) -> list[tuple[int, float, int]]:
+        """The legs' EMCYs with an error code in [t0, t1]: (leg, time, DETAIL); not the IMU's
+        or the controller's own."""
         out = []
         for e in self.log.events:
             if e.name.startswith("EMCY_") and t0 <= e.time_s <= t1 and e.values["ERROR_CODE"] != 0:
-                out.append((int(e.name.split("_")[1]), e.time_s, int(e.values["DETAIL"])))
+                node = int(e.name.split("_")[1])
+                if 1 <= node <= self.n_legs:
+                    out.append((node, e.time_s, int(e.values["DETAIL"])))
         return out
 
     def last_sync_before(self, t: float) -> float | None:

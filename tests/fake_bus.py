@@ -46,6 +46,7 @@ class FakeBus:
                                                          data=bytearray(8), is_extended_id=False),
                      CODECS["IMU_ATTITUDE"].new_values())
         self.sent = collections.Counter()
+        self.last_sent: dict[int, bytes] = {}      # frame id -> the data of its last frame
         self._state = [(CODECS[f"LEG_STATE_{i}"], can.Message(arbitration_id=CODECS[f"LEG_STATE_{i}"].frame_id,
                                                                data=bytearray(6), is_extended_id=False),
                         CODECS[f"LEG_STATE_{i}"].new_values()) for i in range(1, n_legs + 1)]
@@ -60,6 +61,7 @@ class FakeBus:
     def send(self, msg, timeout=None) -> None:
         frame_id = msg.arbitration_id
         self.sent[frame_id] += 1
+        self.last_sent[frame_id] = bytes(msg.data)
         if frame_id == 0x000 and msg.data[0] == 1:
             self.operational = True
             self._heartbeats()

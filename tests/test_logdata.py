@@ -32,3 +32,23 @@ def test_an_emulator_five_cycles_behind_at_the_end_of_the_log_keeps_its_cycles()
     legs = [int(c) for (frame_id, *_), c in zip(frames, cycles) if frame_id == LEG]
     assert truths == list(range(len(counters))) and legs == truths
     assert counters.index(95) in truths               # the phase-15 answer kept its cycle
+
+
+def test_frames_of_a_killed_emulator_keep_their_sync_not_the_next_processes_first_truth():
+    """The fault matrix's case 3a: the emulator killed after its LEG_STATE, before its
+    EMU_TRUTH. Its frames went to the restarted emulator's first truth, 2 s later, and the
+    case read "SENSOR_TIMEOUT -1014 cycles after the last LEG_STATE"."""
+    frames = []
+    for k in range(10):                               # answered normally
+        t = k * 0.002
+        frames += [(SYNC, bytes([k + 1]), t), (LEG, bytes(6), t + 2e-4),
+                   (TRUTH, bytes([0, ((k + 1) % 16) << 4, 0, 0, 0, 0, 0, 0]), t + 3e-4)]
+    frames += [(SYNC, bytes([11]), 0.020), (LEG, bytes(6), 0.0202)]      # killed: no truth
+    for k in range(11, 1011):                         # 2 s of SYNC without the emulator
+        frames.append((SYNC, bytes([k % 240 + 1]), k * 0.002))
+    restart = 1011 * 0.002
+    frames += [(SYNC, bytes([1011 % 240 + 1]), restart), (LEG, bytes(6), restart + 2e-4),
+               (TRUTH, bytes([0, ((1011 % 240 + 1) % 16) << 4, 0, 0, 0, 0, 0, 0]), restart + 3e-4)]
+    cycles = _assign_cycles(frames)
+    legs = [int(c) for (frame_id, *_), c in zip(frames, cycles) if frame_id == LEG]
+    assert legs == list(range(11)) + [1011]

@@ -5,6 +5,7 @@ never moves anything). Through the real loop and ctl, with the in-process fake b
 import math
 import time
 
+import can
 import numpy as np
 import pytest
 from hypothesis import assume, given, settings
@@ -14,7 +15,9 @@ from firmware_py.hostlink import COMMIT_MAX_WAIT_CYCLES
 from firmware_py.kinematics import DirectKinematics, ik_batch
 from firmware_py.rotation import quat_to_rpy
 from firmware_py.supervisor import Supervisor
-from protocol.enums import Ack, AckKind, Command, Fault, State
+from protocol.dbc import load_database
+from protocol.enums import Ack, AckKind, Command, EmcyCode, Fault, State
+from protocol.nodes import CONTROLLER_NODE, IMU_NODE
 from tests.rig_loop import cycles, cycles_until_fault, make_loop, send_waypoint, valve_words
 
 
@@ -117,6 +120,45 @@ def test_valve_fault_state_faults_the_controller():
     loop.cycle()
     assert ctl.state is State.FAULT and ctl.sup.fault_code is Fault.VALVE_FAULT
 
+
+
+def controller_emcy(loop, bus) -> tuple[int, dict]:
+    """How many EMCY_16 the controller sent, and the last one decoded."""
+    message = load_database().get_message_by_name(f"EMCY_{CONTROLLER_NODE}")     # stock cantools
+    data = bus.last_sent.get(message.frame_id)
+    return bus.sent[message.frame_id], (message.decode(data, decode_choices=False) if data is not None else {})
+
+
+def test_the_controller_sends_its_emcy_when_it_latches_and_when_a_reset_clears():
+    """A CANopen watcher learns of a controller fault: EMCY_16 with the CiA 301 class
+    (SENSOR_TIMEOUT: RPDO timeout) and the fault code in DETAIL; ERROR_CODE 0 after RESET."""
+    loop, ctl, bus = make_loop("testbench", "pi")
+    cycles(loop, 20)
+    assert controller_emcy(loop, bus)[0] == 0
+    bus.silent.add(0)
+    cycles(loop, ctl.cfg.missing_frames_fault + 5)
+    count, emcy = controller_emcy(loop, bus)
+    assert ctl.state is State.FAULT and count == 1             # once per latch, not per cycle
+    assert emcy["ERROR_CODE"] == EmcyCode.RPDO_TIMEOUT and emcy["DETAIL"] == Fault.SENSOR_TIMEOUT
+    assert emcy["STATE"] == State.FAULT and emcy["ERROR_REGISTER"] == 1
+    bus.silent.clear()
+    cycles(loop, 2)
+    assert ctl.host_command(Command.RESET, 0) is Ack.ACCEPTED
+    cycles(loop, 2)
+    count, emcy = controller_emcy(loop, bus)
+    assert count == 2 and emcy["ERROR_CODE"] == 0 and emcy["DETAIL"] == 0 and emcy["STATE"] == State.IDLE
+
+
+@pytest.mark.parametrize("node, fault", [(1, Fault.VALVE_FAULT), (IMU_NODE, Fault.SENSOR_FAULT)])
+def test_an_emcy_faults_the_controller_named_by_its_source(node, fault):
+    loop, ctl, bus = make_loop("hexapod", "pi")
+    cycles(loop, 20)
+    message = load_database().get_message_by_name(f"EMCY_{node}")
+    data = message.encode({"ERROR_CODE": 0x6000, "ERROR_REGISTER": 1, "STATE": 0, "DETAIL": 1, "SYNC_COUNTER": 0,
+                           "INFO": 0})
+    bus.queue.append(can.Message(arbitration_id=message.frame_id, data=data, is_extended_id=False))
+    cycles(loop, 2)
+    assert ctl.state is State.FAULT and ctl.sup.fault_code is fault
 
 
 def test_testbench_waypoints_run_and_bad_ones_are_rejected():

@@ -31,6 +31,11 @@ from .cases import (
 def _mm(value) -> str:
     return "n/a" if value is None or not np.isfinite(value) else f"{value * 1e3:.2f} mm"
 
+
+def _cycles(view: LogView, cycles: int | None) -> str:
+    """A detection delay in cycles and milliseconds."""
+    return "n/a cycles" if cycles is None else f"{cycles} cycles ({cycles * view.period_s * 1e3:.0f} ms)"
+
 def judge_baseline(view: LogView, mark: Marks, baseline: Marks | None, run_dir: Path | None):
     faults = view.faults_between(mark.t_start, mark.t_end)
     ran = not math.isnan(mark.t_start) and "host_error" not in mark.extra
@@ -64,7 +69,7 @@ def judge_fault(view: LogView, mark: Marks, baseline: Marks | None, run_dir: Pat
     judged = cycles
     excursion = view.excursion(mark.t_inject, OBSERVE_S)
     held = view.held_after(reaction)
-    measured = f"{code} after {cycles} cycles"
+    measured = f"{code} after {_cycles(view, cycles)}"
     if c.kind is CaseKind.PERSISTENT and reaction is not None:
         # the configured counts are of cycles in a row without a valid frame: a frame
         # accepted in between (a reordered pair's first) starts them again
@@ -214,7 +219,7 @@ def judge_kill_emulator(view: LogView, mark: Marks, baseline: Marks | None, run_
     cycles = None if reaction is None or last_frame is None else reaction - last_frame
     held = view.held_after(reaction, until=mark.t_inject + OBSERVE_S)
     passed = code in mark.case.expect and cycles is not None and cycles <= mark.case.max_cycles and held
-    measured = (f"{code} {cycles} cycles after the last LEG_STATE; VALVE_CMD (finite, M = 0) every cycle "
+    measured = (f"{code} {_cycles(view, cycles)} after the last LEG_STATE; VALVE_CMD (finite, M = 0) every cycle "
                 f"after: {held}")
     return passed, measured, {"code": code, "cycles": cycles, "held": held}
 
