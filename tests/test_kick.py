@@ -73,3 +73,16 @@ def test_a_kick_pushes_the_platform_along_its_axis_for_its_duration():
     trace = np.array(trace)
     assert trace.max() > 1e-4 and trace.min() < 0.0
     assert np.argmax(trace) < np.argmin(trace)
+
+
+def test_a_creep_beside_the_mode_fits_as_an_over_damped_component():
+    """After a sealing that moved the platform, it creeps on while it rings: the two-mode fit
+    gives the creep damping ratio ~1 (hex-kick takes the largest mode below 0.9)."""
+    t = np.arange(0, 1.4, PERIOD_S)
+    y = 4e-4 * np.exp(-t / 0.3) + free_response(t, [(2e-4, 0.15, 4.5, 0.4)])
+    fit = damped_oscillation(t, y, count=2)
+    creep = [m for m in fit["modes"] if m["damping_ratio"] >= 0.9]
+    ring = [m for m in fit["modes"] if m["damping_ratio"] < 0.9]
+    assert len(creep) == 1 and len(ring) == 1
+    assert ring[0]["frequency_hz"] == pytest.approx(4.5, rel=0.02)
+    assert ring[0]["damping_ratio"] == pytest.approx(0.15, rel=0.1)
