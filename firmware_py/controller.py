@@ -134,8 +134,9 @@ class Controller:
             self.platform.estimate(self.home_strokes)
             self.platform.reset_reference(self.home_strokes)
             self.platform.reference_forces(self.home_strokes, ref.vr)
-            self.computed_torque.update(self.platform, meas.position_m, meas.position_m, ref.vr, meas.force_n,
-                                        cmd.spool)
+            # the cycle's own arrays: a view of another layout would compile a new signature
+            self.computed_torque.update(self.platform, self.joint.velocity_estimate, self.joint.error_m, ref.vr,
+                                        meas.force_n, cmd.spool)
             self.platform.dk.reset()
         else:
             self.computed_torque.update(self.joint.error_m, self.joint.velocity_estimate, ref.vr, ref.ar,
