@@ -159,6 +159,7 @@ def test_an_emcy_faults_the_controller_named_by_its_source(node, fault):
     bus.queue.append(can.Message(arbitration_id=message.frame_id, data=data, is_extended_id=False))
     cycles(loop, 2)
     assert ctl.state is State.FAULT and ctl.sup.fault_code is fault
+    assert loop.stats.faults == 1                              # the daemon's summary counts it
 
 
 def test_testbench_waypoints_run_and_bad_ones_are_rejected():
@@ -463,6 +464,7 @@ def test_a_stalled_realtime_loop_faults_overrun_and_stays_held_until_reset():
     now[0] += 0.050                                                     # SIGSTOP for 50 ms
     loop.cycle()
     assert ctl.state is State.FAULT and ctl.sup.fault_code is Fault.OVERRUN
+    assert loop.stats.faults == 1                              # the stall's fault is counted too
     for _ in range(100):
         now[0] += loop.period_s
         loop.cycle()
