@@ -1,4 +1,4 @@
 """Hardware-in-the-loop: scenarios, the runner that launches emulator and controller as
-separate processes on a fresh bus, logs, metrics, plots and reports (later issues).
+separate processes on a fresh bus, logs, metrics, plots and reports.
 This package also holds the `hydrapod` command-line entry point.
 """

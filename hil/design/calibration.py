@@ -37,7 +37,7 @@ from .thesis import thesis_data
 LOADS_KG = (0.0, 3.0, 6.0)
 SPOOL_UNIT = 1e-3        # the operating-point solver's spool variable, per unit of it
 BAND_RAD_S = np.logspace(np.log10(5.0), np.log10(300.0), 40)
-# Table A.3 bounds of the issue: b0 and k01 within +/-20 %, b1 within +/-25 %, the complex
+# the calibration's bounds on Table A.3: b0 and k01 within +/-20 %, b1 within +/-25 %, the complex
 # pole pair inside Re [-65, -45], Im [75, 125] 1/s widened by 10 %.
 TOLERANCE = {"b0": 0.20, "b1": 0.25, "k01": 0.20}
 POLE_RE = (-65.0 * 1.1, -45.0 * 0.9)

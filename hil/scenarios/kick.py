@@ -1,8 +1,9 @@
 """hex-kick: the hexapod's modes measured by pushing its platform (beyond the thesis).
 
 The design basis of the computed-torque controller is the linearised plant of
-`hydrapod design modes`. This experiment checks that model against the emulator through the
-bus, as a modal hammer test would on the rig: at each pose the controller goes to IDLE (the
+`hydrapod design modes`. A push cannot see that plant (with the valves open it is
+over-damped), so this experiment checks the same linearisation in the state a push can see,
+through the bus, as a modal hammer test would on the rig: at each pose the controller goes to IDLE (the
 valves HOLD with the load-holding valves closed: the legs are sealed oil columns), the host
 pushes the platform for 20 ms (EMU_KICK), and the free response the recorder sees
 (EMU_TRUTH) is fitted with a damped oscillation. Its frequency and damping ratio stand beside
@@ -37,7 +38,7 @@ SETTLE_S = 0.6                 # after IDLE, before the push
 OBSERVE_S = 1.5                # the free response fitted
 FIT_SKIP_S = 0.01              # after the push ends
 MOVE_S, MOVE_ACCEL_S = 2.0, 0.5
-TOLERANCE = 0.20               # measured vs model, frequency and damping ratio (issue's bound)
+TOLERANCE = 0.20               # measured vs model, frequency and damping ratio (reported against it)
 ONE_MODE_R2 = 0.97             # below: a second mode in the response (off centre, y moves with yaw)
 FIT_R2_MIN = 0.95              # a push's response is a clean free oscillation (asserted)
 CREEP_DAMPING = 0.9            # a fitted component this damped is the platform's creep, not a mode
@@ -52,7 +53,6 @@ def kick_poses(short: bool) -> dict[str, tuple[float, float, float]]:
     if not short:
         poses["circle start"] = tuple(float(v) for v in circle_motion(geometry).parts[0][1])
     return poses
-
 
 
 class HexapodKick(Scenario):

@@ -1,5 +1,5 @@
 """`hydrapod hil soak --minutes M`: the hexapod in realtime pacing moves through a loop of
-poses for M minutes while the host injects random frame faults (issue 7, item 13).
+poses for M minutes while the host injects random frame faults.
 
 Most faults are transient (one dropped, corrupted, stale or swapped LEG_STATE, a run of
 duplicates): the controller must reject the bad frames and carry on without a fault. One in
@@ -76,7 +76,7 @@ def classify(fault_name: str, param: int) -> SoakFault | None:
 class Soak(Scenario):
     name = "soak"
     title = "realtime hexapod trajectory loop with random frame faults"
-    chapter = "reliability (issue 7, item 13)"
+    chapter = "reliability (docs/MEASUREMENTS.md)"
     rig = "hexapod"
     pacing = "realtime"
     pacings = ("realtime",)

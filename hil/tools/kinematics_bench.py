@@ -1,6 +1,6 @@
 """`hydrapod kinematics bench`: per-call time and NumPy allocations of the loop's kernels.
 
-Goals (issue "Mechanism"): IK <= 20 us, DK warm-started <= 60 us, inverse dynamics
+Goals: IK <= 20 us, DK warm-started <= 60 us, inverse dynamics
 <= 150 us, 0 NumPy allocations per call. The vectorised NumPy IK on one pose is timed
 beside the numba kernel to show why the loop uses the kernels.
 """
