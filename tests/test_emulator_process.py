@@ -93,6 +93,9 @@ class Peer:
         self.bus.send(self.emu_msg)
 
 
+WATCHDOG_PERIODS = 1000.0      # the valves' SYNC watchdog here: 2 s of wall clock
+
+
 @pytest.fixture
 def emulator_process(tmp_path):
     spec = f"udp_multicast:{GROUP}:{free_port()}"
@@ -100,7 +103,7 @@ def emulator_process(tmp_path):
     # this test drives the command timeout (3 SYNCs without VALVE_CMD); the wall-clock SYNC
     # watchdog would trip whenever this process is not scheduled for 6 ms (a loaded machine)
     config = tmp_path / "emulator.toml"
-    config.write_text("[nodes]\nsync_timeout_periods = 1000.0\n")
+    config.write_text(f"[nodes]\nsync_timeout_periods = {WATCHDOG_PERIODS}\n")
     peer = Peer(spec)
     proc = subprocess.Popen([sys.executable, "-m", "plant_emulator", "--bus", spec, "--rig", "testbench",
                              "--load-kg", "3", "--summary", str(summary), "--config", str(config)],
@@ -166,8 +169,8 @@ def test_scripted_peer_drives_the_emulator(emulator_process):
     assert int(peer.decoder.counts[0, RxStatus.CRC_ERROR]) - before >= 2
     latency = np.array(peer.latency_s)
     assert np.percentile(latency, 50) < 0.05                       # answers promptly after SYNC
-    # SYNC stops: the held valve faults on its watchdog (3 periods) with an EMCY
-    assert peer.wait_for("EMCY_1", timeout=2.0)
+    # SYNC stops: the held valve faults on its watchdog (WATCHDOG_PERIODS, 2 s) with an EMCY
+    assert peer.wait_for("EMCY_1", timeout=WATCHDOG_PERIODS * 0.002 + 3.0)
     code, _, emcy_state, detail, *_ = peer.emergencies[-1]
     assert (code, emcy_state, detail) == (0x8100, 4, 2)
     proc.send_signal(signal.SIGTERM)
