@@ -50,8 +50,12 @@ BABBLE_ID = 0x601                    # not in the DBC (an SDO request id of node
 FREE_RUN_CATCH_UP_STEPS = 25         # free run: periods of physics per poll at most (a late wake-up)
 # EMU_CTRL.FAULT (the DBC's value table). REPEAT: the node re-sends its previous frame (a
 # frozen alive counter); LEG_JAM: the cylinder's rod seized (mechanical; the valve still works).
+# ENCODER_DRIFT, FORCE_STUCK, FORCE_ZERO: the leg's sensors; SPOOL_STUCK: the spool held open
+# whatever the valve does (mechanical); SUPPLY_DROP: the power unit delivers part of its pressure;
+# FRAME_LOSS: each frame of the node lost at random.
 # FAULT_PARAM is the fault's value for these (until cleared), its duration in SYNCs for the others
-VALUE_PARAM_FAULTS = (EmuFault.BABBLE, EmuFault.OUT_OF_RANGE)
+VALUE_PARAM_FAULTS = (EmuFault.BABBLE, EmuFault.OUT_OF_RANGE, EmuFault.ENCODER_DRIFT, EmuFault.SPOOL_STUCK,
+                      EmuFault.SUPPLY_DROP, EmuFault.FRAME_LOSS)
 KNOWN_FAULTS = frozenset(int(kind) for kind in EmuFault if kind is not EmuFault.NONE)
 SYNC_TIMEOUT_EVENT = "emulator: event sync_timeout"   # a stderr line per SYNC-watchdog trip (JSON after it)
 # a stderr line per injected fault, at the first SYNC that sees it: the fault's onset cycle
@@ -125,6 +129,8 @@ class Emulator:
         self._free_run_next: float | None = None           # wall time of the next free-run step
         self._delayed: list[can.Message] = []              # DELAY: frames sent at the next SYNC
         self._stuck: dict[int, tuple] = {}
+        self._drift_start: dict[int, float] = {}      # ENCODER_DRIFT: rig time of its onset, per node
+        self._force_stuck: dict[int, float] = {}      # FORCE_STUCK: the reading it froze at
         self._onsets: list[dict] = []                      # injected since the last SYNC
         self._ignore_commands = 0
         divisors = {"LEG_PRESSURE": cfg.leg_pressure_divisor, "VALVE_STATUS": cfg.valve_status_divisor,
@@ -169,6 +175,9 @@ class Emulator:
             self._send(box.message)
             return
         if self._fault(node, EmuFault.SILENT) or self._fault(node, EmuFault.DROP):
+            return
+        loss = self._fault(node, EmuFault.FRAME_LOSS)
+        if loss is not None and self.rng.random() * 100.0 < loss[1]:
             return
         message = box.message
         if self._fault(node, EmuFault.REPEAT):
@@ -374,6 +383,13 @@ class Emulator:
             self._last_sent.clear()
         elif kind == EmuFault.SUPPLY_LOSS:
             self.rig.set_supply_lost(on)
+        elif kind == EmuFault.SUPPLY_DROP:
+            fraction = self.faults[(target, kind)][1] / 100.0 if on else 1.0
+            self.rig.set_supply_fraction(fraction)
+        elif kind == EmuFault.ENCODER_DRIFT and not on:
+            self._drift_start.pop(target, None)
+        elif kind == EmuFault.FORCE_STUCK and not on:
+            self._force_stuck.pop(target, None)
         elif kind == EmuFault.STUCK and not on:
             self._stuck.pop(target, None)
         elif kind == EmuFault.DROP and target == CONTROLLER_NODE:
@@ -430,7 +446,8 @@ class Emulator:
         """Spool commands to the rig, and the load-holding valves open only while ACTIVE."""
         blocks = self.cfg.hold_blocks_ports
         for n, valve in self.valves.items():
-            self.rig.command[n - 1] = valve.spool_command
+            stuck = self._fault(n, EmuFault.SPOOL_STUCK)
+            self.rig.command[n - 1] = valve.spool_command if stuck is None else stuck[1] / 100.0
             self.rig.ports_open[n - 1] = 0.0 if blocks and valve.state is not ValveState.ACTIVE else 1.0
 
     def _count_down_faults(self) -> None:
@@ -474,6 +491,14 @@ class Emulator:
             force = rig.rod_force_n[i] + cfg.load_cell_noise_n * rng.standard_normal()
             if self._fault(n, EmuFault.STUCK):
                 position, force = self._stuck.setdefault(n, (position, force))
+            drift = self._fault(n, EmuFault.ENCODER_DRIFT)
+            if drift is not None:                      # um/s since the fault's onset
+                start = self._drift_start.setdefault(n, rig.time_s)
+                position += drift[1] * 1e-6 * (rig.time_s - start)
+            if self._fault(n, EmuFault.FORCE_STUCK):
+                force = self._force_stuck.setdefault(n, force)
+            if self._fault(n, EmuFault.FORCE_ZERO):
+                force = 0.0
             if self._fault(n, EmuFault.OUT_OF_RANGE):
                 param = self.faults[(n, EmuFault.OUT_OF_RANGE)][1]
                 force = float(param) if param else 1e9         # saturates at the DBC's maximum

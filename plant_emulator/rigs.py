@@ -131,13 +131,19 @@ class _RigBase:
         self.rod_force_n = np.zeros(self.n_legs)
         self.supply_pressure_pa = cfg.supply_pressure_pa
         self.supply_lost = False
+        self.supply_fraction = 1.0
         self.time_s = 0.0
 
     def _supply_for(self, period_s: float) -> float:
-        if self.supply_lost:      # the power unit stops: supply decays to the tank pressure
-            tank = self.cfg.hp[hy.HP_TANK]
-            self.supply_pressure_pa = tank + (self.supply_pressure_pa - tank) * math.exp(
-                -period_s / SUPPLY_LOSS_TIME_CONSTANT_S)
+        tank = self.cfg.hp[hy.HP_TANK]
+        if self.supply_lost:                   # the power unit stops: to the tank pressure
+            target = tank
+        elif self.supply_fraction < 1.0:       # it delivers part of its pressure
+            target = tank + self.supply_fraction * (self.cfg.supply_pressure_pa - tank)
+        else:
+            return self.supply_pressure_pa
+        self.supply_pressure_pa = target + (self.supply_pressure_pa - target) * math.exp(
+            -period_s / SUPPLY_LOSS_TIME_CONSTANT_S)
         return self.supply_pressure_pa
 
     def set_rod_seized(self, leg: int, seized: bool) -> None:
@@ -146,6 +152,13 @@ class _RigBase:
     def set_supply_lost(self, lost: bool) -> None:
         self.supply_lost = lost
         if not lost:
+            self.supply_pressure_pa = self.cfg.supply_pressure_pa
+
+    def set_supply_fraction(self, fraction: float) -> None:
+        """The power unit's pressure above the tank's, as a fraction of its nominal; the supply
+        falls to it with the supply-loss time constant (1 restores it at once)."""
+        self.supply_fraction = fraction
+        if fraction >= 1.0:
             self.supply_pressure_pa = self.cfg.supply_pressure_pa
 
     @property
