@@ -126,3 +126,16 @@ def test_modes_command_prints_the_table_and_json(capsys, tmp_path):
     assert (tmp_path / "modes.png").is_file()
     # the pose's symmetry: legs 1 and 2 mirror each other about the x axis
     assert doc["legs"]["static_force_n"][0] == pytest.approx(doc["legs"]["static_force_n"][1], rel=1e-4)
+
+
+def test_modes_command_adds_the_sealed_modes(capsys):
+    """`--sealed`: the model hex-kick compares with, beside the open-valve one."""
+    assert main(["design", "modes", "--sealed", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    sealed = {m["axis"]: m for m in doc["sealed"]}
+    assert {"x", "y", "yaw"} <= set(sealed)
+    for m in sealed.values():
+        low, high = sorted(m["frequency_hz_sides"])
+        assert low < m["frequency_hz"] < high
+    assert main(["design", "modes", "--sealed"]) == 0
+    assert "sealed (valves HOLD" in capsys.readouterr().out

@@ -2,8 +2,8 @@
 
     hydrapod design robustness [--plants SRC] [--nominal MM,KG] [--kp --ki] [--out DIR] [--json]
     hydrapod design schedule [--plants SRC] [--out FILE] [--ki-scale] [--kp-fraction] [--ti-fraction] [--json]
-    hydrapod design modes [--pose X,Y,Z,ROLL,PITCH,YAW] [--payload-kg M] [--supply-bar P] [--along] [--json]
-                          [--plot DIR]
+    hydrapod design modes [--pose X,Y,Z,ROLL,PITCH,YAW] [--payload-kg M] [--supply-bar P] [--along] [--sealed]
+                          [--json] [--plot DIR]
     hydrapod design computed-torque [--out FILE] [--bandwidth-hz] [--damping] [--integral-fraction]
                                     [--velocity-gain] [--testbench-velocity-gain] [--force-gain-pct-n]
                                     [--velocity-filter-hz] [--json]
@@ -106,10 +106,13 @@ def _modes(args) -> int:
         along_movements,
         format_along,
         format_modes,
+        format_sealed,
         modal_model,
         model_doc,
         plot_modes,
         pose_quaternion,
+        sealed_doc,
+        sealed_modes,
     )
     geometry = default_geometry()
     position, rpy = args.pose if args.pose is not None else (geometry.home_position_m, np.zeros(3))
@@ -124,12 +127,15 @@ def _modes(args) -> int:
     along = along_movements(cfg, args.payload_kg, supply) if args.along else None
     if along is not None:
         doc["along"] = along
+    if args.sealed:
+        doc["sealed"] = sealed_doc(sealed_modes(cfg, position, rpy, args.payload_kg, supply_pa=supply))
     if out is not None:
         doc["figures"] = [str(out / name) for name in plot_modes(doc, along, out)]
     if args.json:
         print(json.dumps(doc, indent=1))
     else:
-        print(format_modes(doc) + ("\n" + format_along(along) if along is not None else ""))
+        print(format_modes(doc) + ("\n" + format_along(along) if along is not None else "")
+              + ("\n" + format_sealed(doc["sealed"]) if args.sealed else ""))
     return 0 if doc["converged"] else 1
 
 
@@ -205,6 +211,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--supply-bar", type=number_in_range(float, 1.0, 40.0), default=None,
                    help="supply pressure (default: the emulator's, 25 bar)")
     p.add_argument("--along", action="store_true", help="also at every waypoint of both movements (11.3)")
+    p.add_argument("--sealed", action="store_true",
+                   help="also with the valves in HOLD (chambers sealed, seals in pre-sliding): what hex-kick measures")
     p.add_argument("--plot", metavar="DIR", default=None, help="write modes.png (and modes_along.png) here")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_modes)

@@ -271,13 +271,13 @@ def modal_model(cfg: EmulatorConfig, position_m, rpy_rad=(0.0, 0.0, 0.0), payloa
 
 
 def sealed_modes(cfg: EmulatorConfig, position_m, rpy_rad=(0.0, 0.0, 0.0), payload_kg: float = 0.0,
-                 count: int = 6) -> list[dict]:
+                 count: int = 6, supply_pa: float | None = None) -> list[dict]:
     """The platform's modes with the valves in HOLD (chambers sealed), for a small push: the
     seals' bristles swing from one side to the other every half period, so each mode is the
     model's with either side's bristles, each for half a period: frequency 2 / (1/f+ + 1/f-),
     damping ratio the mean. Paired one to one by the legs' mode shapes."""
-    plus, minus = (modal_model(cfg, position_m, rpy_rad, payload_kg, sealed_side=side).platform_modes(count, 0.45)
-                   for side in (1, -1))
+    plus, minus = (modal_model(cfg, position_m, rpy_rad, payload_kg, supply_pa, sealed_side=side)
+                   .platform_modes(count, 0.45) for side in (1, -1))
     similarity = np.array([[abs(float(np.dot(p.leg_shape, m.leg_shape))) for m in minus] for p in plus])
     rows, cols = linear_sum_assignment(-similarity)
     out = []
@@ -358,6 +358,23 @@ def format_along(along: dict) -> str:
             text = (f"{modes[0]['frequency_hz']:7.3f}  {modes[0]['damping_ratio']:6.3f}  {modes[0]['axis']}"
                     if modes else "none oscillating")
             lines.append(f"{name:9s} {k:5d}  {' '.join(f'{v:6.1f}' for v in doc['pose']['position_mm'])}  {text}")
+    return "\n".join(lines)
+
+
+def sealed_doc(rows: list[dict]) -> list[dict]:
+    """`sealed_modes` in JSON form."""
+    return [{"axis": r["axis"], "frequency_hz": round(r["frequency_hz"], 4),
+             "damping_ratio": round(r["damping_ratio"], 4),
+             "frequency_hz_sides": [round(f, 4) for f in r["frequency_hz_sides"]],
+             "damping_ratio_sides": [round(z, 4) for z in r["damping_ratio_sides"]],
+             "shape": [round(float(v), 4) for v in r["shape"]]} for r in rows]
+
+
+def format_sealed(rows: list[dict]) -> str:
+    lines = ["sealed (valves HOLD, the seals in pre-sliding: what a small push meets, `hil run hex-kick`):",
+             "axis    f Hz   zeta   f+ / f- Hz (each bristle side)"]
+    lines += [f"{r['axis']:5s} {r['frequency_hz']:6.3f} {r['damping_ratio']:6.3f}   "
+              f"{r['frequency_hz_sides'][0]:.3f} / {r['frequency_hz_sides'][1]:.3f}" for r in rows]
     return "\n".join(lines)
 
 
