@@ -13,6 +13,9 @@ from ..metrics import last_value_before
 NAME_OF_CONTROLLER = {v: k for k, v in CONTROLLER_NAMES.items()}
 
 
+NEW_CONTROLLER = "computed-torque"           # beyond the thesis: held to targets of its own
+TESTBENCH_CONTROLLERS = ("pi", "adaptive", NEW_CONTROLLER)
+
 def controller_at(log: LogData, cycle: int) -> str | None:
     """The controller CTRL_STATUS reported last at or before `cycle`."""
     status = log.get("CTRL_STATUS")

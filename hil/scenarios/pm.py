@@ -20,7 +20,7 @@ from ..motions import Motion, circle_motion, diagonal_motion
 from ..plotting import plt, save
 from ..reference import rebuild
 from ..scenario import Analysis, Check, Figure, Scenario
-from .common import NAME_OF_CONTROLLER, controller_at
+from .common import NAME_OF_CONTROLLER, NEW_CONTROLLER, controller_at
 
 AXES = ("x", "y", "z")
 SETTLE_AFTER_S = 0.5            # the IAE window ends this long after the movement's last point
@@ -28,7 +28,6 @@ RETURN_TIME_S, RETURN_ACCEL_S = 1.5, 0.3
 APPROACH_SPEED_M_S = 0.2
 THESIS_NAMES = {"adaptive": "iae_pi_plus_p", "model-based": "iae_model_based"}
 THESIS_CONTROLLERS = tuple(THESIS_NAMES)     # at the thesis's timing they may fault: reported
-NEW_CONTROLLER = "computed-torque"           # held to the targets below
 IAE_FACTOR_MAX = 2.0                         # its IAE <= this x the thesis's model-based, every axis
 MAX_ERROR_MM = 10.0                          # its largest position error, every axis
 # realtime: a movement a fault cut short is repeated (after RESET + ENABLE) at most this often;

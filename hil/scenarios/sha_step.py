@@ -13,7 +13,15 @@ from ..metrics import step_response
 from ..plotting import colour_for_load, plt, save
 from ..reference import rebuild
 from ..scenario import Analysis, Check, Figure, Scenario
-from .common import controller_at, each_controller_and_load, load_at, move_stroke, step_stroke
+from .common import (
+    NEW_CONTROLLER,
+    TESTBENCH_CONTROLLERS,
+    controller_at,
+    each_controller_and_load,
+    load_at,
+    move_stroke,
+    step_stroke,
+)
 
 THESIS = {"step_mm": 10, "pi_overshoot_pct": 25, "pi_settling_s": 0.5, "adaptive_overshoot_pct_max": 14,
           "adaptive_settling_s": 1.0, "figure": "Fig. 7.16"}
@@ -28,8 +36,6 @@ ADAPTIVE_SETTLING_MAX_S = 1.5
 PRE_STEP_S = 0.1
 # Beyond the thesis: the computed-torque controller on the same steps, held to the thesis's
 # adaptive claim (< 14 %, settling <= 1 s) on every step
-CONTROLLERS = ("pi", "adaptive", "computed-torque")
-NEW_CONTROLLER = "computed-torque"
 NEW_SETTLING_MAX_S = 1.0
 
 
@@ -38,7 +44,7 @@ class ShaStep(Scenario):
     title = "step response of the servo-hydraulic actuator, PI, adaptive and computed torque"
     chapter = "7.6.1 (Fig. 7.16)"
     sweeps_loads = True
-    controllers = CONTROLLERS
+    controllers = TESTBENCH_CONTROLLERS
 
     def plan(self, short: bool):
         positions = (50.0, 250.0) if short else (50.0, 150.0, 250.0)
@@ -86,7 +92,7 @@ class ShaStep(Scenario):
                          "_t": t, "_y": (y[window] - y0) * 1e3})
         checks = []
         summary = {}
-        for controller in CONTROLLERS:
+        for controller in TESTBENCH_CONTROLLERS:
             mine = [r for r in rows if r["controller"] == controller and r["measured"]]
             if not mine:
                 continue
@@ -153,7 +159,7 @@ class ShaStep(Scenario):
         return Analysis(metrics, THESIS, checks, figures, ["\n".join(table)])
 
     def _plot(self, rows, out: Path) -> Figure:
-        controllers = [c for c in CONTROLLERS if any(r["controller"] == c for r in rows)]
+        controllers = [c for c in TESTBENCH_CONTROLLERS if any(r["controller"] == c for r in rows)]
         fig, axes = plt.subplots(1, len(controllers), figsize=(5.5 * len(controllers), 4), squeeze=False)
         for ax, controller in zip(axes[0], controllers):
             for r in rows:
