@@ -124,6 +124,12 @@ def lugre_observer_step(fp, gain_k, z_state, leg, velocity, position_error, peri
 
 # -- filters -----------------------------------------------------------------------------
 
+def first_order_gain(period_s: float, corner_hz: float) -> float:
+    """a of the discrete first-order low-pass y += a (u - y), its step response matched at
+    the samples: a = 1 - exp(-2 pi f T)."""
+    return 1.0 - math.exp(-2.0 * math.pi * corner_hz * period_s)
+
+
 def second_order_filter(period_s: float, natural_hz: float, zeta: float) -> tuple[np.ndarray, np.ndarray]:
     """Exact zero-order-hold discretisation of F(s) = wn^2 / (s^2 + 2 zeta wn s + wn^2).
 

@@ -22,6 +22,8 @@ import math
 
 from protocol.enums import TestMode
 
+from .estimation import first_order_gain
+
 TEST_MODES = frozenset(int(mode) for mode in TestMode)
 
 
@@ -29,8 +31,7 @@ class IdentificationSignal:
     def __init__(self, force_gain_v_n: float, force_filter_hz: float, stroke_guard_m: float, stroke_m: float,
                  saturation_v: float, period_s: float):
         self.force_gain_v_n, self.stroke_guard_m, self.stroke_m = force_gain_v_n, stroke_guard_m, stroke_m
-        # the low-pass's step response matched at the cycle: F_f += a (F_p - F_f)
-        self.filter_gain = 1.0 - math.exp(-2.0 * math.pi * force_filter_hz * period_s)
+        self.filter_gain = first_order_gain(period_s, force_filter_hz)     # F_f += a (F_p - F_f)
         self.saturation_v, self.period_s = saturation_v, period_s
         self.mode = TestMode.ABORT
         self.valve_v = 0.0
