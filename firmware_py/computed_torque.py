@@ -32,7 +32,7 @@ from physics.constants import GRAVITY_M_S2
 
 from .config import ControllerConfig
 from .dynamics import InverseDynamics, gauss_solve_into
-from .estimation import filter_step, second_order_filter
+from .estimation import filter_step, first_order_gain, second_order_filter
 from .geometry import N_LEGS, Geometry
 from .rotation import rotation_vector_between_into
 
@@ -119,7 +119,7 @@ def leg_forces_into(accel_cmd, accel_ref, load_force, force_measured, velocity_r
 
 @njit(cache=True)
 def first_order_into(raw, alpha, state) -> None:
-    """state += alpha (raw - state): a first-order low-pass, alpha = 1 - exp(-w T)."""
+    """state += alpha (raw - state): a first-order low-pass (alpha: `first_order_gain`)."""
     for i in range(state.shape[0]):
         state[i] += alpha * (raw[i] - state[i])
 
@@ -176,9 +176,11 @@ class ComputedTorque(_Gains):
         self._twist_filter[:] = 0.0
         self._fresh = True
 
-    def update(self, platform, velocity_estimate, joint_error, velocity_ref, force_measured, u_out) -> bool:
+    def update(self, platform, velocity_estimate, joint_error, velocity_ref, accel_ref, force_measured,
+               u_out) -> bool:
         """One cycle from the platform model (measured and reference pose, the reference's
-        twist, acceleration and forces); writes u_out (V). False: singular (u_out held)."""
+        twist, acceleration and forces: the legs' `accel_ref` is not used); writes u_out (V).
+        False: singular (u_out held)."""
         if self._fresh:
             self.force_ref_prev[:] = platform.force_n
             self._fresh = False
@@ -217,7 +219,7 @@ class LegComputedTorque(_Gains):
         super().__init__(cfg, period_s, cfg.ct_testbench_velocity_gain_per_s)
         self.rod_mass = cfg.moving_mass_kg
         self.friction = cfg.friction
-        self.load_alpha = 1.0 - math.exp(-2.0 * math.pi * LOAD_FILTER_HZ * period_s)
+        self.load_alpha = first_order_gain(period_s, LOAD_FILTER_HZ)
         self.integral = np.zeros(n_legs)
         self.velocity = np.zeros(n_legs)      # the estimate, low-passed
         self._velocity_filter = np.zeros((n_legs, 3))
@@ -235,8 +237,10 @@ class LegComputedTorque(_Gains):
         self._velocity_filter[:] = 0.0
         self._fresh = True
 
-    def update(self, joint_error, velocity_estimate, velocity_ref, accel_ref, force_measured, u_out) -> None:
-        """One cycle: writes u_out (V)."""
+    def update(self, platform, velocity_estimate, joint_error, velocity_ref, accel_ref, force_measured,
+               u_out) -> bool:
+        """One cycle, as `ComputedTorque.update` (no platform: `platform` is not used); writes
+        u_out (V). Always True: the stroke has no singularity."""
         if self._fresh:                       # the load's weight and the reference force start here
             self.load_force[:] = force_measured
         first_order_into(force_measured, self.load_alpha, self.load_force)
@@ -258,3 +262,4 @@ class LegComputedTorque(_Gains):
         if not saturated:
             integrate_into(self.integral, joint_error, self.period_s)
         np.multiply(self.spool_cmd, self.full_scale_v, out=u_out)
+        return True

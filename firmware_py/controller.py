@@ -134,14 +134,12 @@ class Controller:
             self.platform.estimate(self.home_strokes)
             self.platform.reset_reference(self.home_strokes)
             self.platform.reference_forces(self.home_strokes, ref.vr)
-            # the cycle's own arrays: a view of another layout would compile a new signature
-            self.computed_torque.update(self.platform, self.joint.velocity_estimate, self.joint.error_m, ref.vr,
-                                        meas.force_n, cmd.spool)
-            self.platform.dk.reset()
-        else:
-            self.computed_torque.update(self.joint.error_m, self.joint.velocity_estimate, ref.vr, ref.ar,
-                                        meas.force_n, cmd.spool)
+        # the cycle's own arrays: a view of another layout would compile a new signature
+        self.computed_torque.update(self.platform, self.joint.velocity_estimate, self.joint.error_m, ref.vr, ref.ar,
+                                    meas.force_n, cmd.spool)
         self.computed_torque.reset()
+        if self.hexapod:
+            self.platform.dk.reset()
         self.frames.reset()
         self.plausibility.reset()
         self.limits.recovery_left[0] = 0
@@ -331,11 +329,8 @@ class Controller:
         if computed_torque:
             if sup.state not in ACTIVE:
                 self.computed_torque.reset()
-            elif not self.hexapod:
-                self.computed_torque.update(joint.error_m, joint.velocity_estimate, ref.vr, ref.ar, meas.force_n,
-                                            joint.u_v)
             elif not self.computed_torque.update(self.platform, joint.velocity_estimate, joint.error_m, ref.vr,
-                                                 meas.force_n, joint.u_v):
+                                                 ref.ar, meas.force_n, joint.u_v):
                 sup.fault(Fault.SINGULARITY)
         if testing:
             u, done = self.test.output(self.cycles, meas.position_m[0], self.piston_force_n())
