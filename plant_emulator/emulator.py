@@ -128,9 +128,9 @@ class Emulator:
         self._last_sent: dict[str, bytes] = {}             # REPEAT: the frame sent before the fault
         self._free_run_next: float | None = None           # wall time of the next free-run step
         self._delayed: list[can.Message] = []              # DELAY: frames sent at the next SYNC
-        self._stuck: dict[int, tuple] = {}
-        self._drift_start: dict[int, float] = {}      # ENCODER_DRIFT: rig time of its onset, per node
-        self._force_stuck: dict[int, float] = {}      # FORCE_STUCK: the reading it froze at
+        # what a sensor fault took at its onset, per (node, fault): STUCK the readings it froze,
+        # FORCE_STUCK the force, ENCODER_DRIFT the rig time; dropped when the fault clears
+        self._onset_values: dict[tuple[int, int], object] = {}
         self._onsets: list[dict] = []                      # injected since the last SYNC
         self._ignore_commands = 0
         divisors = {"LEG_PRESSURE": cfg.leg_pressure_divisor, "VALVE_STATUS": cfg.valve_status_divisor,
@@ -375,27 +375,28 @@ class Emulator:
                 self._apply_state_fault(*key, False)
 
     def _apply_state_fault(self, target: int, kind: int, on: bool) -> None:
+        if not on:
+            self._onset_values.pop((target, kind), None)
         if kind == EmuFault.VALVE_JAM and 1 <= target <= self.rig.n_legs:
             self.rig.jammed[target - 1] = on
         elif kind == EmuFault.LEG_JAM and 1 <= target <= self.rig.n_legs:
             self.rig.set_rod_seized(target - 1, on)
         elif kind == EmuFault.REPEAT and not on:
             self._last_sent.clear()
-        elif kind == EmuFault.SUPPLY_LOSS:
-            self.rig.set_supply_lost(on)
-        elif kind == EmuFault.SUPPLY_DROP:
-            fraction = self.faults[(target, kind)][1] / 100.0 if on else 1.0
-            self.rig.set_supply_fraction(fraction)
-        elif kind == EmuFault.ENCODER_DRIFT and not on:
-            self._drift_start.pop(target, None)
-        elif kind == EmuFault.FORCE_STUCK and not on:
-            self._force_stuck.pop(target, None)
-        elif kind == EmuFault.STUCK and not on:
-            self._stuck.pop(target, None)
+        elif kind in (EmuFault.SUPPLY_LOSS, EmuFault.SUPPLY_DROP):
+            self.rig.set_supply_fraction(self._supply_fraction())
         elif kind == EmuFault.DROP and target == CONTROLLER_NODE:
             self._ignore_commands = on
         elif kind == EmuFault.DELAY and not on:
             self._flush_delayed()
+
+    def _supply_fraction(self) -> float:
+        """The power unit's share of its nominal pressure under the supply faults injected:
+        none with SUPPLY_LOSS (it stops), SUPPLY_DROP's percentage, else all."""
+        if any(kind == EmuFault.SUPPLY_LOSS for _, kind in self.faults):
+            return 0.0
+        drops = [entry[1] for (_, kind), entry in self.faults.items() if kind == EmuFault.SUPPLY_DROP]
+        return min(drops) / 100.0 if drops else 1.0
 
     def _flush_delayed(self) -> None:
         delayed, self._delayed = self._delayed, []
@@ -490,13 +491,13 @@ class Emulator:
             position = round(rig.state[i, hy.S_Y] / cfg.encoder_resolution_m) * cfg.encoder_resolution_m
             force = rig.rod_force_n[i] + cfg.load_cell_noise_n * rng.standard_normal()
             if self._fault(n, EmuFault.STUCK):
-                position, force = self._stuck.setdefault(n, (position, force))
+                position, force = self._onset_values.setdefault((n, EmuFault.STUCK), (position, force))
             drift = self._fault(n, EmuFault.ENCODER_DRIFT)
             if drift is not None:                      # um/s since the fault's onset
-                start = self._drift_start.setdefault(n, rig.time_s)
+                start = self._onset_values.setdefault((n, EmuFault.ENCODER_DRIFT), rig.time_s)
                 position += drift[1] * 1e-6 * (rig.time_s - start)
             if self._fault(n, EmuFault.FORCE_STUCK):
-                force = self._force_stuck.setdefault(n, force)
+                force = self._onset_values.setdefault((n, EmuFault.FORCE_STUCK), force)
             if self._fault(n, EmuFault.FORCE_ZERO):
                 force = 0.0
             if self._fault(n, EmuFault.OUT_OF_RANGE):

@@ -130,18 +130,15 @@ class _RigBase:
         self.ports_open = np.ones(self.n_legs)     # 0: the load-holding valves block the chambers
         self.rod_force_n = np.zeros(self.n_legs)
         self.supply_pressure_pa = cfg.supply_pressure_pa
-        self.supply_lost = False
         self.supply_fraction = 1.0
         self.time_s = 0.0
 
     def _supply_for(self, period_s: float) -> float:
         tank = self.cfg.hp[hy.HP_TANK]
-        if self.supply_lost:                   # the power unit stops: to the tank pressure
-            target = tank
-        elif self.supply_fraction < 1.0:       # it delivers part of its pressure
-            target = tank + self.supply_fraction * (self.cfg.supply_pressure_pa - tank)
-        else:
+        if self.supply_fraction >= 1.0:
             return self.supply_pressure_pa
+        # the power unit delivers part of its pressure (0: it stopped, to the tank's)
+        target = tank + self.supply_fraction * (self.cfg.supply_pressure_pa - tank)
         self.supply_pressure_pa = target + (self.supply_pressure_pa - target) * math.exp(
             -period_s / SUPPLY_LOSS_TIME_CONSTANT_S)
         return self.supply_pressure_pa
@@ -149,14 +146,9 @@ class _RigBase:
     def set_rod_seized(self, leg: int, seized: bool) -> None:
         self.seized[leg] = seized
 
-    def set_supply_lost(self, lost: bool) -> None:
-        self.supply_lost = lost
-        if not lost:
-            self.supply_pressure_pa = self.cfg.supply_pressure_pa
-
     def set_supply_fraction(self, fraction: float) -> None:
-        """The power unit's pressure above the tank's, as a fraction of its nominal; the supply
-        falls to it with the supply-loss time constant (1 restores it at once)."""
+        """The power unit's pressure above the tank's, as a fraction of its nominal (0: it
+        stopped); the supply falls to it with the supply-loss time constant, 1 restores it at once."""
         self.supply_fraction = fraction
         if fraction >= 1.0:
             self.supply_pressure_pa = self.cfg.supply_pressure_pa
