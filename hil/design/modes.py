@@ -242,32 +242,44 @@ def modal_model(cfg: EmulatorConfig, position_m, rpy_rad=(0.0, 0.0, 0.0), payloa
     +1 or -1: the valves in HOLD with the load-holding valves closed and the seals in
     pre-sliding, their bristles deflected to that side (LuGre's sigma0, sigma1 of that side):
     what a small push then meets."""
+    return modal_models(cfg, position_m, rpy_rad, payload_kg, supply_pa, (sealed_side,))[0]
+
+
+def _seal_terms(fp: np.ndarray, sealed_side: int) -> tuple[float, float, float]:
+    """(ports, the seals' stiffness, their damping slope) of `modal_model`'s `sealed_side`."""
+    if not sealed_side:                  # valves open, seals sliding: their viscous slope
+        return 1.0, 0.0, 0.5 * (fp[lugre.S2_POS] + fp[lugre.S2_NEG])
+    if sealed_side > 0:
+        return 0.0, fp[lugre.S0_POS], fp[lugre.S1_POS] + fp[lugre.S2_POS]
+    return 0.0, fp[lugre.S0_NEG], fp[lugre.S1_NEG] + fp[lugre.S2_NEG]
+
+
+def modal_models(cfg: EmulatorConfig, position_m, rpy_rad, payload_kg: float, supply_pa: float | None,
+                 sealed_sides) -> list[ModalModel]:
+    """`modal_model` for each of `sealed_sides`, from one linearisation of the mechanism and
+    one solve of the holding points (what the sides share)."""
     supply = cfg.supply_pressure_pa if supply_pa is None else float(supply_pa)
     rig = HexapodRig(cfg)
     rig.set_load(payload_kg)
     quat = pose_quaternion(rpy_rad)
     strokes, static, jacobian, inertia, gravity_stiffness = joint_space(rig, position_m, quat)
-    fp = cfg.friction
-    friction_slope = 0.5 * (fp[lugre.S2_POS] + fp[lugre.S2_NEG])
-    ports, seal_stiffness = 1.0, 0.0
-    if sealed_side:
-        positive = sealed_side > 0
-        ports = 0.0
-        seal_stiffness = fp[lugre.S0_POS] if positive else fp[lugre.S0_NEG]
-        friction_slope = (fp[lugre.S1_POS] + fp[lugre.S2_POS]) if positive else (fp[lugre.S1_NEG] + fp[lugre.S2_NEG])
     pa, pb, spool = np.empty(N_LEGS), np.empty(N_LEGS), np.empty(N_LEGS)
     converged = True
     for i in range(N_LEGS):
         pa[i], pb[i], spool[i], ok = holding_point(cfg, float(strokes[i]), float(static[i]), supply)
         converged = converged and ok
-    a, b, stiffness, flow_gain = state_matrices(cfg, inertia, gravity_stiffness, strokes, pa, pb, spool, supply,
-                                                friction_slope, ports, seal_stiffness)
     radius = float(np.linalg.norm(rig.geometry.platform_anchor_m[0]))
-    model = ModalModel(np.asarray(position_m, dtype=float), np.asarray(rpy_rad, dtype=float), float(payload_kg),
-                       supply, strokes, static, pa, pb, spool, jacobian, inertia, gravity_stiffness, stiffness,
-                       flow_gain, friction_slope, a, b, converged=converged)
-    model.modes = modes_of(a, jacobian, radius, cfg.area_a_m2, cfg.alpha, stiffness)
-    return model
+    models = []
+    for side in sealed_sides:
+        ports, seal_stiffness, friction_slope = _seal_terms(cfg.friction, side)
+        a, b, stiffness, flow_gain = state_matrices(cfg, inertia, gravity_stiffness, strokes, pa, pb, spool, supply,
+                                                    friction_slope, ports, seal_stiffness)
+        model = ModalModel(np.asarray(position_m, dtype=float), np.asarray(rpy_rad, dtype=float), float(payload_kg),
+                           supply, strokes, static, pa, pb, spool, jacobian, inertia, gravity_stiffness, stiffness,
+                           flow_gain, friction_slope, a, b, converged=converged)
+        model.modes = modes_of(a, jacobian, radius, cfg.area_a_m2, cfg.alpha, stiffness)
+        models.append(model)
+    return models
 
 
 def sealed_modes(cfg: EmulatorConfig, position_m, rpy_rad=(0.0, 0.0, 0.0), payload_kg: float = 0.0,
@@ -276,8 +288,8 @@ def sealed_modes(cfg: EmulatorConfig, position_m, rpy_rad=(0.0, 0.0, 0.0), paylo
     seals' bristles swing from one side to the other every half period, so each mode is the
     model's with either side's bristles, each for half a period: frequency 2 / (1/f+ + 1/f-),
     damping ratio the mean. Paired one to one by the legs' mode shapes."""
-    plus, minus = (modal_model(cfg, position_m, rpy_rad, payload_kg, supply_pa, sealed_side=side)
-                   .platform_modes(count, 0.45) for side in (1, -1))
+    plus, minus = (model.platform_modes(count, 0.45)
+                   for model in modal_models(cfg, position_m, rpy_rad, payload_kg, supply_pa, (1, -1)))
     similarity = np.array([[abs(float(np.dot(p.leg_shape, m.leg_shape))) for m in minus] for p in plus])
     rows, cols = linear_sum_assignment(-similarity)
     out = []
