@@ -29,6 +29,7 @@ import can
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from physics import hydraulics as hy
 from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import E2E_REJECTED, RxStatus
@@ -37,7 +38,6 @@ from protocol.nodes import CONTROLLER_NODE, IMU_NODE, rig_nodes
 from protocol.outbox import Outbox
 from protocol.realtime import percentiles_us
 
-from . import hydraulics as hy
 from .params import EmulatorConfig
 from .valve_node import Emergency, ValveDriver, ValveState
 

@@ -15,14 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
+from physics import hydraulics as hy
 from physics import lugre
-from physics.actuator import cylinder_areas
-from physics.constants import BAR, CM3, L_MIN, MM
+from physics.constants import BAR, MM
 from protocol.errors import UserInputError
 from protocol.tomlconfig import load_layered
 from protocol.tomlconfig import merge as _merge
-
-from . import hydraulics as hy
 
 # (low, high) per key; ints are declared with int bounds. Lists are checked separately.
 RANGES: dict[str, dict[str, tuple]] = {
@@ -166,24 +164,7 @@ def pack_hydraulics(raw: dict) -> np.ndarray:
     if a["rod_radius_mm"] >= a["bore_radius_mm"]:
         raise ConfigError(f"config: [actuator].rod_radius_mm = {a['rod_radius_mm']} must be below "
                           f"bore_radius_mm = {a['bore_radius_mm']}")
-    hp = np.zeros(hy.HP_SIZE)
-    hp[hy.HP_AREA_A], hp[hy.HP_ALPHA] = cylinder_areas(a["bore_radius_mm"] * MM, a["rod_radius_mm"] * MM)
-    hp[hy.HP_STROKE] = a["stroke_mm"] * MM
-    hp[hy.HP_VA0] = c["dead_volume_a_cm3"] * CM3
-    hp[hy.HP_VB0] = c["dead_volume_b_cm3"] * CM3
-    hp[hy.HP_BETA_OIL] = c["oil_bulk_modulus_bar"] * BAR
-    hp[hy.HP_AIR0] = c["air_fraction_pct"] / 100.0
-    hp[hy.HP_POLY_N] = c["air_polytropic_index"]
-    hp[hy.HP_BETA_WALL] = c["hose_bulk_modulus_bar"] * BAR
-    hp[hy.HP_KV] = v["edge_flow_l_min"] * L_MIN / math.sqrt(v["edge_drop_bar"] * BAR)
-    hp[hy.HP_LAP_P] = v["supply_lap_pct"] / 100.0
-    hp[hy.HP_LAP_T] = v["return_lap_pct"] / 100.0
-    hp[hy.HP_LEAK] = c["cross_leakage_l_min_per_bar"] * L_MIN / BAR
-    hp[hy.HP_SEAL_LEAK] = c["seal_leakage_l_min_per_bar"] * L_MIN / BAR
-    hp[hy.HP_TANK] = a["tank_pressure_bar"] * BAR
-    hp[hy.HP_LAMINAR] = v["laminar_bar"] * BAR
-    hp[hy.HP_TAU_SPOOL] = v["spool_time_constant_ms"] * 1e-3
-    hp[hy.HP_P_MIN] = c["min_pressure_bar"] * BAR
+    hp = hy.pack(a, v, c)
     if a["tank_pressure_bar"] >= a["supply_pressure_bar"] > 0:
         raise ConfigError("config: [actuator].tank_pressure_bar must be below supply_pressure_bar")
     return hp

@@ -32,10 +32,10 @@ import mujoco
 import numba
 import numpy as np
 
+from physics import hydraulics as hy
 from physics.constants import GRAVITY_M_S2
 from physics.lugre import force_split, z_step
 
-from . import hydraulics as hy
 from .mechanism import Mechanism
 from .params import EmulatorConfig
 from .rig_geometry import RigGeometry, read_rig_geometry
@@ -110,14 +110,6 @@ def legs_hydraulics(st: np.ndarray, stroke: np.ndarray, velocity: np.ndarray, co
             hy.chamber_step(st[i], stroke[i], velocity[i], ps, h, hp, ports[i])
 
 
-def holding_pressures(cfg: EmulatorConfig, force_n: float) -> tuple[float, float]:
-    """Chamber pressures that hold `force_n` with PA + PB = supply + tank (a start value)."""
-    ps, pt, alpha = cfg.supply_pressure_pa, cfg.hp[hy.HP_TANK], cfg.alpha
-    load_pressure = force_n / cfg.area_a_m2
-    pb = (ps + pt - load_pressure) / (1.0 + alpha)
-    return load_pressure + alpha * pb, pb
-
-
 class _RigBase:
     n_legs: int
 
@@ -171,7 +163,7 @@ class TestbenchRig(_RigBase):
         self.set_load(cfg.load_kg if load_kg is None else load_kg)
         self.state[0, hy.S_Y] = min(max(start_mm * 1e-3, 0.0), cfg.stroke_m)
         hold = (cfg.piston_rod_mass_kg + self.load_mass_kg) * GRAVITY_M_S2
-        self.state[0, hy.S_PA], self.state[0, hy.S_PB] = holding_pressures(cfg, hold)
+        self.state[0, hy.S_PA], self.state[0, hy.S_PB] = hy.holding_pressures(hold, cfg.supply_pressure_pa, cfg.hp)
         self.rod_force_n[0] = self.load_mass_kg * GRAVITY_M_S2          # at rest
 
     def set_load(self, load_kg: float) -> None:
@@ -234,7 +226,8 @@ class HexapodRig(_RigBase):
         self.state[:, hy.S_Y] = self._stroke
         static, _ = mech.inverse_forces(mech.data.qpos.copy(), np.zeros(model.nv), np.zeros(model.nv))
         for i in range(6):
-            self.state[i, hy.S_PA], self.state[i, hy.S_PB] = holding_pressures(cfg, float(static[i]))
+            self.state[i, hy.S_PA], self.state[i, hy.S_PB] = hy.holding_pressures(float(static[i]),
+                                                                                   cfg.supply_pressure_pa, cfg.hp)
         mech.set_pose(self.geometry.home_position_m, self.geometry.home_quaternion)
         self._measure_rod_forces()
 

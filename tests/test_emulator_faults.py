@@ -8,7 +8,7 @@ import copy
 import numpy as np
 import pytest
 
-from plant_emulator import hydraulics as hy
+from physics import hydraulics as hy
 from plant_emulator.emulator import Emulator
 from plant_emulator.params import load_config
 from plant_emulator.rigs import make_rig

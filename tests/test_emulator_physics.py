@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from hil.design import calibration
+from physics import hydraulics as hy
 from physics.lugre import force_split as lugre_split
 from physics.lugre import steady_friction
 from physics.lugre import z_step as lugre_z_step
-from plant_emulator import hydraulics as hy
 from plant_emulator.params import ConfigError, load_config
 from plant_emulator.rigs import HexapodRig, TestbenchRig
 from plant_emulator.valve_node import FaultReason, ValveDriver, ValveState

@@ -174,8 +174,8 @@ def _presliding_in_process(start_cycles: int, force_filter_hz: float | None = No
     from firmware_py.controller import Controller
     from hil.design.friction import displacement_from_crossings, steady_sides
     from hil.scenarios.friction import _at_rest
+    from physics import hydraulics as hy
     from physics.actuator import piston_force
-    from plant_emulator import hydraulics as hy
     from plant_emulator.params import load_config as load_emulator_config
     from plant_emulator.rigs import TestbenchRig
     from protocol.enums import TestMode, WaypointFlag

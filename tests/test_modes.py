@@ -12,7 +12,7 @@ from scipy.linalg import expm
 
 from hil.cli import main
 from hil.design.modes import blocks, modal_model, pose_quaternion, sealed_modes, state_matrices
-from plant_emulator import hydraulics as hy
+from physics import hydraulics as hy
 from plant_emulator.params import load_config
 from plant_emulator.rigs import HexapodRig
 

@@ -27,9 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from physics import hydraulics as hy
 from physics import lugre
 from physics.constants import BAR, GRAVITY_M_S2, MM
-from plant_emulator import hydraulics as hy
 from plant_emulator.params import EmulatorConfig, build, merge
 
 from .thesis import thesis_data

@@ -28,9 +28,9 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial.transform import Rotation
 
+from physics import hydraulics as hy
 from physics import lugre
 from physics.constants import BAR, MM
-from plant_emulator import hydraulics as hy
 from plant_emulator.params import EmulatorConfig
 from plant_emulator.rigs import HexapodRig
 

@@ -1,4 +1,6 @@
-"""Servo-hydraulic actuator physics (thesis chapter 4.3), pure and in place.
+"""Servo-hydraulic actuator physics (thesis chapter 4.3), pure and in place: the emulator's
+plant and the controller's model of it (its residuals) use these laws, each with its own
+parameters.
 
 One actuator = a four-way servo-valve feeding an asymmetric double-acting cylinder. The
 state of leg i lives in a row of a float64 array (`S_*` columns); physical parameters are
@@ -39,7 +41,7 @@ import numba
 import numpy as np
 
 from physics import actuator
-from physics.constants import ATMOSPHERE_PA
+from physics.constants import ATMOSPHERE_PA, BAR, CM3, L_MIN, MM
 
 # -- parameter vector (filled by params.ActuatorParams.packed) ------------------------------
 HP_AREA_A = 0          # piston area Ap [m^2]
@@ -166,3 +168,39 @@ def chamber_step(state: np.ndarray, y: float, v: float, ps: float, h: float, hp:
     p_min = hp[HP_P_MIN]
     state[S_PA] = max(pa + h * rate_a / (1.0 - h * slope_a), p_min)
     state[S_PB] = max(pb + h * rate_b / (1.0 - h * slope_b), p_min)
+
+
+def pack(actuator_section: dict, valve: dict, chambers: dict) -> np.ndarray:
+    """The parameter vector from thesis-unit tables: `actuator_section` bore_radius_mm,
+    rod_radius_mm, stroke_mm, tank_pressure_bar; `valve` and `chambers` the emulator's
+    [valve] and [chambers] keys."""
+    a, v, c = actuator_section, valve, chambers
+    hp = np.zeros(HP_SIZE)
+    hp[HP_AREA_A], hp[HP_ALPHA] = actuator.cylinder_areas(a["bore_radius_mm"] * MM, a["rod_radius_mm"] * MM)
+    hp[HP_STROKE] = a["stroke_mm"] * MM
+    hp[HP_VA0] = c["dead_volume_a_cm3"] * CM3
+    hp[HP_VB0] = c["dead_volume_b_cm3"] * CM3
+    hp[HP_BETA_OIL] = c["oil_bulk_modulus_bar"] * BAR
+    hp[HP_AIR0] = c["air_fraction_pct"] / 100.0
+    hp[HP_POLY_N] = c["air_polytropic_index"]
+    hp[HP_BETA_WALL] = c["hose_bulk_modulus_bar"] * BAR
+    hp[HP_KV] = v["edge_flow_l_min"] * L_MIN / math.sqrt(v["edge_drop_bar"] * BAR)
+    hp[HP_LAP_P] = v["supply_lap_pct"] / 100.0
+    hp[HP_LAP_T] = v["return_lap_pct"] / 100.0
+    hp[HP_LEAK] = c["cross_leakage_l_min_per_bar"] * L_MIN / BAR
+    hp[HP_SEAL_LEAK] = c["seal_leakage_l_min_per_bar"] * L_MIN / BAR
+    hp[HP_TANK] = a["tank_pressure_bar"] * BAR
+    hp[HP_LAMINAR] = v["laminar_bar"] * BAR
+    hp[HP_TAU_SPOOL] = v["spool_time_constant_ms"] * 1e-3
+    hp[HP_P_MIN] = c["min_pressure_bar"] * BAR
+    return hp
+
+
+@numba.njit(cache=True)
+def holding_pressures(force_n: float, ps: float, hp: np.ndarray):
+    """Chamber pressures that hold `force_n` on the piston with PA + PB = supply + tank (a
+    start value where no transducer has spoken)."""
+    alpha = hp[HP_ALPHA]
+    load_pressure = force_n / hp[HP_AREA_A]
+    pb = (ps + hp[HP_TANK] - load_pressure) / (1.0 + alpha)
+    return load_pressure + alpha * pb, pb
