@@ -1,0 +1,139 @@
+"""Model-based residuals of the actuators (beyond the thesis): each leg's chamber pressures
+predicted from its valve command and its encoder (eq. 4.2-4.10 with the controller's own
+parameters of the actuator) against the force its load cell measures.
+
+Per leg, every cycle while its valve is ACTIVE:
+    p_A, p_B  <- continuity (eq. 4.7-4.8): the valve's flows at the spool applied at this
+                 SYNC, the piston's swept volume from the encoder's displacement (its counts
+                 do not accumulate: the swept volume telescopes)
+    F_model    = A (p_A - alpha p_B)                                     (eq. 4.15)
+    F_piston   = F_load cell + m_rod g_axial + sigma2 v                  (the rod's balance)
+    e          = F_piston - F_model; p_A, p_B corrected by `gain` e (the pressure level is not
+                 seen by the force: a LEG_PRESSURE sample resets both chambers)
+    r          = low-pass(e)
+The seals' Coulomb and Stribeck friction is left out of F_piston (its sign is unknown while
+the encoder's velocity crosses zero) and is the threshold's floor instead:
+    threshold  = max(|alpha0 + alpha1|) (Tables 6.1-6.2) + K q / 2 + spread K T / gain |Q / A|
+with K the oil column's stiffness, q the encoder's count, `spread` the flow gain's relative
+spread over Table A.3 (k01) and Q the model's valve flow. A leg whose |r| stays above it for
+`persistence` cycles is faulty; several legs at once are the supply's fault.
+What it sees: a valve that does not follow its command, a seized rod, a lost supply, a
+frozen encoder. Allocation-free on arrays made here.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from physics import hydraulics as hy
+from physics import lugre
+
+FRICTION_SIDES = ((lugre.A0_POS, lugre.A1_POS), (lugre.A0_NEG, lugre.A1_NEG))
+
+
+def breakaway_force_n(fp: np.ndarray) -> float:
+    """The seals' largest static friction |alpha0 + alpha1| over both sides."""
+    return max(abs(fp[a0] + fp[a1]) for a0, a1 in FRICTION_SIDES)
+
+
+@njit(cache=True)
+def residual_step(hp, fp, ps, period_s, substeps, spool_applied, position, velocity, force, gravity_axial,
+                  rod_mass, gain, alpha_lp, pressure_fresh, pa_meas, pb_meas, state, y_prev, residual,
+                  flow_velocity) -> None:
+    """One cycle of every leg's chamber model; writes `residual` (low-passed force error, N)
+    and `flow_velocity` (the model's valve flow into A over the piston area, m/s)."""
+    area, ratio = hp[hy.HP_AREA_A], hp[hy.HP_ALPHA]
+    h = period_s / substeps
+    for i in range(position.shape[0]):
+        row = state[i]
+        dy = position[i] - y_prev[i]
+        v = dy / period_s
+        for j in range(substeps):
+            row[hy.S_SPOOL] = hy.spool_step(row[hy.S_SPOOL], spool_applied[i], h, hp)
+            hy.chamber_step(row, y_prev[i] + dy * (j + 1) / substeps, v, ps, h, hp, 1.0)
+        y_prev[i] = position[i]
+        if pressure_fresh[i]:
+            row[hy.S_PA] = pa_meas[i]
+            row[hy.S_PB] = pb_meas[i]
+        qa, _, _, _ = hy.valve_flows(row[hy.S_SPOOL], row[hy.S_PA], row[hy.S_PB], ps, hp)
+        flow_velocity[i] = qa / area
+        _, sigma2 = lugre.stribeck(velocity[i], fp)
+        piston = force[i] + rod_mass * gravity_axial[i] + sigma2 * velocity[i]
+        error = piston - hy.piston_force(row[hy.S_PA], row[hy.S_PB], hp)
+        correction = gain * error / (area * (1.0 + ratio))
+        row[hy.S_PA] += correction
+        row[hy.S_PB] -= correction
+        residual[i] += alpha_lp * (error - residual[i])
+
+
+@njit(cache=True)
+def residual_verdict(residual, flow_velocity, floor_n, flow_n_per_m_s, persistence, above, ratio):
+    """Persistence per leg; returns (legs faulty, the worst leg by |r| / threshold), ratio[i]
+    the leg's |r| / threshold this cycle."""
+    faulty, worst, worst_ratio = 0, -1, 0.0
+    for i in range(residual.shape[0]):
+        threshold = floor_n + flow_n_per_m_s * abs(flow_velocity[i])
+        ratio[i] = abs(residual[i]) / threshold
+        above[i] = above[i] + 1 if ratio[i] > 1.0 else 0
+        if above[i] >= persistence:
+            faulty += 1
+            if ratio[i] > worst_ratio:
+                worst, worst_ratio = i, ratio[i]
+    return faulty, worst
+
+
+@njit(cache=True)
+def start_state(force, gravity_axial, rod_mass, ps, hp, pressure_valid, pa_meas, pb_meas, position, state,
+                y_prev, residual, above) -> None:
+    """The chambers where the transducers last saw them, else holding the measured force."""
+    for i in range(position.shape[0]):
+        row = state[i]
+        if pressure_valid[i]:
+            row[hy.S_PA], row[hy.S_PB] = pa_meas[i], pb_meas[i]
+        else:
+            row[hy.S_PA], row[hy.S_PB] = hy.holding_pressures(force[i] + rod_mass * gravity_axial[i], ps, hp)
+        row[hy.S_SPOOL] = 0.0
+        y_prev[i] = position[i]
+        residual[i] = 0.0
+        above[i] = 0
+
+
+class ActuatorResiduals:
+    """The residual of every leg. `start(...)` when its valves go ACTIVE, `update(...)` every
+    cycle after; `legs_faulty`, `worst_leg` (-1: none) and `ratio` (|r| / threshold) say what
+    it saw."""
+
+    def __init__(self, n_legs: int, hp: np.ndarray, friction: np.ndarray, supply_pa: float, period_s: float,
+                 rod_mass_kg: float, stiffness_n_m: float, encoder_m: float, gain: float, filter_s: float,
+                 persistence: int, flow_spread: float, substeps: int = 2):
+        self.hp, self.friction, self.supply_pa, self.period_s = hp, friction, supply_pa, period_s
+        self.rod_mass, self.gain, self.persistence, self.substeps = rod_mass_kg, gain, persistence, substeps
+        self.alpha_lp = 1.0 - math.exp(-period_s / filter_s)
+        self.floor_n = breakaway_force_n(friction) + 0.5 * stiffness_n_m * encoder_m
+        self.flow_n_per_m_s = flow_spread * stiffness_n_m * period_s / gain
+        self.state = np.zeros((n_legs, hy.S_SIZE))
+        self.y_prev = np.zeros(n_legs)
+        self.residual = np.zeros(n_legs)
+        self.flow_velocity = np.zeros(n_legs)
+        self.ratio = np.zeros(n_legs)
+        self.above = np.zeros(n_legs, dtype=np.int64)
+        self.legs_faulty, self.worst_leg = 0, -1
+
+    def start(self, position_m, force_n, gravity_axial, pressure_valid, pa_pa, pb_pa) -> None:
+        start_state(force_n, gravity_axial, self.rod_mass, self.supply_pa, self.hp, pressure_valid, pa_pa, pb_pa,
+                    position_m, self.state, self.y_prev, self.residual, self.above)
+        self.legs_faulty, self.worst_leg = 0, -1
+
+    def update(self, spool_applied, position_m, velocity_m_s, force_n, gravity_axial, pressure_fresh, pa_pa,
+               pb_pa) -> int:
+        """One cycle; the number of legs whose residual persisted beyond its threshold."""
+        residual_step(self.hp, self.friction, self.supply_pa, self.period_s, self.substeps, spool_applied,
+                      position_m, velocity_m_s, force_n, gravity_axial, self.rod_mass, self.gain, self.alpha_lp,
+                      pressure_fresh, pa_pa, pb_pa, self.state, self.y_prev, self.residual, self.flow_velocity)
+        self.legs_faulty, self.worst_leg = residual_verdict(self.residual, self.flow_velocity, self.floor_n,
+                                                            self.flow_n_per_m_s, self.persistence, self.above,
+                                                            self.ratio)
+        return self.legs_faulty
