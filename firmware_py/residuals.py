@@ -60,8 +60,8 @@ def residual_step(hp, fp, ps, period_s, substeps, spool_applied, position, veloc
             row[hy.S_PB] = pb_meas[i]
         qa, _, _, _ = hy.valve_flows(row[hy.S_SPOOL], row[hy.S_PA], row[hy.S_PB], ps, hp)
         flow_velocity[i] = qa / area
-        _, sigma2 = lugre.stribeck(velocity[i], fp)
-        piston = force[i] + rod_mass * gravity_axial[i] + sigma2 * velocity[i]
+        _, sigma2 = lugre.stribeck(v, fp)           # the encoder's own rate: an estimator lags a fast start
+        piston = force[i] + rod_mass * gravity_axial[i] + sigma2 * v
         error = piston - hy.piston_force(row[hy.S_PA], row[hy.S_PB], hp)
         correction = gain * error / (area * (1.0 + ratio))
         row[hy.S_PA] += correction
