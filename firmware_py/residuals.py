@@ -53,7 +53,7 @@ def residual_step(hp, fp, ps, period_s, substeps, spool_applied, position, veloc
         v = dy / period_s
         for j in range(substeps):
             row[hy.S_SPOOL] = hy.spool_step(row[hy.S_SPOOL], spool_applied[i], h, hp)
-            hy.chamber_step(row, y_prev[i] + dy * (j + 1) / substeps, v, ps, h, hp, 1.0)
+            hy.chamber_step(row, y_prev[i] + dy * (j + 1) / substeps, v, ps, h, hp, 1.0, hp[hy.HP_SEAL_LEAK])
         y_prev[i] = position[i]
         if pressure_fresh[i]:
             row[hy.S_PA] = pa_meas[i]

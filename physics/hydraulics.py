@@ -135,12 +135,13 @@ def piston_force(pa: float, pb: float, hp: np.ndarray) -> float:
 
 @numba.njit(cache=True)
 def pressure_rates(y: float, v: float, pa: float, pb: float, spool: float, ps: float, hp: np.ndarray,
-                   ports: float):
+                   ports: float, seal_leak: float):
     """dPA/dt, dPB/dt (eq. 4.7-4.8, 4.13-4.14 with internal leakage) and their slopes;
-    `ports` 1 = the valve connected to the chambers, 0 = the load-holding valves closed."""
+    `ports` 1 = the valve connected to the chambers, 0 = the load-holding valves closed;
+    `seal_leak` the piston seal's leakage [m^3/s/Pa] (`HP_SEAL_LEAK` when it is sound)."""
     qa, qb, dqa, dqb = valve_flows(spool, pa, pb, ps, hp)
     qa, qb, dqa, dqb = qa * ports, qb * ports, dqa * ports, dqb * ports
-    leak_coefficient = hp[HP_LEAK] * ports + hp[HP_SEAL_LEAK]
+    leak_coefficient = hp[HP_LEAK] * ports + seal_leak
     leak = leak_coefficient * (pa - pb)
     va, vb = chamber_volumes(y, hp)
     ka = bulk_modulus(pa, hp) / va
@@ -160,11 +161,11 @@ def spool_step(spool: float, command: float, h: float, hp: np.ndarray) -> float:
 
 @numba.njit(cache=True)
 def chamber_step(state: np.ndarray, y: float, v: float, ps: float, h: float, hp: np.ndarray,
-                 ports: float) -> None:
+                 ports: float, seal_leak: float) -> None:
     """Advance PA, PB of one leg's state row by h, linearly implicit (Rosenbrock-Euler
     on each chamber's own slope); v and y are the end-of-step mechanical state."""
     pa, pb = state[S_PA], state[S_PB]
-    rate_a, rate_b, slope_a, slope_b = pressure_rates(y, v, pa, pb, state[S_SPOOL], ps, hp, ports)
+    rate_a, rate_b, slope_a, slope_b = pressure_rates(y, v, pa, pb, state[S_SPOOL], ps, hp, ports, seal_leak)
     p_min = hp[HP_P_MIN]
     state[S_PA] = max(pa + h * rate_a / (1.0 - h * slope_a), p_min)
     state[S_PB] = max(pb + h * rate_b / (1.0 - h * slope_b), p_min)

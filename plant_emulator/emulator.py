@@ -52,10 +52,10 @@ FREE_RUN_CATCH_UP_STEPS = 25         # free run: periods of physics per poll at 
 # frozen alive counter); LEG_JAM: the cylinder's rod seized (mechanical; the valve still works).
 # ENCODER_DRIFT, FORCE_STUCK, FORCE_ZERO: the leg's sensors; SPOOL_STUCK: the spool held open
 # whatever the valve does (mechanical); SUPPLY_DROP: the power unit delivers part of its pressure;
-# FRAME_LOSS: each frame of the node lost at random.
+# FRAME_LOSS: each frame of the node lost at random; SEAL_LEAK: a worn piston seal (mechanical).
 # FAULT_PARAM is the fault's value for these (until cleared), its duration in SYNCs for the others
 VALUE_PARAM_FAULTS = (EmuFault.BABBLE, EmuFault.OUT_OF_RANGE, EmuFault.ENCODER_DRIFT, EmuFault.SPOOL_STUCK,
-                      EmuFault.SUPPLY_DROP, EmuFault.FRAME_LOSS)
+                      EmuFault.SUPPLY_DROP, EmuFault.FRAME_LOSS, EmuFault.SEAL_LEAK)
 KNOWN_FAULTS = frozenset(int(kind) for kind in EmuFault if kind is not EmuFault.NONE)
 SYNC_TIMEOUT_EVENT = "emulator: event sync_timeout"   # a stderr line per SYNC-watchdog trip (JSON after it)
 # a stderr line per injected fault, at the first SYNC that sees it: the fault's onset cycle
@@ -381,6 +381,8 @@ class Emulator:
             self.rig.jammed[target - 1] = on
         elif kind == EmuFault.LEG_JAM and 1 <= target <= self.rig.n_legs:
             self.rig.set_rod_seized(target - 1, on)
+        elif kind == EmuFault.SEAL_LEAK and 1 <= target <= self.rig.n_legs:
+            self.rig.set_seal_leak(target - 1, float(self.faults[(target, kind)][1]) if on else 0.0)
         elif kind == EmuFault.REPEAT and not on:
             self._last_sent.clear()
         elif kind in (EmuFault.SUPPLY_LOSS, EmuFault.SUPPLY_DROP):

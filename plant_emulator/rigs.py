@@ -47,9 +47,9 @@ SEIZED_SOLIMP = (0.9999, 0.9999, 0.0001, 0.5, 2.0)
 
 
 @numba.njit(cache=True)
-def testbench_advance(st: np.ndarray, command: float, jammed: bool, seized: bool, ports: float, n: int, h: float,
-                      ps: float, hp: np.ndarray, fp: np.ndarray, gp: np.ndarray, rod_mass: float, load_mass: float,
-                      out: np.ndarray) -> None:
+def testbench_advance(st: np.ndarray, command: float, jammed: bool, seized: bool, ports: float, seal_leak: float,
+                      n: int, h: float, ps: float, hp: np.ndarray, fp: np.ndarray, gp: np.ndarray, rod_mass: float,
+                      load_mass: float, out: np.ndarray) -> None:
     """n sub-steps of h of the test bench; out = [acceleration, seal friction, guide friction]."""
     mass = rod_mass + load_mass
     stroke = hp[hy.HP_STROKE]
@@ -78,7 +78,7 @@ def testbench_advance(st: np.ndarray, command: float, jammed: bool, seized: bool
         guide = guide_z + guide_c * v_new
         st[hy.S_Z] = z_step(st[hy.S_Z], v_new, h, fp)
         st[hy.S_ZG] = z_step(st[hy.S_ZG], v_new, h, gp)
-        hy.chamber_step(st, y_new, v_new, ps, h, hp, ports)
+        hy.chamber_step(st, y_new, v_new, ps, h, hp, ports, seal_leak)
         accel = (v_new - v) / h
         y, v = y_new, v_new
     st[hy.S_Y], st[hy.S_V] = y, v
@@ -97,8 +97,8 @@ def legs_drive_into(st: np.ndarray, velocity: np.ndarray, hp: np.ndarray, fp: np
 
 @numba.njit(cache=True)
 def legs_hydraulics(st: np.ndarray, stroke: np.ndarray, velocity: np.ndarray, command: np.ndarray,
-                    jammed: np.ndarray, ports: np.ndarray, n: int, h: float, ps: float, hp: np.ndarray,
-                    fp: np.ndarray) -> None:
+                    jammed: np.ndarray, ports: np.ndarray, seal_leak: np.ndarray, n: int, h: float, ps: float,
+                    hp: np.ndarray, fp: np.ndarray) -> None:
     """Advance spool, bristles and chambers of every leg by n x h at the given leg motion."""
     for i in range(st.shape[0]):
         st[i, hy.S_Y] = stroke[i]
@@ -107,7 +107,7 @@ def legs_hydraulics(st: np.ndarray, stroke: np.ndarray, velocity: np.ndarray, co
             if not jammed[i]:
                 st[i, hy.S_SPOOL] = hy.spool_step(st[i, hy.S_SPOOL], command[i], h, hp)
             st[i, hy.S_Z] = z_step(st[i, hy.S_Z], velocity[i], h, fp)
-            hy.chamber_step(st[i], stroke[i], velocity[i], ps, h, hp, ports[i])
+            hy.chamber_step(st[i], stroke[i], velocity[i], ps, h, hp, ports[i], seal_leak[i])
 
 
 class _RigBase:
@@ -120,6 +120,7 @@ class _RigBase:
         self.jammed = np.zeros(self.n_legs, dtype=bool)
         self.seized = np.zeros(self.n_legs, dtype=bool)
         self.ports_open = np.ones(self.n_legs)     # 0: the load-holding valves block the chambers
+        self.seal_leak = np.full(self.n_legs, cfg.hp[hy.HP_SEAL_LEAK])    # each piston seal's leakage
         self.rod_force_n = np.zeros(self.n_legs)
         self.supply_pressure_pa = cfg.supply_pressure_pa
         self.supply_fraction = 1.0
@@ -137,6 +138,12 @@ class _RigBase:
 
     def set_rod_seized(self, leg: int, seized: bool) -> None:
         self.seized[leg] = seized
+
+    def set_seal_leak(self, leg: int, factor: float) -> None:
+        """A worn piston seal of `leg` passing `factor` times the calibrated A <-> B leakage
+        (0: sound again); unlike that leakage it is not cut by the load-holding valves."""
+        hp = self.cfg.hp
+        self.seal_leak[leg] = factor * hp[hy.HP_LEAK] if factor > 0.0 else hp[hy.HP_SEAL_LEAK]
 
     def set_supply_fraction(self, fraction: float) -> None:
         """The power unit's pressure above the tank's, as a fraction of its nominal (0: it
@@ -175,7 +182,7 @@ class TestbenchRig(_RigBase):
         n = max(1, round(period_s / self.cfg.substep_s))
         ps = self._supply_for(period_s)
         testbench_advance(self.state[0], float(self.command[0]), bool(self.jammed[0]), bool(self.seized[0]),
-                          float(self.ports_open[0]), n, period_s / n, ps,
+                          float(self.ports_open[0]), float(self.seal_leak[0]), n, period_s / n, ps,
                           self.cfg.hp, self.cfg.friction, self.guide_friction, self.cfg.piston_rod_mass_kg,
                           self.load_mass_kg, self.out)
         # the rod carries the load's weight, inertia and guide friction
@@ -185,7 +192,8 @@ class TestbenchRig(_RigBase):
     def warm_up(self) -> None:
         """Load the compiled kernels now: their first call costs 0.2-0.25 s (numba's cache),
         which in the first SYNC made the nodes miss ~45 realtime cycles. Scratch copies only."""
-        testbench_advance(self.state[0].copy(), 0.0, False, False, 1.0, 1, self.cfg.substep_s,
+        testbench_advance(self.state[0].copy(), 0.0, False, False, 1.0, float(self.seal_leak[0]), 1,
+                          self.cfg.substep_s,
                           self.cfg.supply_pressure_pa,
                           self.cfg.hp, self.cfg.friction, self.guide_friction, self.cfg.piston_rod_mass_kg,
                           self.load_mass_kg, np.zeros(3))
@@ -280,7 +288,7 @@ class HexapodRig(_RigBase):
             mujoco.mj_step(model, data)
             self._read_legs()
             legs_hydraulics(self.state, self._stroke, self._velocity, self.command, self.jammed, self.ports_open,
-                            sub, h, ps,
+                            self.seal_leak, sub, h, ps,
                             cfg.hp, cfg.friction)
         self._measure_rod_forces()
         self.time_s += steps * model.opt.timestep
@@ -290,7 +298,7 @@ class HexapodRig(_RigBase):
         cfg, state = self.cfg, self.state.copy()
         legs_drive_into(state, self._velocity, cfg.hp, cfg.friction, np.zeros(6), np.zeros(6))
         legs_hydraulics(state, self._stroke.copy(), self._velocity.copy(), np.zeros(6), self.jammed,
-                        self.ports_open, 1,
+                        self.ports_open, self.seal_leak, 1,
                         cfg.substep_s, cfg.supply_pressure_pa, cfg.hp, cfg.friction)
 
     def _measure_rod_forces(self) -> None:

@@ -138,3 +138,22 @@ def test_a_stuck_spool_drives_the_leg_whatever_the_valve_is_told():
     bench.syncs(2)
     assert bench.rig.command[0] == 0.0
     assert np.isfinite(bench.rig.state).all()
+
+
+def test_a_leaking_seal_equalises_the_held_chambers_and_clearing_restores_it():
+    """HOLD (load-holding valves closed): a sound seal keeps PA and PB apart; one leaking 10x
+    the calibrated leakage lets B fill from A until the chambers nearly share one pressure."""
+    gaps = {}
+    for factor in (0, 10):
+        bench = Bench()
+        if factor:
+            bench.inject(EmuFault.SEAL_LEAK, factor)
+            assert bench.rig.seal_leak[0] == pytest.approx(10 * bench.cfg.hp[hy.HP_LEAK])
+        bench.syncs(200)
+        state = bench.rig.state[0]
+        gaps[factor] = abs(state[hy.S_PA] - state[hy.S_PB])
+        assert np.isfinite(bench.rig.state).all()
+    assert gaps[10] < 0.2 * gaps[0]
+    bench.inject(EmuFault.SEAL_LEAK, command=EmuCommand.CLEAR_FAULT)
+    bench.syncs(1)
+    assert bench.rig.seal_leak[0] == bench.cfg.hp[hy.HP_SEAL_LEAK]

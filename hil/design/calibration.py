@@ -83,7 +83,8 @@ class OperatingPoint:
 
 def _rhs(x: np.ndarray, u_v: float, y: float, mass: float, damping: float, cfg: EmulatorConfig) -> np.ndarray:
     v, pa, pb, spool = x
-    rate_a, rate_b, _, _ = hy.pressure_rates(y, v, pa, pb, spool, cfg.supply_pressure_pa, cfg.hp, 1.0)
+    rate_a, rate_b, _, _ = hy.pressure_rates(y, v, pa, pb, spool, cfg.supply_pressure_pa, cfg.hp, 1.0,
+                                         cfg.hp[hy.HP_SEAL_LEAK])
     force = hy.piston_force(pa, pb, cfg.hp) - damping * v - mass * GRAVITY_M_S2
     return np.array([force / mass, rate_a, rate_b,
                      (u_v / cfg.valve_full_scale_v - spool) / cfg.hp[hy.HP_TAU_SPOOL]])
@@ -105,7 +106,8 @@ def holding_point(cfg: EmulatorConfig, y: float, force_n: float, supply_pa: floa
 
     def residual(q):
         pa, pb, spool = q[0] * BAR, q[1] * BAR, q[2] * SPOOL_UNIT
-        rate_a, rate_b, _, _ = hy.pressure_rates(y, velocity_m_s, pa, pb, spool, ps, cfg.hp, 1.0)
+        rate_a, rate_b, _, _ = hy.pressure_rates(y, velocity_m_s, pa, pb, spool, ps, cfg.hp, 1.0,
+                                             cfg.hp[hy.HP_SEAL_LEAK])
         va, vb = hy.chamber_volumes(y, cfg.hp)
         return [(pa - cfg.alpha * pb - hold) / BAR,
                 rate_a * va / hy.bulk_modulus(pa, cfg.hp) * 1e6 / cfg.area_a_m2,

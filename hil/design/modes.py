@@ -159,8 +159,8 @@ def actuator_partials(cfg: EmulatorConfig, y: float, pa: float, pb: float, spool
     for j in range(4):
         dx = np.zeros(4)
         dx[j] = steps[j]
-        hi = hy.pressure_rates(y, *(x0 + dx), supply_pa, cfg.hp, ports)[:2]
-        lo = hy.pressure_rates(y, *(x0 - dx), supply_pa, cfg.hp, ports)[:2]
+        hi = hy.pressure_rates(y, *(x0 + dx), supply_pa, cfg.hp, ports, cfg.hp[hy.HP_SEAL_LEAK])[:2]
+        lo = hy.pressure_rates(y, *(x0 - dx), supply_pa, cfg.hp, ports, cfg.hp[hy.HP_SEAL_LEAK])[:2]
         out[:, j] = (np.array(hi) - np.array(lo)) / (2 * steps[j])
     return out
 
