@@ -7,7 +7,7 @@ Per leg, every cycle while its valve is ACTIVE:
                  SYNC, the piston's swept volume from the encoder's displacement (its counts
                  do not accumulate: the swept volume telescopes)
     F_model    = A (p_A - alpha p_B)                                     (eq. 4.15)
-    F_piston   = F_load cell + m_rod g_axial + sigma2 v                  (the rod's balance)
+    F_piston   = F_load cell + m_rod g_axial + sigma2 v, v the encoder's rate (the rod's balance)
     e          = F_piston - F_model; p_A, p_B corrected by `gain` e (the pressure level is not
                  seen by the force: a LEG_PRESSURE sample resets both chambers)
     r          = low-pass(e)
@@ -16,7 +16,7 @@ the encoder's velocity crosses zero) and is the threshold's floor instead:
     threshold  = max(|alpha0 + alpha1|) (Tables 6.1-6.2) + K q / 2 + spread K T / gain |Q / A|
 with K the oil column's stiffness, q the encoder's count, `spread` the flow gain's relative
 spread over Table A.3 (k01) and Q the model's valve flow. A leg whose |r| stays above it for
-`persistence` cycles is faulty; several legs at once are the supply's fault.
+`persistence` cycles is faulty (several legs at once point at the supply).
 What it sees: a valve that does not follow its command, a seized rod, a lost supply, a
 frozen encoder. Allocation-free on arrays made here.
 """
@@ -40,7 +40,7 @@ def breakaway_force_n(fp: np.ndarray) -> float:
 
 
 @njit(cache=True)
-def residual_step(hp, fp, ps, period_s, substeps, spool_applied, position, velocity, force, gravity_axial,
+def residual_step(hp, fp, ps, period_s, substeps, spool_applied, position, force, gravity_axial,
                   rod_mass, gain, alpha_lp, pressure_fresh, pa_meas, pb_meas, state, y_prev, residual,
                   flow_velocity) -> None:
     """One cycle of every leg's chamber model; writes `residual` (low-passed force error, N)
@@ -127,11 +127,10 @@ class ActuatorResiduals:
                     position_m, self.state, self.y_prev, self.residual, self.above)
         self.legs_faulty, self.worst_leg = 0, -1
 
-    def update(self, spool_applied, position_m, velocity_m_s, force_n, gravity_axial, pressure_fresh, pa_pa,
-               pb_pa) -> int:
+    def update(self, spool_applied, position_m, force_n, gravity_axial, pressure_fresh, pa_pa, pb_pa) -> int:
         """One cycle; the number of legs whose residual persisted beyond its threshold."""
         residual_step(self.hp, self.friction, self.supply_pa, self.period_s, self.substeps, spool_applied,
-                      position_m, velocity_m_s, force_n, gravity_axial, self.rod_mass, self.gain, self.alpha_lp,
+                      position_m, force_n, gravity_axial, self.rod_mass, self.gain, self.alpha_lp,
                       pressure_fresh, pa_pa, pb_pa, self.state, self.y_prev, self.residual, self.flow_velocity)
         self.legs_faulty, self.worst_leg = residual_verdict(self.residual, self.flow_velocity, self.floor_n,
                                                             self.flow_n_per_m_s, self.persistence, self.above,

@@ -4,7 +4,7 @@ parameters.
 
 One actuator = a four-way servo-valve feeding an asymmetric double-acting cylinder. The
 state of leg i lives in a row of a float64 array (`S_*` columns); physical parameters are
-packed once into a float64 vector (`HP_*` entries) by `plant_emulator.params`. Kernels are
+packed once into a float64 vector (`HP_*` entries) by `pack`. Kernels are
 numba-compiled and allocate nothing, so the rigs can call them every sub-step.
 
 Modelling choices (all SI, gauge pressures):
@@ -43,7 +43,7 @@ import numpy as np
 from physics import actuator
 from physics.constants import ATMOSPHERE_PA, BAR, CM3, L_MIN, MM
 
-# -- parameter vector (filled by params.ActuatorParams.packed) ------------------------------
+# -- parameter vector (filled by `pack`) ---------------------------------------------------
 HP_AREA_A = 0          # piston area Ap [m^2]
 HP_ALPHA = 1           # annulus / piston area ratio
 HP_STROKE = 2          # [m]

@@ -65,8 +65,7 @@ def run_move(fault: str | None, cycles: int = 700):
             rig.set_supply_fraction(0.0)
         spool = applied.copy()                       # what the valves apply at this SYNC
         cycle()
-        res.update(spool, meas.position_m, ctl.joint.velocity_estimate, meas.force_n, ctl.gravity_axial,
-                   no_pressure, meas.pa_pa, meas.pb_pa)
+        res.update(spool, meas.position_m, meas.force_n, ctl.gravity_axial, no_pressure, meas.pa_pa, meas.pb_pa)
         if k < FAULT_AT:
             if k > 10:
                 quiet = max(quiet, float(res.ratio.max()))
