@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from physics import hydraulics as hy
 from physics import lugre
 from physics.actuator import cylinder_areas
 from physics.constants import BAR, MM
@@ -66,6 +67,10 @@ RANGES: dict[str, dict[str, object]] = {
         "velocity_filter_hz": (0.5, 200.0),
     },
     "valve_map": {"force_n": None, "velocity_mm_s": None, "spool_pct": TABLE},
+    "hydraulic_model": {**hy.VALVE_RANGES, **hy.CHAMBER_RANGES, "supply_pressure_bar": (1.0, 400.0),
+                        "tank_pressure_bar": (0.0, 10.0)},
+    "residuals": {"enabled": bool, "correction_gain": (0.001, 1.0), "filter_ms": (0.1, 1000.0),
+                  "persistence_cycles": (1, 10000), "flow_spread_pct": (0.0, 100.0), "supply_legs": (2, 6)},
     "limits": {
         "stroke_margin_mm": (0.0, 100.0), "velocity_max_mm_s": (1.0, 1e4), "force_max_n": (1.0, 1e6),
         "tracking_error_max_mm": (0.1, 1000.0), "spool_max_pct": (1.0, 100.0),
@@ -80,6 +85,7 @@ RANGES: dict[str, dict[str, object]] = {
         "waypoint_path_samples": (2, 1000), "plausibility_spool_pct": (1.0, 100.0),
         "plausibility_cycles": (1, 100000), "plausibility_travel_mm": (0.0, 1000.0),
         "attitude_mismatch_deg": (0.01, 90.0), "attitude_mismatch_samples": (1, 10000),
+        "controlled_stop_ms": (0.0, 5000.0),
     },
 }
 SCHEDULE_LOADS = ("0kg", "3kg", "6kg")
@@ -167,6 +173,15 @@ class ControllerConfig:
     valve_map_force_n: np.ndarray     # (n_f,)
     valve_map_velocity_m_s: np.ndarray    # (n_v,)
     valve_map_spool: np.ndarray       # (n_f, n_v) steady-state spool, fraction of full input
+    # the actuators' hydraulic model and its residuals
+    hydraulics: np.ndarray            # physics.hydraulics HP_* vector (the [actuator] stroke)
+    supply_pressure_pa: float
+    residuals_enabled: bool
+    residual_gain: float              # chamber correction per cycle, fraction of the force error
+    residual_filter_s: float
+    residual_persistence: int
+    residual_flow_spread: float       # relative
+    residual_supply_legs: int
     # limits and supervisor
     stroke_margin_m: float
     velocity_max_m_s: float
@@ -193,6 +208,7 @@ class ControllerConfig:
     plausibility_travel_m: float
     attitude_mismatch_rad: float      # encoders' DK attitude against the IMU's
     attitude_mismatch_samples: int
+    controlled_stop_s: float          # hexapod: after a one-leg fault the others move this long (stopping.py)
     stall_fault_periods: float        # realtime: a SYNC this many periods after the previous one -> OVERRUN
 
 
@@ -248,6 +264,11 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
     positions, loads, kp, ki = _schedule_tables(ad, source)
     ct = raw["computed_torque"]
     map_forces, map_velocities, map_spool = _valve_map(raw["valve_map"], source)
+    hm, rs = raw["hydraulic_model"], raw["residuals"]
+    if hm["tank_pressure_bar"] >= hm["supply_pressure_bar"]:
+        raise ConfigError(f"config {source}: [hydraulic_model].tank_pressure_bar = {hm['tank_pressure_bar']} must "
+                          f"be below supply_pressure_bar = {hm['supply_pressure_bar']}")
+    hydraulics = hy.pack({**a, "tank_pressure_bar": hm["tank_pressure_bar"]}, hm, hm)
     area, ratio = cylinder_areas(a["bore_radius_mm"] * MM, a["rod_radius_mm"] * MM)
     try:
         friction = lugre.from_table(f)
@@ -289,6 +310,10 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         ct_velocity_filter_hz=ct["velocity_filter_hz"],
 
         valve_map_force_n=map_forces, valve_map_velocity_m_s=map_velocities, valve_map_spool=map_spool,
+        hydraulics=hydraulics, supply_pressure_pa=hm["supply_pressure_bar"] * BAR, residuals_enabled=rs["enabled"],
+        residual_gain=rs["correction_gain"], residual_filter_s=rs["filter_ms"] * 1e-3,
+        residual_persistence=rs["persistence_cycles"], residual_flow_spread=rs["flow_spread_pct"] / 100.0,
+        residual_supply_legs=rs["supply_legs"],
         stroke_margin_m=lim["stroke_margin_mm"] * MM, velocity_max_m_s=lim["velocity_max_mm_s"] * MM,
         force_max_n=lim["force_max_n"], tracking_error_max_m=lim["tracking_error_max_mm"] * MM,
         spool_max=lim["spool_max_pct"] / 100.0,
@@ -303,7 +328,7 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         plausibility_spool=sv["plausibility_spool_pct"] / 100.0, plausibility_cycles=sv["plausibility_cycles"],
         plausibility_travel_m=sv["plausibility_travel_mm"] * MM,
         attitude_mismatch_rad=math.radians(sv["attitude_mismatch_deg"]),
-        attitude_mismatch_samples=sv["attitude_mismatch_samples"],
+        attitude_mismatch_samples=sv["attitude_mismatch_samples"], controlled_stop_s=sv["controlled_stop_ms"] * 1e-3,
         stall_fault_periods=t["stall_fault_periods"],
     )
 

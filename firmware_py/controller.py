@@ -30,12 +30,15 @@ from .interfaces import Measurements, ValveCommands
 from .monitors import FrameMonitor, LimitMonitor, LoopMonitor, NodeMonitor
 from .plausibility import AttitudeCrossCheck, MotionPlausibility
 from .reference import Reference
-from .supervisor import ACTIVE, Action, Supervisor
+from .residuals import ActuatorResiduals
+from .stopping import ControlledStop
+from .supervisor import ACTIVE, LATCHED, Action, Supervisor
 from .trajectory import through_points
 from .waypoints import HexapodCheck, TestbenchCheck, WaypointQueue
 
 RIGS = ("testbench", "hexapod")
 MOTION_COMMANDS = (Command.ENABLE, Command.HOME, Command.PARK, Command.START)
+PEAK_DELAY = 64                        # cycles: a fault's residual rises over fewer than this before it latches
 RESET_GRACE_CYCLES = 4                 # valves need a SYNC or two to leave FAULT after R
 
 
@@ -88,6 +91,24 @@ class Controller:
                          (cfg.testbench_plausibility_spool, cfg.testbench_plausibility_cycles))
         self.plausibility = MotionPlausibility(n, spool * cfg.valve_full_scale_v, cycles, cfg.plausibility_travel_m)
         self.attitude_check = AttitudeCrossCheck(cfg.attitude_mismatch_rad, cfg.attitude_mismatch_samples)
+        # each actuator's chamber model against its load cell, while the valves are ACTIVE; the
+        # cylinder's own stroke sets its chamber volumes
+        self.residuals = ActuatorResiduals(
+            n, cfg.hydraulics, cfg.friction, cfg.supply_pressure_pa, period_s,
+            self.geometry.rod.mass_kg if self.hexapod else cfg.moving_mass_kg, cfg.ct_stiffness_n_m,
+            cfg.encoder_resolution_m, cfg.residual_gain, cfg.residual_filter_s, cfg.residual_persistence,
+            cfg.residual_flow_spread)
+        self.residuals_running = False
+        # spool setpoints sent: the last cycle's (applied at this SYNC) and the one before (applied
+        # over the period this cycle's measurements close)
+        self.spool_sent = np.zeros(n)
+        self.spool_applied = np.zeros(n)
+        self._no_pressure = np.zeros(n, dtype=bool)
+        # the false-alarm margin's measure: the largest |r| / threshold before the first fault,
+        # less the PEAK_DELAY cycles before it (a fault's own rise)
+        self.residual_peak = 0.0
+        self._peaks = np.zeros(PEAK_DELAY)
+        self.stop = ControlledStop(n, round(cfg.controlled_stop_s / period_s) if self.hexapod else 0)
         # identification tests (HOST_TEST, test bench only: chapter 6.4)
         self.test = None if self.hexapod else IdentificationSignal(
             cfg.test_force_gain_v_n, cfg.test_force_filter_hz, cfg.test_stroke_guard_m, cfg.stroke_m,
@@ -123,7 +144,11 @@ class Controller:
         self.limits.check_always(self.joint.u_v, self.joint.kalman_x, meas.force_n)
         self.limits.check_active(meas.position_m, self.joint.velocity_estimate, self.joint.error_m)
         self.plausibility.update(self.joint.u_v, meas.position_m)
-        valve_commands(VALVES_HOLD, self.joint.u_v, 1.0, False, cmd.enable, cmd.hold, cmd.active, cmd.reset,
+        self.residuals.start(meas.position_m, meas.force_n, self.gravity_axial, meas.pressure_valid, meas.pa_pa,
+                             meas.pb_pa)
+        self.residuals.update(self.spool_applied, meas.fresh, meas.position_m, meas.force_n, self.gravity_axial,
+                              self._no_pressure, meas.pa_pa, meas.pb_pa)
+        valve_commands(VALVES_HOLD, self.joint.u_v, 1.0, False, -1, cmd.enable, cmd.hold, cmd.active, cmd.reset,
                        cmd.spool)
         ref.play(through_points(np.array([self.home_strokes, self.home_strokes + 1e-3]), 0.1, 0.2), [0], 0)
         ref.advance(1)
@@ -293,7 +318,9 @@ class Controller:
         elif self.reinitialise and meas.fresh.all():
             self.initialise(meas, keep_load=True)
             self.reinitialise = False
-        sup.fault(self.frames.check(meas.fresh, meas.rejected, meas.sensor_fault))
+        frames = self.frames.check(meas.fresh, meas.rejected, meas.sensor_fault)
+        if frames is not Fault.NONE and sup.state not in LATCHED:      # the leg: an event's work
+            sup.fault(frames, self.frames.leg_of(frames, meas.sensor_fault) + 1)
         if self.reset_cycles > 0:
             self.reset_cycles -= 1
         elif sup.state not in (State.FAULT, State.ESTOP, State.BOOT):
@@ -302,11 +329,19 @@ class Controller:
             self._platform(meas)
         # reference
         active = sup.state in ACTIVE
+        if self.stop.active and sup.state is not State.FAULT:
+            self.stop.end()                          # an e-stop or a reset ends a controlled stop
+        stopping = self.stop.active
         testing = self.test is not None and self.test.running
         if testing and not active:
             self.test.stop()                         # a fault or an e-stop ends it: valves hold
             testing = False
-        if testing:                                  # the test drives the valve: the loop follows the leg
+        if stopping:                                 # the healthy legs to the pose the locked leg allows
+            self.stop.step(meas.position_m)
+            ref.yr[:] = self.stop.target
+            ref.vr[:] = 0.0
+            ref.ar[:] = 0.0
+        elif testing:                                # the test drives the valve: the loop follows the leg
             ref.follow(joint.position_estimate)
         elif active and ref.moving:
             if ref.advance(self.cycles):
@@ -325,7 +360,7 @@ class Controller:
         if joint.mode != sup.controller:
             joint.set_mode(sup.controller)
         joint.update(meas.position_m, meas.fresh, meas.force_n, ref.yr, ref.ar, self.gravity_axial, self.tau_n,
-                     sup.state in ACTIVE and not computed_torque)
+                     (sup.state in ACTIVE and not computed_torque) or stopping)
         if computed_torque:
             if sup.state not in ACTIVE:
                 self.computed_torque.reset()
@@ -337,8 +372,46 @@ class Controller:
             joint.u_v[0] = u
             if done:
                 self._end_test()
-        self._limits(meas, active)
+        self._residuals(meas, active and not testing)
+        if stopping:
+            self._stop_checks(meas)
+        else:
+            self._limits(meas, active)
         self._write(cmd)
+
+    def _residuals(self, meas: Measurements, active: bool) -> None:
+        """The actuators' residuals while the valves are ACTIVE: started where the legs are
+        when they become ACTIVE; one leg beyond its threshold is that leg's fault, several at
+        once the supply's."""
+        res = self.residuals
+        if not (active and self.cfg.residuals_enabled):
+            self.residuals_running = False
+            return
+        if not self.residuals_running:
+            res.start(meas.position_m, meas.force_n, self.gravity_axial, meas.pressure_valid, meas.pa_pa, meas.pb_pa)
+            self.residuals_running = True
+            return
+        faulty = res.update(self.spool_applied, meas.fresh, meas.position_m, meas.force_n, self.gravity_axial,
+                            self._no_pressure, meas.pa_pa, meas.pb_pa)
+        slot = self.cycles % PEAK_DELAY
+        if self.sup.faults == 0 and self._peaks[slot] > self.residual_peak:
+            self.residual_peak = float(self._peaks[slot])
+        self._peaks[slot] = res.peak
+        if faulty >= self.cfg.residual_supply_legs:
+            self.sup.fault(Fault.SUPPLY_PRESSURE)
+        elif faulty:
+            if self.stop.cycles > 0 and self.sup.state in ACTIVE:
+                self.stop.begin(res.worst_leg, self.reference.yr, self.platform.jacobian_scaled)
+            self.sup.fault(Fault.ACTUATOR_RESIDUAL, res.worst_leg + 1)
+
+    def _stop_checks(self, meas: Measurements) -> None:
+        """A controlled stop ends at once (every valve holds) on anything the limits see."""
+        joint = self.joint
+        if (self.limits.check_always(joint.u_v, joint.kalman_x, meas.force_n) is not Fault.NONE
+                or self.node_monitor.check_valves(meas.valve_state) is not Fault.NONE
+                or self.limits.check_active(meas.position_m, joint.velocity_estimate, joint.error_m)
+                is not Fault.NONE):
+            self.stop.end()
 
     def _platform(self, meas: Measurements) -> None:
         """Pose by direct kinematics, gravity along the legs; singularity and IMU checks."""
@@ -367,25 +440,29 @@ class Controller:
     def _write(self, cmd: ValveCommands) -> None:
         """Control words and spool setpoints for the state the supervisor is in now."""
         state = self.sup.state
-        mode = VALVES_DISABLED if state is State.ESTOP else VALVES_ACTIVE if state in ACTIVE else VALVES_HOLD
-        valve_commands(mode, self.joint.u_v, self.cfg.valve_full_scale_v, self._reset_pulse, cmd.enable, cmd.hold,
-                       cmd.active, cmd.reset, cmd.spool)
+        mode = (VALVES_DISABLED if state is State.ESTOP else
+                VALVES_ACTIVE if state in ACTIVE or self.stop.active else VALVES_HOLD)
+        valve_commands(mode, self.joint.u_v, self.cfg.valve_full_scale_v, self._reset_pulse, self.stop.leg,
+                       cmd.enable, cmd.hold, cmd.active, cmd.reset, cmd.spool)
+        np.copyto(self.spool_applied, self.spool_sent)
+        np.copyto(self.spool_sent, cmd.spool)
 
 
 VALVES_DISABLED, VALVES_HOLD, VALVES_ACTIVE = 0, 1, 2
 
 
 @njit(cache=True)
-def valve_commands(mode, u_v, full_scale_v, reset_pulse, enable, hold, active, reset, spool):
+def valve_commands(mode, u_v, full_scale_v, reset_pulse, hold_leg, enable, hold, active, reset, spool):
     """CiA 408 control words and spool setpoints: DISABLED (power off), HOLD, or ACTIVE with
-    the controller's input as the spool setpoint; ACTIVE with a non-finite input holds."""
+    the controller's input as the spool setpoint; ACTIVE with a non-finite input holds, and
+    so does `hold_leg` (-1: none)."""
     finite = True
     for leg in range(u_v.shape[0]):
         finite = finite and math.isfinite(u_v[leg])
     for leg in range(u_v.shape[0]):
         enable[leg] = 0.0 if mode == VALVES_DISABLED else 1.0
         hold[leg] = enable[leg]
-        go = mode == VALVES_ACTIVE and finite
+        go = mode == VALVES_ACTIVE and finite and leg != hold_leg
         active[leg] = 1.0 if go else 0.0
         spool[leg] = u_v[leg] / full_scale_v if go else 0.0
         reset[leg] = 1.0 if reset_pulse else 0.0

@@ -387,8 +387,9 @@ class ControllerLoop:
         phase[PH_HOST_WORK] = self._cycle_end - written
 
     def _report_latch(self) -> None:
-        """EMCY_16 when the controller latches a fault or an e-stop (its code in DETAIL), and
-        with ERROR_CODE 0 when a RESET clears it: what a CANopen watcher listens for."""
+        """EMCY_16 when the controller latches a fault or an e-stop (its code in DETAIL, the
+        leg in INFO), and with ERROR_CODE 0 when a RESET clears it: what a CANopen watcher
+        listens for."""
         sup = self.controller.sup
         latched = sup.state in LATCHED
         if latched == self._latched:
@@ -400,7 +401,7 @@ class ControllerLoop:
         v[i["STATE"]] = int(sup.state)
         v[i["DETAIL"]] = int(sup.fault_code) if latched else 0
         v[i["SYNC_COUNTER"]] = self.sync_counter
-        v[i["INFO"]] = self.stats.cycles & 0xFFFF
+        v[i["INFO"]] = sup.fault_leg if latched else 0         # the leg a leg fault was isolated to
         self._send(self.out_emcy)
 
     def _log_fault(self, sync_time: float) -> None:
@@ -409,7 +410,9 @@ class ControllerLoop:
         last made of each; the leg a SENSOR_TIMEOUT or E2E_ERROR came from is named here."""
         c = self.controller
         last = [RxStatus(int(self.decoder.last_status[slot])).name for slot in self._leg_slots]
-        self.log(f"fault {c.sup.fault_code.name} at cycle {self.stats.cycles}: missing in a row "
+        leg = f" leg {c.sup.fault_leg}" if c.sup.fault_leg else ""
+        self.log(f"fault {c.sup.fault_code.name}{leg} at cycle {self.stats.cycles}: residual/threshold "
+                 f"{[round(r, 2) for r in c.residuals.ratio.tolist()]}, missing in a row "
                  f"{c.frames.missing.tolist()}, rejected in a row {c.frames.rejected.tolist()}, last LEG_STATE "
                  f"status {last}, overruns in a row {c.loop_monitor.overruns_in_row}, this cycle "
                  f"{1e6 * (self.clock() - sync_time):.0f} us after its SYNC")
@@ -483,5 +486,6 @@ class ControllerLoop:
         return {"rig": c.rig, "controller": c.sup.controller, "pacing": self.pacing,
                 "cycles": s.cycles, "overruns": s.overruns, "e2e_errors": s.e2e_errors,
                 "missing_frames": s.missing_frames, "faults": s.faults, "fault_code": c.sup.fault_code.name,
+                "residual_peak": round(c.residual_peak, 3),
                 "state": c.state.name, "emergencies": s.emergencies, "host_commands": s.host_commands,
                 "frames_sent": s.frames_sent, "timing": self.timing()}

@@ -128,6 +128,11 @@ class FrameMonitor:
                             self.cfg.missing_frames_fault)
         return Fault(code) if code else Fault.NONE
 
+    def leg_of(self, code: Fault, sensor_fault: np.ndarray) -> int:
+        """The leg (0-based) a fault of `check` came from (an event: it may allocate)."""
+        runs = {Fault.E2E_ERROR: self.rejected, Fault.SENSOR_TIMEOUT: self.missing}.get(code, sensor_fault)
+        return int(np.argmax(runs))
+
 
 @njit(cache=True)
 def always_check(u_v, kalman_x, force_n, force_max_n):

@@ -40,20 +40,30 @@ def breakaway_force_n(fp: np.ndarray) -> float:
 
 
 @njit(cache=True)
-def residual_step(hp, fp, ps, period_s, substeps, spool_applied, position, force, gravity_axial,
-                  rod_mass, gain, alpha_lp, pressure_fresh, pa_meas, pb_meas, state, y_prev, residual,
+def residual_step(hp, fp, ps, period_s, substeps, spool_applied, fresh, position, force, gravity_axial,
+                  rod_mass, gain, alpha_lp, pressure_fresh, pa_meas, pb_meas, state, y_prev, stale, residual,
                   flow_velocity) -> None:
     """One cycle of every leg's chamber model; writes `residual` (low-passed force error, N)
-    and `flow_velocity` (the model's valve flow into A over the piston area, m/s)."""
+    and `flow_velocity` (the model's valve flow into A over the piston area, m/s). A leg
+    without a fresh frame keeps its residual; its chambers follow the spool at the last
+    position, and the next frame's displacement is swept in one cycle (volumes telescope)."""
     area, ratio = hp[hy.HP_AREA_A], hp[hy.HP_ALPHA]
     h = period_s / substeps
     for i in range(position.shape[0]):
         row = state[i]
-        dy = position[i] - y_prev[i]
-        v = dy / period_s
+        if fresh[i]:
+            dy = position[i] - y_prev[i]
+            v = dy / (period_s * (1 + stale[i]))     # the rate over the time it took
+            stale[i] = 0
+        else:
+            dy, v = 0.0, 0.0
+            stale[i] += 1
         for j in range(substeps):
             row[hy.S_SPOOL] = hy.spool_step(row[hy.S_SPOOL], spool_applied[i], h, hp)
-            hy.chamber_step(row, y_prev[i] + dy * (j + 1) / substeps, v, ps, h, hp, 1.0, hp[hy.HP_SEAL_LEAK])
+            hy.chamber_step(row, y_prev[i] + dy * (j + 1) / substeps, dy / period_s, ps, h, hp, 1.0,
+                            hp[hy.HP_SEAL_LEAK])
+        if not fresh[i]:
+            continue
         y_prev[i] = position[i]
         if pressure_fresh[i]:
             row[hy.S_PA] = pa_meas[i]
@@ -71,23 +81,24 @@ def residual_step(hp, fp, ps, period_s, substeps, spool_applied, position, force
 
 @njit(cache=True)
 def residual_verdict(residual, flow_velocity, floor_n, flow_n_per_m_s, persistence, above, ratio):
-    """Persistence per leg; returns (legs faulty, the worst leg by |r| / threshold), ratio[i]
-    the leg's |r| / threshold this cycle."""
-    faulty, worst, worst_ratio = 0, -1, 0.0
+    """Persistence per leg; returns (legs faulty, the worst faulty leg, the largest ratio),
+    ratio[i] the leg's |r| / threshold this cycle."""
+    faulty, worst, worst_ratio, peak = 0, -1, 0.0, 0.0
     for i in range(residual.shape[0]):
         threshold = floor_n + flow_n_per_m_s * abs(flow_velocity[i])
         ratio[i] = abs(residual[i]) / threshold
+        peak = max(peak, ratio[i])
         above[i] = above[i] + 1 if ratio[i] > 1.0 else 0
         if above[i] >= persistence:
             faulty += 1
             if ratio[i] > worst_ratio:
                 worst, worst_ratio = i, ratio[i]
-    return faulty, worst
+    return faulty, worst, peak
 
 
 @njit(cache=True)
 def start_state(force, gravity_axial, rod_mass, ps, hp, pressure_valid, pa_meas, pb_meas, position, state,
-                y_prev, residual, above) -> None:
+                y_prev, stale, residual, above) -> None:
     """The chambers where the transducers last saw them, else holding the measured force."""
     for i in range(position.shape[0]):
         row = state[i]
@@ -97,14 +108,15 @@ def start_state(force, gravity_axial, rod_mass, ps, hp, pressure_valid, pa_meas,
             row[hy.S_PA], row[hy.S_PB] = hy.holding_pressures(force[i] + rod_mass * gravity_axial[i], ps, hp)
         row[hy.S_SPOOL] = 0.0
         y_prev[i] = position[i]
+        stale[i] = 0
         residual[i] = 0.0
         above[i] = 0
 
 
 class ActuatorResiduals:
     """The residual of every leg. `start(...)` when its valves go ACTIVE, `update(...)` every
-    cycle after; `legs_faulty`, `worst_leg` (-1: none) and `ratio` (|r| / threshold) say what
-    it saw."""
+    cycle after; `legs_faulty`, `worst_leg` (-1: none), `ratio` (|r| / threshold) and `peak`
+    (its largest) say what it saw."""
 
     def __init__(self, n_legs: int, hp: np.ndarray, friction: np.ndarray, supply_pa: float, period_s: float,
                  rod_mass_kg: float, stiffness_n_m: float, encoder_m: float, gain: float, filter_s: float,
@@ -116,23 +128,27 @@ class ActuatorResiduals:
         self.flow_n_per_m_s = flow_spread * stiffness_n_m * period_s / gain
         self.state = np.zeros((n_legs, hy.S_SIZE))
         self.y_prev = np.zeros(n_legs)
+        self.stale = np.zeros(n_legs, dtype=np.int64)       # cycles since the leg's last fresh frame
         self.residual = np.zeros(n_legs)
         self.flow_velocity = np.zeros(n_legs)
         self.ratio = np.zeros(n_legs)
         self.above = np.zeros(n_legs, dtype=np.int64)
-        self.legs_faulty, self.worst_leg = 0, -1
+        self.legs_faulty, self.worst_leg, self.peak = 0, -1, 0.0
 
     def start(self, position_m, force_n, gravity_axial, pressure_valid, pa_pa, pb_pa) -> None:
         start_state(force_n, gravity_axial, self.rod_mass, self.supply_pa, self.hp, pressure_valid, pa_pa, pb_pa,
-                    position_m, self.state, self.y_prev, self.residual, self.above)
+                    position_m, self.state, self.y_prev, self.stale, self.residual, self.above)
         self.legs_faulty, self.worst_leg = 0, -1
 
-    def update(self, spool_applied, position_m, force_n, gravity_axial, pressure_fresh, pa_pa, pb_pa) -> int:
-        """One cycle; the number of legs whose residual persisted beyond its threshold."""
-        residual_step(self.hp, self.friction, self.supply_pa, self.period_s, self.substeps, spool_applied,
+    def update(self, spool_applied, fresh, position_m, force_n, gravity_axial, pressure_fresh, pa_pa,
+               pb_pa) -> int:
+        """One cycle: `spool_applied` the spool each valve applied over the period the
+        measurements close; the number of legs whose residual persisted beyond its threshold."""
+        residual_step(self.hp, self.friction, self.supply_pa, self.period_s, self.substeps, spool_applied, fresh,
                       position_m, force_n, gravity_axial, self.rod_mass, self.gain, self.alpha_lp,
-                      pressure_fresh, pa_pa, pb_pa, self.state, self.y_prev, self.residual, self.flow_velocity)
-        self.legs_faulty, self.worst_leg = residual_verdict(self.residual, self.flow_velocity, self.floor_n,
+                      pressure_fresh, pa_pa, pb_pa, self.state, self.y_prev, self.stale, self.residual,
+                      self.flow_velocity)
+        self.legs_faulty, self.worst_leg, self.peak = residual_verdict(self.residual, self.flow_velocity, self.floor_n,
                                                             self.flow_n_per_m_s, self.persistence, self.above,
                                                             self.ratio)
         return self.legs_faulty

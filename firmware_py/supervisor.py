@@ -45,7 +45,8 @@ EMCY_OF_FAULT = {Fault.SENSOR_TIMEOUT: EmcyCode.RPDO_TIMEOUT, Fault.E2E_ERROR: E
                  Fault.POSITION_LIMIT: EmcyCode.CONTROL_DEVIATION, Fault.FORCE_LIMIT: EmcyCode.CONTROL_DEVIATION,
                  Fault.VELOCITY_LIMIT: EmcyCode.CONTROL_DEVIATION,
                  Fault.MOTION_PLAUSIBILITY: EmcyCode.CONTROL_DEVIATION,
-                 Fault.ATTITUDE_MISMATCH: EmcyCode.CONTROL_DEVIATION}
+                 Fault.ATTITUDE_MISMATCH: EmcyCode.CONTROL_DEVIATION,
+                 Fault.ACTUATOR_RESIDUAL: EmcyCode.CONTROL_DEVIATION}
 
 
 def emergency_code(fault: Fault) -> EmcyCode:
@@ -57,6 +58,7 @@ class Supervisor:
     def __init__(self, controller: int = ControllerKind.PI):
         self.state = State.BOOT
         self.fault_code = Fault.NONE
+        self.fault_leg = 0                 # the leg (1..n) the latched fault was isolated to, 0: none
         self.controller = int(controller)
         self.action = Action.NONE
         self.parking = False
@@ -79,11 +81,13 @@ class Supervisor:
             if auto_enable:
                 self.command(Command.ENABLE, 0)
 
-    def fault(self, code: Fault) -> None:
-        """Latch a fault: FAULT (valves HOLD) unless already in FAULT or ESTOP; NONE is no fault."""
+    def fault(self, code: Fault, leg: int = 0) -> None:
+        """Latch a fault: FAULT (valves HOLD) unless already in FAULT or ESTOP; NONE is no fault.
+        `leg` (1..n): the leg it was isolated to."""
         if self.state in LATCHED or code is Fault.NONE:
             return
         self.fault_code = code
+        self.fault_leg = leg
         self.faults += 1
         self.parking = False
         self._go(State.FAULT)
@@ -99,6 +103,7 @@ class Supervisor:
         if command is Command.ESTOP:
             if s is not State.ESTOP:
                 self.fault_code = Fault.ESTOP
+                self.fault_leg = 0
                 self.parking = False
                 self._go(State.ESTOP)
             return Ack.ACCEPTED
@@ -106,6 +111,7 @@ class Supervisor:
             if s not in LATCHED:
                 return Ack.BAD_STATE
             self.fault_code = Fault.NONE
+            self.fault_leg = 0
             self.action = Action.RESET
             self._go(State.IDLE)
             return Ack.ACCEPTED

@@ -171,6 +171,20 @@ def chamber_step(state: np.ndarray, y: float, v: float, ps: float, h: float, hp:
     state[S_PB] = max(pb + h * rate_b / (1.0 - h * slope_b), p_min)
 
 
+# (low, high) of the thesis-unit keys `pack` reads from a [valve] and a [chambers] table
+VALVE_RANGES = {
+    "edge_flow_l_min": (0.01, 100.0), "edge_drop_bar": (1.0, 350.0), "supply_lap_pct": (0.0, 50.0),
+    "return_lap_pct": (0.0, 50.0), "spool_time_constant_ms": (0.05, 100.0), "laminar_bar": (1e-4, 1.0),
+}
+CHAMBER_RANGES = {
+    "dead_volume_a_cm3": (0.1, 5000.0), "dead_volume_b_cm3": (0.1, 5000.0),
+    "oil_bulk_modulus_bar": (1000.0, 30000.0), "air_fraction_pct": (0.0, 50.0),
+    "air_polytropic_index": (1.0, 1.4), "hose_bulk_modulus_bar": (10.0, 1e6),
+    "cross_leakage_l_min_per_bar": (0.0, 10.0), "seal_leakage_l_min_per_bar": (0.0, 10.0),
+    "min_pressure_bar": (-1.0, 0.0),
+}
+
+
 def pack(actuator_section: dict, valve: dict, chambers: dict) -> np.ndarray:
     """The parameter vector from thesis-unit tables: `actuator_section` bore_radius_mm,
     rod_radius_mm, stroke_mm, tank_pressure_bar; `valve` and `chambers` the emulator's

@@ -29,17 +29,8 @@ RANGES: dict[str, dict[str, tuple]] = {
         "piston_rod_mass_kg": (0.01, 50.0), "supply_pressure_bar": (0.0, 40.0),
         "tank_pressure_bar": (0.0, 10.0), "valve_full_scale_v": (0.01, 10.0),
     },
-    "valve": {
-        "edge_flow_l_min": (0.01, 100.0), "edge_drop_bar": (1.0, 350.0), "supply_lap_pct": (0.0, 50.0),
-        "return_lap_pct": (0.0, 50.0), "spool_time_constant_ms": (0.05, 100.0), "laminar_bar": (1e-4, 1.0),
-    },
-    "chambers": {
-        "dead_volume_a_cm3": (0.1, 5000.0), "dead_volume_b_cm3": (0.1, 5000.0),
-        "oil_bulk_modulus_bar": (1000.0, 30000.0), "air_fraction_pct": (0.0, 50.0),
-        "air_polytropic_index": (1.0, 1.4), "hose_bulk_modulus_bar": (10.0, 1e6),
-        "cross_leakage_l_min_per_bar": (0.0, 10.0), "seal_leakage_l_min_per_bar": (0.0, 10.0),
-        "min_pressure_bar": (-1.0, 0.0),
-    },
+    "valve": hy.VALVE_RANGES,
+    "chambers": hy.CHAMBER_RANGES,
     "friction": {
         "alpha0_pos_n": (-1000.0, 1000.0), "alpha1_pos_n": (-1000.0, 1000.0), "vs_pos_mm_s": (0.01, 1e4),
         "sigma2_pos_ns_mm": (0.0, 100.0), "alpha0_neg_n": (-1000.0, 1000.0), "alpha1_neg_n": (-1000.0, 1000.0),
