@@ -61,6 +61,23 @@ class LogView:
         first = [int(f[0]) for f in first if len(f)]
         return min(first) if first else None
 
+    def all_held_cycle(self, k0: int | None) -> int | None:
+        """The first cycle >= k0 in which every leg's VALVE_CMD had M = 0 (after a controlled
+        stop, its end)."""
+        if k0 is None:
+            return None
+        for k in range(k0, self.log.n_cycles):
+            if all(np.all(c["CW_M"][c.cycle == k] == 0) and np.any(c.cycle == k) for c in self.cmds):
+                return k
+        return None
+
+    def controller_fault_leg(self, t0: float, t1: float) -> int:
+        """The leg the controller's first EMCY with an error code in [t0, t1] named (INFO), 0: none."""
+        for e in self.log.events_named("EMCY_16"):
+            if t0 <= e.time_s <= t1 and e.values["ERROR_CODE"] != 0:
+                return int(e.values["INFO"])
+        return 0
+
     def held_after(self, k: int | None, until: float | None = None) -> bool:
         """From cycle k on, every cycle has every leg's VALVE_CMD with M = 0 (until a RESET
         or `until`): the controller held and never resumed motion by itself."""

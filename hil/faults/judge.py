@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from firmware_py.config import load_config
 from plant_emulator.emulator import FAULT_ONSET_EVENT, SYNC_TIMEOUT_EVENT
 from protocol.enums import AckKind, Command
 
@@ -20,6 +21,7 @@ from .cases import (
     HOLD_WITHIN_PERIODS,
     INJECT_AT_S,
     OBSERVE_S,
+    PROBE_SEGMENT_S,
     TRANSIENT_MAX_M,
     TRANSIENT_WINDOW_S,
     Case,
@@ -68,7 +70,9 @@ def judge_fault(view: LogView, mark: Marks, baseline: Marks | None, run_dir: Pat
     cycles = None if reaction is None or k0 is None else reaction - k0 + 1
     judged = cycles
     excursion = view.excursion(mark.t_inject, OBSERVE_S)
-    held = view.held_after(reaction)
+    all_held = view.all_held_cycle(reaction)     # a controlled stop's end, else the reaction
+    held = (all_held is not None and (all_held - reaction) * view.period_s <= CONTROLLED_STOP_S + 2 * view.period_s
+            and view.held_after(all_held))
     measured = f"{code} after {_cycles(view, cycles)}"
     if c.kind is CaseKind.PERSISTENT and reaction is not None:
         # the configured counts are of cycles in a row without a valid frame: a frame
@@ -77,11 +81,24 @@ def judge_fault(view: LogView, mark: Marks, baseline: Marks | None, run_dir: Pat
         judged = reaction - last if last is not None and last >= (k0 or 0) else cycles
         measured += f" ({judged} since its last valid frame)"
     passed = (code in c.expect and judged is not None and judged <= c.max_cycles and held)
+    path = None
+    if c.kind is CaseKind.PLANT:
+        path = path_excursion(view, mark, baseline)
+        passed = passed and (c.path_max_m == math.inf or (path is not None and path <= c.path_max_m))
+        leg = view.controller_fault_leg(mark.t_inject, mark.t_inject + OBSERVE_S)
+        measured += f" (leg {leg})" if leg else ""
+        measured += f"; off the no-fault path {_mm(path)}"
     measured += f"; excursion {_mm(excursion)}; VALVE_CMD every cycle after it with M = 0: {held}"
     if c.kind is CaseKind.PERSISTENT:
         rejected = view.rejected_between(c.target, mark.t_inject, mark.t_end)
         measured += f"; {rejected['rejected']} frames rejected"
-    return passed, measured, {"code": code, "cycles": cycles, "excursion_m": excursion, "held": held}
+    return passed, measured, {"code": code, "cycles": cycles, "detection_ms": None if cycles is None else
+                              round(cycles * view.period_s * 1e3, 1), "excursion_m": excursion,
+                              "path_excursion_m": path, "held": held}
+
+# a controlled stop (firmware_py/stopping.py) keeps the healthy legs ACTIVE this long at most
+CONTROLLED_STOP_S = load_config().controlled_stop_s
+
 
 def judge_estop(view: LogView, mark: Marks, baseline: Marks | None, run_dir: Path | None):
     ack_cycle = view.ack_cycle(Command.ESTOP, mark.t_inject)
@@ -259,6 +276,27 @@ def deviation_from(view: LogView, mark: Marks, baseline: Marks | None) -> tuple[
     la, lb = _legs_window(view, ka + skip - 1, span), _legs_window(view, kb + skip - 1, span)
     legs = None if la is None or lb is None else _largest_change(la - lb, np.abs)
     return legs, platform
+
+
+def path_excursion(view: LogView, mark: Marks, baseline: Marks | None) -> float | None:
+    """How far the platform strayed from the no-fault probe's path over OBSERVE_S from the
+    injection: each position's distance to the nearest of the baseline's, less that distance
+    the cycle before the injection. A stop along the path is no excursion; the swing a locked
+    leg's error causes is."""
+    if baseline is None or math.isnan(mark.t_inject):
+        return None
+    ka, kb, k_inject = waypoint_ack_cycle(view, mark), waypoint_ack_cycle(view, baseline), view.cycle_at(mark.t_inject)
+    if ka is None or kb is None or k_inject is None:
+        return None
+    span = 2 * PROBE_SEGMENT_S
+    path = _truth_window(view, kb, span)
+    after = _truth_window(view, k_inject - 1, OBSERVE_S + view.period_s)
+    if path is None or after is None:
+        return None
+    path = path[np.all(np.isfinite(path), axis=1)]
+    after = after[np.all(np.isfinite(after), axis=1)]
+    distance = np.linalg.norm(after[:, None, :] - path[None, :, :], axis=2).min(axis=1)
+    return float(np.max(distance - distance[0]))
 
 
 def _largest_change(difference: np.ndarray, size) -> float | None:

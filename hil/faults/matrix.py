@@ -27,7 +27,8 @@ def run_matrix(out: Path, short: bool, bus: str | None = None, start_timeout_s: 
                              valve_watchdog_periods=VALVE_WATCHDOG_PERIODS if session.pacing == "realtime" else None)
         doc = run_scenario(session, options)
         runs.append({"session": session.name, "passed": doc["passed"], "failure": doc.get("failure"),
-                     "e2e_errors": doc["e2e_errors"], "wall_time_s": doc.get("wall_time_s")})
+                     "e2e_errors": doc["e2e_errors"], "wall_time_s": doc.get("wall_time_s"),
+                     "residual_peak": residual_peak(doc)})
         results += doc["metrics"].get("cases", [])
         expected = {c.key for c in session.cases}
         missing = expected - {r["key"] for r in doc["metrics"].get("cases", [])}
@@ -42,6 +43,15 @@ def run_matrix(out: Path, short: bool, bus: str | None = None, start_timeout_s: 
     return doc
 
 
+def residual_peak(doc: dict) -> float | None:
+    """The controllers' largest residual / threshold before their first fault (the false-alarm
+    margin is its inverse), from their summaries; None when none reported it."""
+    peaks = [child.get("summary", {}).get("residual_peak") for name, child in doc.get("children", {}).items()
+             if name.startswith("controller")]
+    peaks = [p for p in peaks if p is not None]
+    return max(peaks) if peaks else None
+
+
 def format_matrix(doc: dict) -> str:
     lines = ["# Fault-injection matrix", "", f"Result: **{'PASSED' if doc['passed'] else 'FAILED'}**", "",
              "| case | rig | fault | bound | measured | recovered (9) | pass |", "|---|---|---|---|---|---|---|"]
@@ -51,9 +61,11 @@ def format_matrix(doc: dict) -> str:
     noted = [r for r in doc["cases"] if r["detail"].get("notes")]
     if noted:     # spoiled attempts and repeated recoveries (machine stalls), in the open
         lines += ["", "Notes:"] + [f"- {r['key']} ({r['rig']}): " + " | ".join(r["detail"]["notes"]) for r in noted]
-    lines += ["", "| session | passed | wall s | E2E errors | failure |", "|---|---|---|---|---|"]
+    lines += ["", "| session | passed | wall s | E2E errors | residual / threshold before the first fault | failure |",
+              "|---|---|---|---|---|---|"]
     for s in doc["sessions"]:
         lines.append(f"| {s['session']} | {s['passed']} | {s['wall_time_s']} | {s['e2e_errors']} | "
+                     f"{s.get('residual_peak')} | "
                      f"{(s['failure'] or '').splitlines()[0] if s['failure'] else ''} |")
     return "\n".join(lines) + "\n"
 
