@@ -18,6 +18,7 @@ from numba import njit
 
 from physics.actuator import piston_force
 from physics.constants import GRAVITY_M_S2
+from protocol.dbc import signal_scale
 from protocol.enums import Ack, Command, Fault, State, TestMode, WaypointFlag
 
 from .computed_torque import ComputedTorque, LegComputedTorque
@@ -28,7 +29,7 @@ from .hostlink import HostLink
 from .identification import TEST_MODES, IdentificationSignal
 from .interfaces import Measurements, ValveCommands
 from .monitors import FrameMonitor, LimitMonitor, LoopMonitor, NodeMonitor
-from .plausibility import AttitudeCrossCheck, MotionPlausibility
+from .plausibility import AttitudeCrossCheck, FrozenLoadCells, MotionPlausibility
 from .reference import Reference
 from .residuals import ActuatorResiduals
 from .stopping import ControlledStop
@@ -91,6 +92,7 @@ class Controller:
                          (cfg.testbench_plausibility_spool, cfg.testbench_plausibility_cycles))
         self.plausibility = MotionPlausibility(n, spool * cfg.valve_full_scale_v, cycles, cfg.plausibility_travel_m)
         self.attitude_check = AttitudeCrossCheck(cfg.attitude_mismatch_rad, cfg.attitude_mismatch_samples)
+        self.load_cells = FrozenLoadCells(n, cfg.load_cell_noise_n, signal_scale("LEG_STATE_1", "FORCE"))
         # each actuator's chamber model against its load cell, while the valves are ACTIVE; the
         # cylinder's own stroke sets its chamber volumes
         self.residuals = ActuatorResiduals(
@@ -141,6 +143,7 @@ class Controller:
         self.node_monitor.check_heartbeats(meas.heartbeat_age_s)
         self.node_monitor.check_valves(meas.valve_state)
         self.frames.check(meas.fresh, meas.rejected, meas.sensor_fault)
+        self.load_cells.update(meas.force_n, meas.fresh)
         self.limits.check_always(self.joint.u_v, self.joint.kalman_x, meas.force_n)
         self.limits.check_active(meas.position_m, self.joint.velocity_estimate, self.joint.error_m)
         self.plausibility.update(self.joint.u_v, meas.position_m)
@@ -166,6 +169,7 @@ class Controller:
         if self.hexapod:
             self.platform.dk.reset()
         self.frames.reset()
+        self.load_cells.reset()
         self.plausibility.reset()
         self.limits.recovery_left[0] = 0
         self.joint.reset(0.0)
@@ -248,6 +252,7 @@ class Controller:
         elif action is Action.RESET:
             self.reset_cycles = RESET_GRACE_CYCLES
             self.frames.reset()
+            self.load_cells.reset()
             self.loop_monitor.reset()
             self.dk_failures = 0
             ref.trajectory = None
@@ -321,6 +326,9 @@ class Controller:
         frames = self.frames.check(meas.fresh, meas.rejected, meas.sensor_fault)
         if frames is not Fault.NONE and sup.state not in LATCHED:      # the leg: an event's work
             sup.fault(frames, self.frames.leg_of(frames, meas.sensor_fault) + 1)
+        frozen = self.load_cells.update(meas.force_n, meas.fresh)
+        if frozen >= 0:
+            sup.fault(Fault.LOAD_CELL, frozen + 1)
         if self.reset_cycles > 0:
             self.reset_cycles -= 1
         elif sup.state not in (State.FAULT, State.ESTOP, State.BOOT):

@@ -1,5 +1,5 @@
-"""Plausibility of the measurements: commanded against measured motion per leg, and the
-legs' platform attitude against the IMU's.
+"""Plausibility of the measurements: commanded against measured motion per leg, the
+legs' platform attitude against the IMU's, and load cells that stop changing.
 
 MotionPlausibility, commanded against measured motion, per leg: a valve that is driven hard must move its
 cylinder. It catches what the other limits only see late or never: a stuck encoder (the
@@ -18,6 +18,8 @@ made at construction (no allocation per cycle).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
@@ -102,3 +104,49 @@ class AttitudeCrossCheck:
         self.angle_rad = angle_between_matrices(dk_rot, self._imu_rot)
         self.beyond = self.beyond + 1 if self.angle_rad > self.limit_rad else 0
         return self.beyond >= self.samples
+
+
+FROZEN_FALSE_ALARM = 1e-9              # a healthy load cell's chance per cycle of looking frozen
+
+
+def frozen_limit(noise_n: float, lsb_n: float) -> int:
+    """Readings in a row, equal to the bit, beyond which a load cell is frozen: one with
+    Gaussian noise `noise_n` read at `lsb_n` repeats its last reading with probability
+    p = lsb / (2 sqrt(pi) noise) (two draws in one bin), so n repeats have p^n; the least n
+    with p^n below FROZEN_FALSE_ALARM. 0 (no check) when the sensor is too quiet to tell."""
+    if noise_n <= 0.0:
+        return 0
+    p = lsb_n / (2.0 * math.sqrt(math.pi) * noise_n)
+    return 0 if p >= 0.5 else math.ceil(math.log(FROZEN_FALSE_ALARM) / math.log(p))
+
+
+@njit(cache=True)
+def frozen_step(values, fresh, last, run, limit):
+    """Count, per leg, fresh readings equal to the one before; the first leg whose run
+    reached `limit`, -1 when none (or limit 0)."""
+    faulty = -1
+    for i in range(values.shape[0]):
+        if not fresh[i]:
+            continue
+        run[i] = run[i] + 1 if values[i] == last[i] else 0
+        last[i] = values[i]
+        if limit > 0 and run[i] >= limit and faulty < 0:
+            faulty = i
+    return faulty
+
+
+class FrozenLoadCells:
+    """A load cell whose reading stops changing (stuck, or dead at zero): its noise makes a
+    healthy one change every few cycles. `update` returns the faulty leg or -1."""
+
+    def __init__(self, n_legs: int, noise_n: float, lsb_n: float):
+        self.limit = frozen_limit(noise_n, lsb_n)
+        self.last = np.full(n_legs, np.nan)
+        self.run = np.zeros(n_legs, dtype=np.int64)
+
+    def reset(self) -> None:
+        self.last[:] = np.nan
+        self.run[:] = 0
+
+    def update(self, force_n: np.ndarray, fresh: np.ndarray) -> int:
+        return frozen_step(force_n, fresh, self.last, self.run, self.limit)

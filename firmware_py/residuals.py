@@ -82,18 +82,21 @@ def residual_step(hp, fp, ps, period_s, substeps, spool_applied, fresh, position
 @njit(cache=True)
 def residual_verdict(residual, flow_velocity, floor_n, flow_n_per_m_s, persistence, above, ratio):
     """Persistence per leg; returns (legs faulty, the worst faulty leg, the largest ratio),
-    ratio[i] the leg's |r| / threshold this cycle."""
-    faulty, worst, worst_ratio, peak = 0, -1, 0.0, 0.0
+    ratio[i] the leg's |r| / threshold this cycle. Once one leg is faulty, every leg beyond
+    its threshold this cycle counts: a supply fault reaches them all, not all in one cycle."""
+    persisted, worst, worst_ratio, peak, beyond = 0, -1, 0.0, 0.0, 0
     for i in range(residual.shape[0]):
         threshold = floor_n + flow_n_per_m_s * abs(flow_velocity[i])
         ratio[i] = abs(residual[i]) / threshold
         peak = max(peak, ratio[i])
         above[i] = above[i] + 1 if ratio[i] > 1.0 else 0
+        if above[i] > 0:
+            beyond += 1
         if above[i] >= persistence:
-            faulty += 1
+            persisted += 1
             if ratio[i] > worst_ratio:
                 worst, worst_ratio = i, ratio[i]
-    return faulty, worst, peak
+    return (beyond if persisted else 0), worst, peak
 
 
 @njit(cache=True)
@@ -143,7 +146,8 @@ class ActuatorResiduals:
     def update(self, spool_applied, fresh, position_m, force_n, gravity_axial, pressure_fresh, pa_pa,
                pb_pa) -> int:
         """One cycle: `spool_applied` the spool each valve applied over the period the
-        measurements close; the number of legs whose residual persisted beyond its threshold."""
+        measurements close. Returns 0, or once a leg's residual has persisted beyond its
+        threshold, the number of legs beyond theirs this cycle."""
         residual_step(self.hp, self.friction, self.supply_pa, self.period_s, self.substeps, spool_applied, fresh,
                       position_m, force_n, gravity_axial, self.rod_mass, self.gain, self.alpha_lp,
                       pressure_fresh, pa_pa, pb_pa, self.state, self.y_prev, self.stale, self.residual,

@@ -95,3 +95,8 @@ def schedule_of(message) -> Schedule:
 def schedules() -> tuple[Schedule, ...]:
     """Schedules of every message, sorted by CAN id (= arbitration priority)."""
     return tuple(schedule_of(m) for m in sorted(load_database().messages, key=lambda m: m.frame_id))
+
+
+def signal_scale(message: str, signal: str) -> float:
+    """A signal's resolution on the wire (its DBC scale), e.g. the load cell's 0.1 N."""
+    return float(load_database().get_message_by_name(message).get_signal_by_name(signal).scale)

@@ -10,12 +10,14 @@ identified actuator of Table A.3 (150 mm, 0 kg) integrated by forward-Euler sub-
 from __future__ import annotations
 
 import collections
+import random
 import time
 
 import can
 
 from protocol.codec import CODECS
 
+LOAD_CELL_NOISE_N = 0.3        # the emulated hexapod's load cells, as the controller's [residuals] assumes
 HEARTBEAT_S = 0.05             # wall clock, as the nodes' timers (the controller checks on its clock)
 
 
@@ -124,7 +126,8 @@ class FakeBus:
         self._advance()
 
     def force_n(self, leg: int) -> float:
-        """The load cell: the leg's own mass accelerated, against gravity."""
+        """The load cell: the leg's own mass accelerated, against gravity (noiseless: the
+        controller's frozen load-cell check is off for it, `rig_loop.make_loop`)."""
         return self.mass * (self.a[leg] + 9.81)
 
     def _advance(self) -> None:
@@ -151,12 +154,13 @@ class EmulatedHexapodBus(FakeBus):
         from plant_emulator.emulator import attitude_rpy
         super().__init__(6, strokes_m, **kwargs)
         self.rig = rig
+        self._noise = random.Random(7)              # the load cells' noise, the same every run
         self._attitude_rpy = attitude_rpy
         self.y = [float(s) for s in rig.stroke_m]
         self.imu_rpy = [0.0, 0.0, 0.0]
 
     def force_n(self, leg: int) -> float:
-        return float(self.rig.rod_force_n[leg])
+        return float(self.rig.rod_force_n[leg]) + self._noise.gauss(0.0, LOAD_CELL_NOISE_N)    # as the emulator
 
     def _advance(self) -> None:
         for leg in range(6):

@@ -4,6 +4,7 @@ then SIGTERM -> valves HOLD, then DISABLED, exit 0 with the one-line summary."""
 
 import json
 import os
+import random
 import signal
 import subprocess
 import sys
@@ -36,6 +37,7 @@ def test_daemon_runs_against_a_scripted_peer_and_shuts_down_safely(tmp_path):
     decoder = FrameDecoder(["VALVE_CMD_1", "SYNC", "NMT", "CTRL_STATUS"])
     cmd = CODECS["VALVE_CMD_1"].index
     valve_state, latched = 1, None
+    noise = random.Random(3)
     syncs, commands, words = 0, 0, []
     next_heartbeat = 0.0
     deadline = time.monotonic() + 120.0
@@ -61,7 +63,7 @@ def test_daemon_runs_against_a_scripted_peer_and_shuts_down_safely(tmp_path):
                     latched = None
                 values[codec.index["VALVE_STATE"]] = valve_state
                 values[codec.index["POSITION"]] = 0.150
-                values[codec.index["FORCE"]] = 13.2
+                values[codec.index["FORCE"]] = 13.2 + noise.gauss(0.0, 0.3)     # a load cell's noise
                 codec.encode_into(values, state.data)
                 bus.send(state)
                 if syncs == CYCLES:

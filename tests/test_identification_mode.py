@@ -23,7 +23,9 @@ class Driven:
     """A controller updated by hand with set measurements (no bus)."""
 
     def __init__(self, rig: str = "testbench", y_m: float = 0.150):
-        self.ctl = Controller(load_config(), rig, PERIOD, CONTROLLER_NAMES["pi"])
+        # set measurements, no plant behind them: neither the actuators' model nor a load cell's noise
+        cfg = load_config(overrides={"residuals": {"enabled": False, "load_cell_noise_n": 0.0}})
+        self.ctl = Controller(cfg, rig, PERIOD, CONTROLLER_NAMES["pi"])
         self.meas, self.cmd = self.ctl.new_interfaces()
         self.meas.position_m[:] = y_m
         self.meas.fresh[:] = True

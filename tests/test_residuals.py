@@ -20,7 +20,8 @@ FAULT_AT = 400                     # cycles into the move (20 mm/s)
 DETECT_WITHIN = 25
 
 
-def run_move(fault: str | None, cycles: int = 700, residuals: bool = True, supervisor: dict | None = None):
+def run_move(fault: str | None, cycles: int = 700, residuals: bool = True, supervisor: dict | None = None,
+             hook=None, noise=None, frozen=None):
     """Home, then every leg +30 mm at 20 mm/s with the adaptive controller; `fault` injected
     FAULT_AT cycles in. Returns (max |r| / threshold before the fault, the cycle after the
     fault at which the controller faulted or None, the controller, the platform's positions)."""
@@ -35,6 +36,10 @@ def run_move(fault: str | None, cycles: int = 700, residuals: bool = True, super
     def cycle():
         meas.position_m[:] = np.round(rig.stroke_m / encoder_m) * encoder_m
         meas.force_n[:] = rig.rod_force_n
+        if noise is not None:                        # the load cells as on the wire: noise, 0.1 N
+            meas.force_n[:] = np.round((meas.force_n + 0.3 * noise.standard_normal(6)) / 0.1) * 0.1
+        if frozen:
+            meas.force_n[2] = frozen["force"]
         meas.fresh[:] = True
         meas.valve_state[:] = ValveState.ACTIVE if applied.any() or ctl.state in (State.READY,) else ValveState.HOLD
         ctl.update(meas, cmd)
@@ -62,6 +67,12 @@ def run_move(fault: str | None, cycles: int = 700, residuals: bool = True, super
             rig.state[0, hy.S_SPOOL] = 0.2
         elif k == FAULT_AT and fault == "supply":
             rig.set_supply_fraction(0.0)
+        elif k == FAULT_AT and fault == "seal":
+            rig.set_seal_leak(0, 10.0)
+        elif k == FAULT_AT and fault == "supply60":
+            rig.set_supply_fraction(0.6)
+        if hook is not None:
+            hook(k, ctl, rig)
         cycle()
         if k < FAULT_AT:
             assert ctl.state is not State.FAULT, ctl.sup.fault_code.name
@@ -116,3 +127,40 @@ def test_the_controlled_stop_keeps_the_platform_near_its_path():
         excursion[name] = 1e3 * path_excursion_m(positions, healthy)
     assert excursion["stop"] < 0.25 * excursion["lock"] < excursion["late"], excursion
     assert excursion["seized"] <= 5.0, excursion
+
+
+def test_frozen_limit_follows_from_the_noise_and_the_bit():
+    from firmware_py.plausibility import FROZEN_FALSE_ALARM, frozen_limit
+    n = frozen_limit(0.3, 0.1)
+    p = 0.1 / (2 * np.sqrt(np.pi) * 0.3)
+    assert p ** n < FROZEN_FALSE_ALARM <= p ** (n - 1) and n == 9
+    assert frozen_limit(0.04, 0.1) == 0 and frozen_limit(0.0, 0.1) == 0     # too quiet to tell
+
+
+def test_a_healthy_noisy_load_cell_is_never_frozen_a_stuck_one_is():
+    """Quantised Gaussian readings (0.3 N on 0.1 N) over 100,000 cycles of six legs: no
+    fault; the same reading repeated: the leg after the derived count."""
+    from firmware_py.plausibility import FrozenLoadCells
+    cells = FrozenLoadCells(6, 0.3, 0.1)
+    rng = np.random.default_rng(11)
+    fresh = np.ones(6, dtype=bool)
+    readings = np.round((50.0 + 0.3 * rng.standard_normal((100_000, 6))) / 0.1) * 0.1
+    assert all(cells.update(row, fresh) == -1 for row in readings)
+    stuck = readings[-1] + 0.1 * np.arange(1, 13)[:, None]        # the others keep changing ...
+    stuck[:, 2] = 42.0                                              # ... leg 3 reads 42 N from now on
+    seen = [cells.update(row, fresh) for row in stuck]
+    assert seen.index(2) == cells.limit                             # the first 42 N, then `limit` repeats
+
+
+def test_a_frozen_load_cell_faults_its_leg_in_the_cycle():
+    """In the controller: leg 3's load cell stops changing mid-move -> LOAD_CELL, leg 3."""
+    noise = np.random.default_rng(5)
+    frozen = {}
+
+    def hook(k, ctl, rig):
+        if k >= FAULT_AT:
+            frozen.setdefault("force", float(ctl.meas.force_n[2]))
+
+    quiet, detected, ctl, _ = run_move("load_cell", hook=hook, noise=noise, frozen=frozen)
+    assert detected is not None and detected <= ctl.load_cells.limit + 1
+    assert ctl.sup.fault_code is Fault.LOAD_CELL and ctl.sup.fault_leg == 3

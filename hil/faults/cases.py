@@ -102,8 +102,10 @@ LOCKSTEP_CASES = [
          "SILENT", 3, 0, ("SENSOR_TIMEOUT",), 5),
     # hexapod: the IMU disagrees with the encoders' attitude (ATTITUDE_MISMATCH); the test
     # bench has no IMU: the motion window or the tracking limit
-    Case("5a", "stuck encoder, leg 2", "FAULT within 0.5 s", CaseKind.PLANT, "STUCK", 2, 0,
-         ("ACTUATOR_RESIDUAL", "ATTITUDE_MISMATCH", "MOTION_PLAUSIBILITY", "TRACKING_ERROR"), PLANT_FAULT_MAX_CYCLES),
+    # the sensor node of leg 2 freezes its whole frame: the load cell's noise stops first
+    Case("5a", "stuck sensor node (encoder and load cell), leg 2",
+         f"LOAD_CELL within {RESIDUAL_MAX_CYCLES} cycles, <= 5 mm off the path", CaseKind.PLANT, "STUCK", 2, 0,
+         ("LOAD_CELL",), RESIDUAL_MAX_CYCLES, RESIDUAL_PATH_MAX_M),
     Case("5b", "out-of-range force, leg 4", "FORCE_LIMIT within 1 cycle", CaseKind.PLANT, "OUT_OF_RANGE", 4, 0,
          ("FORCE_LIMIT",), 1),
     # the actuators' residuals (chamber model against load cell) see a seized rod, a stuck
@@ -117,6 +119,10 @@ LOCKSTEP_CASES = [
          CaseKind.PLANT, "SPOOL_STUCK", 1, 20, ("ACTUATOR_RESIDUAL",), RESIDUAL_MAX_CYCLES),
     Case("5f", "piston seal leaking 10x the calibrated leakage, leg 1", "ACTUATOR_RESIDUAL within 2 s",
          CaseKind.PLANT, "SEAL_LEAK", 1, 10, ("ACTUATOR_RESIDUAL",), 1000),
+    Case("5g", "load cell stuck, leg 3", f"LOAD_CELL within {RESIDUAL_MAX_CYCLES} cycles, <= 5 mm off the path",
+         CaseKind.PLANT, "FORCE_STUCK", 3, 0, ("LOAD_CELL",), RESIDUAL_MAX_CYCLES, RESIDUAL_PATH_MAX_M),
+    Case("5h", "load cell dead (reads 0), leg 3", f"LOAD_CELL within {RESIDUAL_MAX_CYCLES} cycles, <= 5 mm off the path",
+         CaseKind.PLANT, "FORCE_ZERO", 3, 0, ("LOAD_CELL",), RESIDUAL_MAX_CYCLES, RESIDUAL_PATH_MAX_M),
     Case("6", "e-stop from the host mid-trajectory", "valves disabled in the cycle of the command", CaseKind.ESTOP,
          expect=("ESTOP",), max_cycles=1),
     Case("7", "bad waypoints: outside, singular, too fast, NaN, sequence gap", "each rejected with its reason, "
