@@ -217,6 +217,7 @@ class JointController:
         self.kalman_p = np.zeros((n_legs, 3, 3))
         self.position_estimate = self.kalman_x[:, 0]
         self.velocity_estimate = self.kalman_x[:, 1]
+        self.acceleration_estimate = self.kalman_x[:, 2]
         self._xp = np.zeros(3)
         self._pp = np.zeros((3, 3))
         self.reset(initial_position_m)

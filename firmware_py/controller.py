@@ -105,7 +105,6 @@ class Controller:
         # over the period this cycle's measurements close)
         self.spool_sent = np.zeros(n)
         self.spool_applied = np.zeros(n)
-        self._no_pressure = np.zeros(n, dtype=bool)
         # the false-alarm margin's measure: the largest |r| / threshold before the first fault,
         # less the PEAK_DELAY cycles before it (a fault's own rise)
         self.residual_peak = 0.0
@@ -150,7 +149,7 @@ class Controller:
         self.residuals.start(meas.position_m, meas.force_n, self.gravity_axial, meas.pressure_valid, meas.pa_pa,
                              meas.pb_pa)
         self.residuals.update(self.spool_applied, meas.fresh, meas.position_m, meas.force_n, self.gravity_axial,
-                              self._no_pressure, meas.pa_pa, meas.pb_pa)
+                              self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
         valve_commands(VALVES_HOLD, self.joint.u_v, 1.0, False, -1, cmd.enable, cmd.hold, cmd.active, cmd.reset,
                        cmd.spool)
         ref.play(through_points(np.array([self.home_strokes, self.home_strokes + 1e-3]), 0.1, 0.2), [0], 0)
@@ -400,7 +399,7 @@ class Controller:
             self.residuals_running = True
             return
         faulty = res.update(self.spool_applied, meas.fresh, meas.position_m, meas.force_n, self.gravity_axial,
-                            self._no_pressure, meas.pa_pa, meas.pb_pa)
+                            self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
         slot = self.cycles % PEAK_DELAY
         if self.sup.faults == 0 and self._peaks[slot] > self.residual_peak:
             self.residual_peak = float(self._peaks[slot])

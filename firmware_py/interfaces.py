@@ -24,6 +24,7 @@ class Measurements:
         self.pa_pa = np.zeros(n_legs)
         self.pb_pa = np.zeros(n_legs)
         self.pressure_valid = np.zeros(n_legs, dtype=bool)
+        self.pressure_fresh = np.zeros(n_legs, dtype=bool)    # a valid sample arrived since the last cycle
         # IMU_ATTITUDE (hexapod): roll, pitch, yaw of R = Rz Ry Rx
         self.attitude_rad = np.zeros(3)
         self.attitude_fresh = False                    # a valid sample arrived since the last cycle

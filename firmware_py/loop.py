@@ -144,6 +144,7 @@ class ControllerLoop:
         self._imu_emergency = False                 # ... from the IMU
         self._latched = False                       # the last EMCY_16 said: a fault is latched
         self._attitude_new = False
+        self._pressure_new = np.zeros(len(self.legs), dtype=bool)    # LEG_PRESSURE since the last read
         self._stall_s = self.cfg.stall_fault_periods * self.period_s if pacing == "realtime" else math.inf
         self._forced: bool | None = None            # shutdown: True HOLD, False DISABLED
 
@@ -172,6 +173,7 @@ class ControllerLoop:
             if valid:
                 self.meas.pa_pa[leg] = values[self._i_pa]
                 self.meas.pb_pa[leg] = values[self._i_pb]
+                self._pressure_new[leg] = True
             return
         if frame_id == self._imu_attitude_id:
             if self._imu_status[0] == ImuStatus.VALID:
@@ -271,6 +273,8 @@ class ControllerLoop:
                 meas.sensor_fault[leg] = values[self._i_sensor] != 0.0
         np.subtract(now, self.heartbeat_seen, out=meas.heartbeat_age_s)
         meas.attitude_fresh, self._attitude_new = self._attitude_new, False
+        np.copyto(meas.pressure_fresh, self._pressure_new)
+        self._pressure_new[:] = False
         meas.emergency, self._emergency = self._emergency, False
         meas.imu_emergency, self._imu_emergency = self._imu_emergency, False
         meas.stalled, self._stalled = self._stalled, False

@@ -7,15 +7,18 @@ Per leg, every cycle while its valve is ACTIVE:
                  SYNC, the piston's swept volume from the encoder's displacement (its counts
                  do not accumulate: the swept volume telescopes)
     F_model    = A (p_A - alpha p_B)                                     (eq. 4.15)
-    F_piston   = F_load cell + m_rod g_axial + sigma2 v, v the encoder's rate (the rod's balance)
+    F_piston   = F_load cell + m_rod (g_axial + a) + sigma2 v, v the encoder's rate, a the
+                 Kalman filter's acceleration (the rod's balance)
     e          = F_piston - F_model; p_A, p_B corrected by `gain` e (the pressure level is not
                  seen by the force: a LEG_PRESSURE sample resets both chambers)
     r          = low-pass(e)
 The seals' Coulomb and Stribeck friction is left out of F_piston (its sign is unknown while
 the encoder's velocity crosses zero) and is the threshold's floor instead:
-    threshold  = max(|alpha0 + alpha1|) (Tables 6.1-6.2) + K q / 2 + spread K T / gain |Q / A|
+    threshold  = max(|alpha0 + alpha1|) (Tables 6.1-6.2) + K q / 2 + spread K T / gain <|Q / A|>
 with K the oil column's stiffness, q the encoder's count, `spread` the flow gain's relative
-spread over Table A.3 (k01) and Q the model's valve flow. A leg whose |r| stays above it for
+spread over Table A.3 (k01), Q the model's valve flow and <.> the larger of its present value
+and its average with weight `gain` per cycle: a flow error e_k = spread K T |Q/A|_k, corrected
+by `gain` each cycle, sums to at most spread K T / gain times that average. A leg whose |r| stays above it for
 `persistence` cycles is faulty (several legs at once point at the supply).
 What it sees: a valve that does not follow its command, a seized rod, a lost supply, a
 frozen encoder. Allocation-free on arrays made here.
@@ -41,7 +44,7 @@ def breakaway_force_n(fp: np.ndarray) -> float:
 
 @njit(cache=True)
 def residual_step(hp, fp, ps, period_s, substeps, spool_applied, fresh, position, force, gravity_axial,
-                  rod_mass, gain, alpha_lp, pressure_fresh, pa_meas, pb_meas, state, y_prev, stale, residual,
+                  accel, rod_mass, gain, alpha_lp, pressure_fresh, pa_meas, pb_meas, state, y_prev, stale, residual,
                   flow_velocity) -> None:
     """One cycle of every leg's chamber model; writes `residual` (low-passed force error, N)
     and `flow_velocity` (the model's valve flow into A over the piston area, m/s). A leg
@@ -71,7 +74,7 @@ def residual_step(hp, fp, ps, period_s, substeps, spool_applied, fresh, position
         qa, _, _, _ = hy.valve_flows(row[hy.S_SPOOL], row[hy.S_PA], row[hy.S_PB], ps, hp)
         flow_velocity[i] = qa / area
         _, sigma2 = lugre.stribeck(v, fp)           # the encoder's own rate: an estimator lags a fast start
-        piston = force[i] + rod_mass * gravity_axial[i] + sigma2 * v
+        piston = force[i] + rod_mass * (gravity_axial[i] + accel[i]) + sigma2 * v
         error = piston - hy.piston_force(row[hy.S_PA], row[hy.S_PB], hp)
         correction = gain * error / (area * (1.0 + ratio))
         row[hy.S_PA] += correction
@@ -80,13 +83,16 @@ def residual_step(hp, fp, ps, period_s, substeps, spool_applied, fresh, position
 
 
 @njit(cache=True)
-def residual_verdict(residual, flow_velocity, floor_n, flow_n_per_m_s, persistence, above, ratio):
+def residual_verdict(residual, flow_velocity, flow_bound, gain, floor_n, flow_n_per_m_s, persistence, above, ratio):
     """Persistence per leg; returns (legs faulty, the worst faulty leg, the largest ratio),
     ratio[i] the leg's |r| / threshold this cycle. Once one leg is faulty, every leg beyond
     its threshold this cycle counts: a supply fault reaches them all, not all in one cycle."""
     persisted, worst, worst_ratio, peak, beyond = 0, -1, 0.0, 0.0, 0
     for i in range(residual.shape[0]):
-        threshold = floor_n + flow_n_per_m_s * abs(flow_velocity[i])
+        # the flow error a correction of `gain` per cycle leaves: the same average of |Q / A|
+        # (after the flow falls), and at least its present value (the step's own error)
+        flow_bound[i] += gain * (abs(flow_velocity[i]) - flow_bound[i])
+        threshold = floor_n + flow_n_per_m_s * max(flow_bound[i], abs(flow_velocity[i]))
         ratio[i] = abs(residual[i]) / threshold
         peak = max(peak, ratio[i])
         above[i] = above[i] + 1 if ratio[i] > 1.0 else 0
@@ -134,6 +140,7 @@ class ActuatorResiduals:
         self.stale = np.zeros(n_legs, dtype=np.int64)       # cycles since the leg's last fresh frame
         self.residual = np.zeros(n_legs)
         self.flow_velocity = np.zeros(n_legs)
+        self.flow_bound = np.zeros(n_legs)                  # |Q / A| averaged as the correction forgets
         self.ratio = np.zeros(n_legs)
         self.above = np.zeros(n_legs, dtype=np.int64)
         self.legs_faulty, self.worst_leg, self.peak = 0, -1, 0.0
@@ -141,18 +148,20 @@ class ActuatorResiduals:
     def start(self, position_m, force_n, gravity_axial, pressure_valid, pa_pa, pb_pa) -> None:
         start_state(force_n, gravity_axial, self.rod_mass, self.supply_pa, self.hp, pressure_valid, pa_pa, pb_pa,
                     position_m, self.state, self.y_prev, self.stale, self.residual, self.above)
+        self.flow_bound[:] = 0.0
         self.legs_faulty, self.worst_leg = 0, -1
 
-    def update(self, spool_applied, fresh, position_m, force_n, gravity_axial, pressure_fresh, pa_pa,
+    def update(self, spool_applied, fresh, position_m, force_n, gravity_axial, accel_m_s2, pressure_fresh, pa_pa,
                pb_pa) -> int:
         """One cycle: `spool_applied` the spool each valve applied over the period the
         measurements close. Returns 0, or once a leg's residual has persisted beyond its
         threshold, the number of legs beyond theirs this cycle."""
         residual_step(self.hp, self.friction, self.supply_pa, self.period_s, self.substeps, spool_applied, fresh,
-                      position_m, force_n, gravity_axial, self.rod_mass, self.gain, self.alpha_lp,
+                      position_m, force_n, gravity_axial, accel_m_s2, self.rod_mass, self.gain, self.alpha_lp,
                       pressure_fresh, pa_pa, pb_pa, self.state, self.y_prev, self.stale, self.residual,
                       self.flow_velocity)
-        self.legs_faulty, self.worst_leg, self.peak = residual_verdict(self.residual, self.flow_velocity, self.floor_n,
+        self.legs_faulty, self.worst_leg, self.peak = residual_verdict(self.residual, self.flow_velocity,
+                                                                       self.flow_bound, self.gain, self.floor_n,
                                                             self.flow_n_per_m_s, self.persistence, self.above,
                                                             self.ratio)
         return self.legs_faulty

@@ -18,6 +18,17 @@ CONTROLLERS = ("pi", "adaptive", "computed-torque")     # sha-step and sha-track
 SHA_STEP_GROUP = pytest.mark.xdist_group("sha-step-run")
 
 
+FALSE_ALARM_MARGIN = 1.5        # the actuators' residuals stay below 1 / 1.5 of their thresholds
+
+
+def assert_false_alarm_margin(doc: dict) -> None:
+    """Every controller of a no-fault run kept its residuals below 1 / FALSE_ALARM_MARGIN of
+    their thresholds (its summary's `residual_peak`)."""
+    peaks = {name: child["summary"]["residual_peak"] for name, child in doc["children"].items()
+             if name.startswith("controller")}
+    assert peaks and all(p * FALSE_ALARM_MARGIN <= 1.0 for p in peaks.values()), peaks
+
+
 @pytest.fixture(scope="module")
 def sha_step_run(tmp_path_factory):
     """One short sha-step run that several tests read."""
@@ -47,6 +58,7 @@ def test_sha_step_short_passes_with_zero_e2e_errors(sha_step_run):
     assert len(ct) == 2 and all(c["passed"] and c["required"] for c in ct.values()), ct
     for name in ("emulator", "controller"):
         assert doc["children"][name]["exit_status"] == 0
+    assert_false_alarm_margin(doc)
     assert (out / "report.md").read_text().count("thesis") >= 3
     assert (out / "sha_step.png").stat().st_size > 10_000
 
@@ -176,4 +188,5 @@ def test_scenario_runs_from_the_command_and_passes(scenario, tmp_path):
     assert doc["e2e_errors"] <= 1e-4 * doc["log"]["frames"], doc["e2e_errors"]
     assert doc["log"]["lost_frames"] == 0
     assert holds(doc["metrics"]), doc["metrics"]
+    assert_false_alarm_margin(doc)
     assert list(tmp_path.glob("*.png")) and "thesis" in (tmp_path / "report.md").read_text()

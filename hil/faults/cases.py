@@ -109,10 +109,11 @@ LOCKSTEP_CASES = [
     Case("5b", "out-of-range force, leg 4", "FORCE_LIMIT within 1 cycle", CaseKind.PLANT, "OUT_OF_RANGE", 4, 0,
          ("FORCE_LIMIT",), 1),
     # the actuators' residuals (chamber model against load cell) see a seized rod, a stuck
-    # spool, a leaking seal; several legs at once, the supply. Bounds: what they reach today
-    # (docs/MEASUREMENTS.md "Actuator residuals"); the aim is 25 cycles and 5 mm off the path
-    Case("5c", "leg jam (rod seized), leg 1", "ACTUATOR_RESIDUAL within 40 cycles, <= 5 mm off the path",
-         CaseKind.PLANT, "LEG_JAM", 1, 0, ("ACTUATOR_RESIDUAL",), 40, RESIDUAL_PATH_MAX_M),
+    # spool, a leaking seal; several legs at once, the supply. The aim is 25 cycles and 5 mm
+    # off the path; where it is missed the bound is what they reach (docs/MEASUREMENTS.md)
+    Case("5c", "leg jam (rod seized), leg 1",
+         f"ACTUATOR_RESIDUAL within {RESIDUAL_MAX_CYCLES} cycles, <= 5 mm off the path", CaseKind.PLANT, "LEG_JAM", 1,
+         0, ("ACTUATOR_RESIDUAL",), RESIDUAL_MAX_CYCLES, RESIDUAL_PATH_MAX_M),
     Case("5d", "loss of supply pressure", "SUPPLY_PRESSURE or ACTUATOR_RESIDUAL within 250 cycles", CaseKind.PLANT,
          "SUPPLY_LOSS", 0, 0, ("SUPPLY_PRESSURE", "ACTUATOR_RESIDUAL"), PLANT_FAULT_MAX_CYCLES),
     Case("5e", "valve spool stuck open at 20 %, leg 1", f"ACTUATOR_RESIDUAL within {RESIDUAL_MAX_CYCLES} cycles",
