@@ -9,8 +9,9 @@ Per leg, every cycle while its valve is ACTIVE:
     F_model    = A (p_A - alpha p_B)                                     (eq. 4.15)
     F_piston   = F_load cell + m_rod (g_axial + a) + sigma2 v, v the encoder's rate, a the
                  Kalman filter's acceleration (the rod's balance)
-    e          = F_piston - F_model; p_A, p_B corrected by `gain` e (the pressure level is not
-                 seen by the force: a LEG_PRESSURE sample resets both chambers)
+    e          = F_piston - F_model; p_A, p_B corrected by `gain` e (the level p_A + p_B is
+                 not seen by the force: a LEG_PRESSURE sample sets it, the model keeping its
+                 own p_A - alpha p_B, so a fault's force error is not wiped)
     r          = low-pass(e)
 The seals' Coulomb and Stribeck friction is left out of F_piston (its sign is unknown while
 the encoder's velocity crosses zero) and is the threshold's floor instead:
@@ -18,8 +19,8 @@ the encoder's velocity crosses zero) and is the threshold's floor instead:
 with K the oil column's stiffness, q the encoder's count, `spread` the flow gain's relative
 spread over Table A.3 (k01), Q the model's valve flow and <.> the larger of its present value
 and its average with weight `gain` per cycle: a flow error e_k = spread K T |Q/A|_k, corrected
-by `gain` each cycle, sums to at most spread K T / gain times that average. A leg whose |r| stays above it for
-`persistence` cycles is faulty (several legs at once point at the supply).
+by `gain` each cycle, sums to at most spread K T / gain times that average. A leg whose |r|
+stays above it for `persistence` cycles is faulty (several legs at once point at the supply).
 What it sees: a valve that does not follow its command, a seized rod, a lost supply, a
 frozen encoder. Allocation-free on arrays made here.
 """
@@ -68,9 +69,10 @@ def residual_step(hp, fp, ps, period_s, substeps, spool_applied, fresh, position
         if not fresh[i]:
             continue
         y_prev[i] = position[i]
-        if pressure_fresh[i]:
-            row[hy.S_PA] = pa_meas[i]
-            row[hy.S_PB] = pb_meas[i]
+        if pressure_fresh[i]:                        # the sample's level p_A + p_B, the model's force
+            load = row[hy.S_PA] - ratio * row[hy.S_PB]
+            row[hy.S_PB] = (pa_meas[i] + pb_meas[i] - load) / (1.0 + ratio)
+            row[hy.S_PA] = load + ratio * row[hy.S_PB]
         qa, _, _, _ = hy.valve_flows(row[hy.S_SPOOL], row[hy.S_PA], row[hy.S_PB], ps, hp)
         flow_velocity[i] = qa / area
         _, sigma2 = lugre.stribeck(v, fp)           # the encoder's own rate: an estimator lags a fast start

@@ -63,6 +63,7 @@ class RunOptions:
     # a controller config file's sections (e.g. `hydrapod design schedule`), over the
     # scenario's own overrides: validated by the caller before the run
     controller_config: dict = field(default_factory=dict)
+    emulator_config: dict = field(default_factory=dict)     # sections over the scenario's emulator overrides
     notes: list[str] = field(default_factory=list)
 
 
@@ -122,7 +123,10 @@ class Run:
                               f"{watchdog:g} periods (--valve-watchdog-periods; docs/TIMING.md)")
         name = self._child_name("emulator")
         config = self.out / f"{name}.toml"
-        config.write_text(_toml(self.scenario.emulator_overrides))
+        merged = {section: dict(values) for section, values in self.scenario.emulator_overrides.items()}
+        for section, values in self.options.emulator_config.items():
+            merged.setdefault(section, {}).update(values)
+        config.write_text(_toml(merged))
         child = Child(name, ["-m", "plant_emulator", "--bus", str(self.spec), "--rig", self.scenario.rig,
                              "--rate-hz", str(self.options.rate_hz), "--load-kg", str(self.scenario.load_kg),
                              "--sync-watchdog-periods", f"{watchdog:g}", "--config", str(config),

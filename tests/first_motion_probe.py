@@ -48,7 +48,8 @@ def exercise(loop, ctl) -> list[str]:
         for command, n in ((Command.ESTOP, 5), (Command.RESET, 20), (Command.ENABLE, 20)):
             ctl.host_command(command, 0)
             cycles(loop, n)
-        seen.append(f"{name}: {ctl.state.name}" + (f" {ctl.sup.fault_code.name} leg {ctl.sup.fault_leg}" if ctl.state is State.FAULT else ""))
+        fault = f" {ctl.sup.fault_code.name} leg {ctl.sup.fault_leg}" if ctl.state is State.FAULT else ""
+        seen.append(f"{name}: {ctl.state.name}{fault}")
     return seen
 
 

@@ -16,7 +16,8 @@ def make_loop(rig: str, controller: str, overrides: dict | None = None, emulated
     """(loop, controller, bus), activated: the controller READY at home; `emulated`: the
     emulator's hexapod behind the bus instead of independent identified legs."""
     # the identified legs' load cells are noiseless: the frozen load-cell check would see them
-    cfg = load_config(overrides=overrides if emulated else {"residuals": {"load_cell_noise_n": 0.0}, **(overrides or {})})
+    noiseless = {"residuals": {"load_cell_noise_n": 0.0}}
+    cfg = load_config(overrides=overrides if emulated else {**noiseless, **(overrides or {})})
     ctl = Controller(cfg, rig, 0.002, CONTROLLER_NAMES[controller])
     if emulated:
         from plant_emulator.params import load_config as load_emulator_config

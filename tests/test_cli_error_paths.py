@@ -36,6 +36,7 @@ BAD_TEXT = {
     "--nominal": ("120;6", "120;6"),
     "--pose": ("0,0,631", "0,0,631"),
     "--controller-config": ("/nonexistent/schedule.toml", "/nonexistent/schedule.toml"),
+    "--emulator-config": ("/nonexistent/rig.toml", "/nonexistent/rig.toml"),
 }
 OUTPUT_DIRS = ("--out", "--plot")          # given a path below a regular file: cannot be created
 # what a command needs before the option under test is reached

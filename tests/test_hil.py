@@ -121,6 +121,7 @@ def test_every_cycle_has_its_leg_frame_despite_on_host_reordering(sha_step_run):
     (["hil", "run", "sha-step", "--controllers", "pi,fuzzy"], "fuzzy"),
     (["hil", "run", "sha-step", "--controllers", "model-based"], "model-based"),
     (["hil", "run", "pm-circle", "--loads", "3"], "pm-circle"),
+    (["hil", "run", "pm-circle", "--emulator-config", "/nonexistent/plant.toml"], "plant.toml"),
     (["hil", "analyze", "/nonexistent/run.blf", "--scenario", "sha-step"], "run.blf"),
     (["hil", "analyze", "x.txt", "--scenario", "sha-step"], "x.txt"),
 ])

@@ -18,10 +18,11 @@ from protocol.enums import Fault, State, ValveState
 PERIOD_S = 0.002
 FAULT_AT = 400                     # cycles into the move (20 mm/s)
 DETECT_WITHIN = 25
+PRESSURE_PHASES = np.arange(6, 12)     # LEG_PRESSURE_1..6's SyncPhase (the DBC)
 
 
 def run_move(fault: str | None, cycles: int = 700, residuals: bool = True, supervisor: dict | None = None,
-             hook=None, noise=None, frozen=None):
+             hook=None, noise=None, frozen=None, pressures: bool = False):
     """Home, then every leg +30 mm at 20 mm/s with the adaptive controller; `fault` injected
     FAULT_AT cycles in. Returns (max |r| / threshold before the fault, the cycle after the
     fault at which the controller faulted or None, the controller, the platform's positions)."""
@@ -31,6 +32,7 @@ def run_move(fault: str | None, cycles: int = 700, residuals: bool = True, super
     meas, cmd = ctl.new_interfaces()
     encoder_m = cfg.encoder_resolution_m
     applied, active = np.zeros(6), np.zeros(6)
+    sample_noise = np.random.default_rng(2)
     positions = []
 
     def cycle():
@@ -41,6 +43,12 @@ def run_move(fault: str | None, cycles: int = 700, residuals: bool = True, super
         if frozen:
             meas.force_n[2] = frozen["force"]
         meas.fresh[:] = True
+        if pressures:                                # LEG_PRESSURE_n on its SYNC phase, 0.02 bar noise
+            meas.pressure_fresh[:] = (ctl.cycles % 16) == PRESSURE_PHASES
+            meas.pa_pa[:] = np.where(meas.pressure_fresh, rig.state[:, hy.S_PA] + 2e3 * sample_noise.standard_normal(6),
+                                     meas.pa_pa)
+            meas.pb_pa[:] = np.where(meas.pressure_fresh, rig.state[:, hy.S_PB] + 2e3 * sample_noise.standard_normal(6),
+                                     meas.pb_pa)
         meas.valve_state[:] = ValveState.ACTIVE if applied.any() or ctl.state in (State.READY,) else ValveState.HOLD
         ctl.update(meas, cmd)
         rig.command[:] = applied                     # the valves apply the last command at the SYNC
@@ -164,3 +172,14 @@ def test_a_frozen_load_cell_faults_its_leg_in_the_cycle():
     quiet, detected, ctl, _ = run_move("load_cell", hook=hook, noise=noise, frozen=frozen)
     assert detected is not None and detected <= ctl.load_cells.limit + 1
     assert ctl.sup.fault_code is Fault.LOAD_CELL and ctl.sup.fault_leg == 3
+
+
+def test_chamber_pressure_samples_keep_the_margin_and_the_detection():
+    """With LEG_PRESSURE samples as the bus brings them (each leg every 16th SYNC, 0.02 bar
+    noise) setting the model's level: still quiet with margin, a seized rod still named in
+    25 cycles."""
+    quiet, detected, ctl, _ = run_move(None, pressures=True)
+    assert quiet < 1.0 / 1.5 and detected is None
+    _, detected, ctl, _ = run_move("seized", pressures=True)
+    assert detected is not None and detected <= DETECT_WITHIN
+    assert ctl.sup.fault_code is Fault.ACTUATOR_RESIDUAL and ctl.sup.fault_leg == 1

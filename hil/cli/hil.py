@@ -65,10 +65,11 @@ def _run(args) -> int:
                          duration_s=args.duration_s, plots=not args.no_plots,
                          valve_watchdog_periods=args.valve_watchdog_periods, start_timeout_s=args.start_timeout_s,
                          controller_config=_controller_config(args.controller_config),
-                         time_scale=args.time_scale)
-    if args.controller_config:
-        options.notes.append(f"controller config {args.controller_config}: "
-                             f"[{'], ['.join(options.controller_config)}] over the scenario's own")
+                         emulator_config=_emulator_config(args.emulator_config), time_scale=args.time_scale)
+    for name, path, sections in (("controller", args.controller_config, options.controller_config),
+                                 ("emulator", args.emulator_config, options.emulator_config)):
+        if path:
+            options.notes.append(f"{name} config {path}: [{'], ['.join(sections)}] over the scenario's own")
     return _finish(args, run_scenario(scenario, options))
 
 
@@ -78,6 +79,16 @@ def _controller_config(path: str | None) -> dict:
     if path is None:
         return {}
     from firmware_py.config import load_config
+    from protocol.tomlconfig import read_toml
+    load_config(path)
+    return read_toml(Path(path))
+
+
+def _emulator_config(path: str | None) -> dict:
+    """As `_controller_config`, for the emulator (the plant: payload, supply, parameters)."""
+    if path is None:
+        return {}
+    from plant_emulator.params import load_config
     from protocol.tomlconfig import read_toml
     load_config(path)
     return read_toml(Path(path))
@@ -164,6 +175,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                         "3 is the valves' own, for an RT kernel)")
     p.add_argument("--controller-config", metavar="FILE",
                    help="controller config sections over the scenario's (e.g. from `hydrapod design schedule`)")
+    p.add_argument("--emulator-config", metavar="FILE",
+                   help="emulator config sections over the scenario's (payload, supply pressure, plant parameters)")
     p.add_argument("--start-timeout-s", type=number_in_range(float, 1.0, 3600.0), default=90.0,
                    help="how long the processes may take to come up (default 90; a VM without KVM needs more)")
     p.add_argument("--no-plots", action="store_true", help="metrics and report without the PNG figures")

@@ -58,6 +58,7 @@ class Case:
     max_cycles: int = 0           # detection bound
     path_max_m: float = math.inf  # plant faults: the platform's excursion from the no-fault run's path
     rigs: tuple[str, ...] = ("hexapod", "testbench")
+    on_testbench: dict = field(default_factory=dict)   # fields that differ on the one-leg test bench
 
 
 @dataclass
@@ -98,6 +99,10 @@ LOCKSTEP_CASES = [
          "REPEAT", 4, 1),
     Case("4i", "repeated counter (stale frame), leg 4 for 50 cycles", "E2E_ERROR within 3 cycles", CaseKind.PERSISTENT,
          "REPEAT", 4, 50, ("E2E_ERROR",), 3),
+    # 30 % of leg 5's frames lost at random: five in a row (0.3^5 per cycle) is a timeout; the
+    # residuals must ride out the stale cycles without a fault of theirs
+    Case("4j", "LEG_STATE of leg 5: 30 % lost at random", "no fault, <= 1 mm from no-fault run; or SENSOR_TIMEOUT",
+         CaseKind.TRANSIENT, "FRAME_LOSS", 5, 30, ("SENSOR_TIMEOUT",)),
     Case("3b", "sensor node of leg 3 silent", "SENSOR_TIMEOUT within 5 cycles, held, no NaN", CaseKind.PERSISTENT,
          "SILENT", 3, 0, ("SENSOR_TIMEOUT",), 5),
     # hexapod: the IMU disagrees with the encoders' attitude (ATTITUDE_MISMATCH); the test
@@ -111,18 +116,24 @@ LOCKSTEP_CASES = [
     # the actuators' residuals (chamber model against load cell) see a seized rod, a stuck
     # spool, a leaking seal; several legs at once, the supply. The aim is 25 cycles and 5 mm
     # off the path; where it is missed the bound is what they reach (docs/MEASUREMENTS.md)
+    # test bench: at the probe's 20 mm/s a seized rod's force ramp K v leaves the corrected
+    # model K v T / gain = 16 N behind, under the 25 N floor: it waits for the PI to open the
+    # valve further (42 cycles measured); its one leg cannot tell the supply from the leg
     Case("5c", "leg jam (rod seized), leg 1",
          f"ACTUATOR_RESIDUAL within {RESIDUAL_MAX_CYCLES} cycles, <= 5 mm off the path", CaseKind.PLANT, "LEG_JAM", 1,
-         0, ("ACTUATOR_RESIDUAL",), RESIDUAL_MAX_CYCLES, RESIDUAL_PATH_MAX_M),
+         0, ("ACTUATOR_RESIDUAL",), RESIDUAL_MAX_CYCLES, RESIDUAL_PATH_MAX_M,
+         on_testbench={"bound": "ACTUATOR_RESIDUAL within 50 cycles, <= 5 mm off the path", "max_cycles": 50}),
     Case("5d", "loss of supply pressure", "SUPPLY_PRESSURE or ACTUATOR_RESIDUAL within 250 cycles", CaseKind.PLANT,
-         "SUPPLY_LOSS", 0, 0, ("SUPPLY_PRESSURE", "ACTUATOR_RESIDUAL"), PLANT_FAULT_MAX_CYCLES),
+         "SUPPLY_LOSS", 0, 0, ("SUPPLY_PRESSURE", "ACTUATOR_RESIDUAL"), PLANT_FAULT_MAX_CYCLES,
+         on_testbench={"bound": "ACTUATOR_RESIDUAL or MOTION_PLAUSIBILITY within 250 cycles",
+                       "expect": ("ACTUATOR_RESIDUAL", "MOTION_PLAUSIBILITY")}),
     Case("5e", "valve spool stuck open at 20 %, leg 1", f"ACTUATOR_RESIDUAL within {RESIDUAL_MAX_CYCLES} cycles",
          CaseKind.PLANT, "SPOOL_STUCK", 1, 20, ("ACTUATOR_RESIDUAL",), RESIDUAL_MAX_CYCLES),
     Case("5f", "piston seal leaking 10x the calibrated leakage, leg 1", "ACTUATOR_RESIDUAL within 2 s",
          CaseKind.PLANT, "SEAL_LEAK", 1, 10, ("ACTUATOR_RESIDUAL",), 1000),
     Case("5g", "load cell stuck, leg 3", f"LOAD_CELL within {RESIDUAL_MAX_CYCLES} cycles, <= 5 mm off the path",
          CaseKind.PLANT, "FORCE_STUCK", 3, 0, ("LOAD_CELL",), RESIDUAL_MAX_CYCLES, RESIDUAL_PATH_MAX_M),
-    Case("5h", "load cell dead (reads 0), leg 3", f"LOAD_CELL within {RESIDUAL_MAX_CYCLES} cycles, <= 5 mm off the path",
+    Case("5h", "load cell reads 0, leg 3", f"LOAD_CELL within {RESIDUAL_MAX_CYCLES} cycles, <= 5 mm off the path",
          CaseKind.PLANT, "FORCE_ZERO", 3, 0, ("LOAD_CELL",), RESIDUAL_MAX_CYCLES, RESIDUAL_PATH_MAX_M),
     Case("6", "e-stop from the host mid-trajectory", "valves disabled in the cycle of the command", CaseKind.ESTOP,
          expect=("ESTOP",), max_cycles=1),

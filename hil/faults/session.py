@@ -49,6 +49,8 @@ class Session(Scenario):
         # the test bench has one leg: a case aimed at leg 2-6 hits its only one
         self.cases = [c if c.target <= n_legs else replace(c, target=1, what=c.what.replace(f"leg {c.target}", "leg 1"))
                       for c in cases if rig in c.rigs]
+        if rig == "testbench":
+            self.cases = [replace(c, **c.on_testbench) for c in self.cases]
         self.name = f"faults-{rig}-{pacing}"
         self.title = f"fault-injection matrix, {rig}, {pacing}"
         self.chapter = "reliability (docs/PROTOCOL.md, supervisor)"
@@ -91,7 +93,8 @@ class Session(Scenario):
                                   "(a machine stall tripped the stall watchdog); repeated")
             if run.host.state is not State.READY or case.kind in (CaseKind.KILL, CaseKind.KILL_EMULATOR):
                 self._recover(run, mark)
-            else:                                  # no fault: nothing to recover from
+            else:                                  # no fault: nothing to recover from but a fault that
+                run.host.emulator(EmuCommand.CLEAR_ALL)    # lasts until cleared (random frame loss)
                 run.wait_s(SETTLE_S)
 
     def _ready(self, run, mark: Marks) -> None:
