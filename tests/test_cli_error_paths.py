@@ -37,6 +37,9 @@ BAD_TEXT = {
     "--pose": ("0,0,631", "0,0,631"),
     "--controller-config": ("/nonexistent/schedule.toml", "/nonexistent/schedule.toml"),
     "--emulator-config": ("/nonexistent/rig.toml", "/nonexistent/rig.toml"),
+    "--replay": ("/nonexistent/run.blf", "/nonexistent/run.blf"),
+    "--snapshot": ("/nonexistent/dir/screen.svg", "--snapshot"),
+    "--export-dir": ("/nonexistent/dir", "/nonexistent/dir"),
 }
 OUTPUT_DIRS = ("--out", "--plot")          # given a path below a regular file: cannot be created
 # what a command needs before the option under test is reached

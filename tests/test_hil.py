@@ -191,3 +191,13 @@ def test_scenario_runs_from_the_command_and_passes(scenario, tmp_path):
     assert holds(doc["metrics"]), doc["metrics"]
     assert_false_alarm_margin(doc)
     assert list(tmp_path.glob("*.png")) and "thesis" in (tmp_path / "report.md").read_text()
+
+
+@pytest.mark.hil
+@SHA_STEP_GROUP
+def test_the_monitor_replays_the_sha_step_log(sha_step_run):
+    """`hydrapod monitor --replay` of the run's log ends showing the log's last controller
+    state, fault and leg position (stock cantools decoding the same log as the oracle)."""
+    from test_monitor import assert_replay_shows_the_log
+    out, _ = sha_step_run
+    assert_replay_shows_the_log(out / "run.blf")

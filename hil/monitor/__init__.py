@@ -1,0 +1,1 @@
+"""`hydrapod monitor`: the operator's live view of the bus, or of a recorded log."""
