@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
+import time
 from pathlib import Path
 
 from protocol.bus import open_bus
@@ -12,14 +14,26 @@ from protocol.cliutil import number_in_range, output_file
 from protocol.errors import UserInputError
 
 SNAPSHOT_SIZE = (160, 48)          # columns, rows of the screen without a terminal
+LIVE_NICE = 10                     # live: below the controller, the emulator and the HIL host
 
 
-def _summary(view, source) -> dict:
+def _percentiles(values: list[float]) -> dict:
+    """p50 / p99 / max of the per-second CPU figures (seconds that carried frames)."""
+    if not values:
+        return {}
+    import numpy as np
+    return {"p50": round(float(np.percentile(values, 50)), 1), "p99": round(float(np.percentile(values, 99)), 1),
+            "max": round(max(values), 1), "seconds": len(values)}
+
+
+def _summary(view, source, app, wall_s: float, cpu_s: float) -> dict:
     from hil.monitor.sources import ReplaySource
     s = view.snapshot()
     out = {"frames": s.frames, "unknown": s.unknown, "e2e_rejected": s.rejected, "lost": s.lost,
            "state": s.state, "fault": s.fault, "legs": s.n_legs, "ok_by_message": view.ok_by_message(),
-           "rejected_by_message": view.rejected_by_message(), "source_error": source.error}
+           "rejected_by_message": view.rejected_by_message(), "source_error": source.error,
+           "wall_s": round(wall_s, 2), "cpu_pct": round(100 * cpu_s / wall_s, 1),
+           "cpu_pct_busy_seconds": _percentiles(app.cpu_seconds), "redraw_hz": round(app.redraw_hz(), 1)}
     if isinstance(source, ReplaySource):
         out.update(replay_log_s=round(source.log_span_s, 3), replay_wall_s=round(source.wall_s, 3),
                    replay_behind_max_ms=round(source.lag_s * 1e3, 1))
@@ -48,11 +62,14 @@ def _monitor(args: argparse.Namespace) -> int:
         title = f"hydrapod monitor: replay of {args.replay} at {pace}"
     else:
         bus = open_bus(args.bus, recorder=True)   # a large receive buffer: it loses nothing
+        # beside a controller and an emulator on this host, the screen must never take their CPU
+        os.nice(LIVE_NICE)
         source = LiveSource(view, bus)
         title = f"hydrapod monitor: {args.bus or 'default bus'}" + (" (control)" if args.control else " (read-only)")
     sender = CommandSender(view, bus) if args.control else None
     app = MonitorApp(view, source, title, sender=sender, snapshot=Path(args.snapshot) if args.snapshot else None,
                      duration_s=args.duration_s, export_dir=Path(args.export_dir or "."))
+    wall, cpu = time.monotonic(), time.process_time()
     try:
         headless = bool(args.snapshot) or args.headless
         app.run(headless=headless, size=SNAPSHOT_SIZE if headless else None)
@@ -60,12 +77,13 @@ def _monitor(args: argparse.Namespace) -> int:
         source.stop()
         if bus is not None:
             bus.shutdown()
-    summary = _summary(view, source)
+    summary = _summary(view, source, app, time.monotonic() - wall, time.process_time() - cpu)
     if args.json:
         print(json.dumps(summary, indent=1))
     elif args.snapshot or args.headless:
         print(f"monitor: {summary['frames']} frames, {summary['e2e_rejected']} E2E rejected, "
-              f"{summary['lost']} lost; controller {summary['state']} {summary['fault']}"
+              f"{summary['lost']} lost; controller {summary['state']} {summary['fault']}; "
+              f"CPU {summary['cpu_pct']} %, redraw {summary['redraw_hz']} Hz"
               + (f"; replay {summary['replay_log_s']} s of log in {summary['replay_wall_s']} s, "
                  f"behind at most {summary['replay_behind_max_ms']} ms" if args.replay else ""))
     if source.error:
