@@ -115,6 +115,16 @@ def test_every_cycle_has_its_leg_frame_despite_on_host_reordering(sha_step_run):
     assert len(set(cycles.tolist())) == len(cycles)        # never two in one cycle
 
 
+@pytest.mark.hil
+@SHA_STEP_GROUP
+def test_the_monitor_replays_the_sha_step_log(sha_step_run):
+    """`hydrapod monitor --replay` of the run's log ends showing the log's last controller
+    state, fault and leg position (stock cantools decoding the same log as the oracle)."""
+    from test_monitor import assert_replay_shows_the_log
+    out, _ = sha_step_run
+    assert_replay_shows_the_log(out / "run.blf")
+
+
 @pytest.mark.parametrize("argv, culprit", [
     (["hil", "run", "no-such"], "no-such"),
     (["hil", "run", "sha-step", "--bus", "udp_multicast:10.0.0.1"], "10.0.0.1"),
@@ -192,12 +202,3 @@ def test_scenario_runs_from_the_command_and_passes(scenario, tmp_path):
     assert_false_alarm_margin(doc)
     assert list(tmp_path.glob("*.png")) and "thesis" in (tmp_path / "report.md").read_text()
 
-
-@pytest.mark.hil
-@SHA_STEP_GROUP
-def test_the_monitor_replays_the_sha_step_log(sha_step_run):
-    """`hydrapod monitor --replay` of the run's log ends showing the log's last controller
-    state, fault and leg position (stock cantools decoding the same log as the oracle)."""
-    from test_monitor import assert_replay_shows_the_log
-    out, _ = sha_step_run
-    assert_replay_shows_the_log(out / "run.blf")

@@ -136,6 +136,8 @@ class MonitorApp(App[None]):
         self._leg_min_m = default_geometry().leg_min_m
         self.shown: Snapshot | None = None
         self._finishing = False
+        self.panels: dict[str, Panel] = {}
+        self.sparks: dict[str, Widget] = {}
         self.messages: list[str] = []
 
     def check_action(self, action: str, parameters: tuple) -> bool | None:
@@ -163,6 +165,9 @@ class MonitorApp(App[None]):
     def on_mount(self) -> None:
         self.query_one("#sparks").border_title = f"stroke (left) and force (right), last {WINDOW_S:g} s"
         self.query_one("#legs").border_title = "legs"
+        # held from here on: a timer tick during shutdown finds no screen to query
+        self.panels = {w.id: w for w in self.query(Panel)}
+        self.sparks = {w.id: w for w in self.query("#sparks > *")}
         self.source.start()
         self.set_interval(REDRAW_S, self.redraw)
 
@@ -212,25 +217,25 @@ class MonitorApp(App[None]):
         return (self.redraws - 1) / max(time.monotonic() - self.first_redraw, 1e-9)
 
     def _draw(self, s: Snapshot, end_s: float) -> None:
-        self.query_one("#controller", Panel).show(self._controller_text(s))
-        self.query_one("#platform", Panel).show(self._platform_text(s))
-        self.query_one("#host", Panel).show(self._host_text(s))
-        self.query_one("#legs", Panel).show(self._legs_table(s))
+        self.panels["controller"].show(self._controller_text(s))
+        self.panels["platform"].show(self._platform_text(s))
+        self.panels["host"].show(self._host_text(s))
+        self.panels["legs"].show(self._legs_table(s))
         rows = self.view.history(end_s, WINDOW_S) if math.isfinite(end_s) else np.empty((0, 1))
         for leg in range(N_LEGS):
             present = leg < max(s.n_legs, 1)
             for kind in ("label", "pos", "force"):
-                widget = self.query_one(f"#spark-{kind}-{leg}")
+                widget = self.sparks[f"spark-{kind}-{leg}"]
                 if widget.has_class("absent") == present:
                     widget.set_class(not present, "absent")
             if present and len(rows):
                 base = 1 + leg * len(COLUMNS)
                 for kind, col in (("pos", base), ("force", base + 1)):
                     data = rows[:, col]
-                    self.query_one(f"#spark-{kind}-{leg}", Sparkline).data = _bars(data[np.isfinite(data)])
-        self.query_one("#bus", Panel).show(self._bus_text(s))
-        self.query_one("#emcy", Panel).show(self._emcy_text(s))
-        self.query_one("#status", Panel).show(self._status_text(s, end_s))
+                    self.sparks[f"spark-{kind}-{leg}"].data = _bars(data[np.isfinite(data)])
+        self.panels["bus"].show(self._bus_text(s))
+        self.panels["emcy"].show(self._emcy_text(s))
+        self.panels["status"].show(self._status_text(s, end_s))
 
     def _controller_text(self, s: Snapshot) -> Text:
         t = Text()
