@@ -154,6 +154,16 @@ REALTIME_CASES = [
 ]
 
 
+def realtime_cases(short: bool) -> list[Case]:
+    """The realtime session's cases: the process faults; the full matrix also runs the plant
+    cases there, after the baseline whose path they are judged against (make test's short
+    session leaves them to the lockstep one: the realtime tier's time)."""
+    if short:
+        return REALTIME_CASES
+    plant = [c for c in LOCKSTEP_CASES if c.kind is CaseKind.PLANT]
+    return REALTIME_CASES[:1] + plant + REALTIME_CASES[1:]
+
+
 @dataclass
 class CaseResult:
     key: str

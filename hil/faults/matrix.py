@@ -6,15 +6,16 @@ import json
 from pathlib import Path
 
 from ..runner import RunOptions, run_scenario
-from .cases import LOCKSTEP_CASES, REALTIME_CASES, VALVE_WATCHDOG_PERIODS
+from .cases import LOCKSTEP_CASES, VALVE_WATCHDOG_PERIODS, realtime_cases
 from .session import Session
 
 PACINGS = ("lockstep", "realtime")
 
 
 def sessions(short: bool, pacings: tuple[str, ...] = PACINGS) -> list[Session]:
-    """Full: every case on both rigs. Short (make test): every case on the hexapod (~2 min)."""
-    cases = {"lockstep": LOCKSTEP_CASES, "realtime": REALTIME_CASES}
+    """Full: every case on both rigs, the plant cases in both pacings. Short (make test): the
+    hexapod, the plant cases in lockstep only."""
+    cases = {"lockstep": LOCKSTEP_CASES, "realtime": realtime_cases(short)}
     rigs = ("hexapod",) if short else ("hexapod", "testbench")
     return [Session(rig, pacing, cases[pacing]) for rig in rigs for pacing in PACINGS if pacing in pacings]
 
