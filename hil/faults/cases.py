@@ -119,6 +119,7 @@ LOCKSTEP_CASES = [
     # test bench: at the probe's 20 mm/s a seized rod's force ramp K v leaves the corrected
     # model K v T / gain = 16 N behind, under the 25 N floor: it waits for the PI to open the
     # valve further (42 cycles measured); its one leg cannot tell the supply from the leg
+    # (ACTUATOR_RESIDUAL, or the motion window when the residuals are off)
     Case("5c", "leg jam (rod seized), leg 1",
          f"ACTUATOR_RESIDUAL within {RESIDUAL_MAX_CYCLES} cycles, <= 5 mm off the path", CaseKind.PLANT, "LEG_JAM", 1,
          0, ("ACTUATOR_RESIDUAL",), RESIDUAL_MAX_CYCLES, RESIDUAL_PATH_MAX_M,
