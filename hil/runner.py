@@ -46,6 +46,15 @@ START_TIMEOUT_S = 90.0                             # imports, kernels, MuJoCo, a
 START_TRIES = 3                                    # realtime: a start a machine stall faulted is recovered
 
 
+def merge_sections(base: dict, *overlays: dict) -> dict:
+    """Config sections: each overlay's keys over the ones before it, section by section."""
+    merged = {section: dict(values) for section, values in base.items()}
+    for overlay in overlays:
+        for section, values in overlay.items():
+            merged.setdefault(section, {}).update(values)
+    return merged
+
+
 @dataclass
 class RunOptions:
     out_dir: Path
@@ -123,10 +132,7 @@ class Run:
                               f"{watchdog:g} periods (--valve-watchdog-periods; docs/TIMING.md)")
         name = self._child_name("emulator")
         config = self.out / f"{name}.toml"
-        merged = {section: dict(values) for section, values in self.scenario.emulator_overrides.items()}
-        for section, values in self.options.emulator_config.items():
-            merged.setdefault(section, {}).update(values)
-        config.write_text(_toml(merged))
+        config.write_text(_toml(merge_sections(self.scenario.emulator_overrides, self.options.emulator_config)))
         child = Child(name, ["-m", "plant_emulator", "--bus", str(self.spec), "--rig", self.scenario.rig,
                              "--rate-hz", str(self.options.rate_hz), "--load-kg", str(self.scenario.load_kg),
                              "--sync-watchdog-periods", f"{watchdog:g}", "--config", str(config),
@@ -145,9 +151,7 @@ class Run:
         return base if count == 0 else f"{base}-{count + 1}"
 
     def start_controller(self, controller: str, overrides: dict | None = None) -> None:
-        merged = {section: dict(values) for section, values in self.scenario.controller_overrides.items()}
-        for section, values in [*self.options.controller_config.items(), *(overrides or {}).items()]:
-            merged.setdefault(section, {}).update(values)
+        merged = merge_sections(self.scenario.controller_overrides, self.options.controller_config, overrides or {})
         if self.pacing == "lockstep":
             merged.setdefault("timing", {}).setdefault("heartbeat_timeout_ms", LOCKSTEP_HEARTBEAT_TIMEOUT_MS)
         else:   # a stall the emulated valves ride out must not fault the controller either

@@ -76,21 +76,21 @@ def _run(args) -> int:
 def _controller_config(path: str | None) -> dict:
     """The file's sections, after the controller's own validation (one line, exit 2, naming
     the file and key); the controller process validates it again when it starts."""
-    if path is None:
-        return {}
     from firmware_py.config import load_config
-    from protocol.tomlconfig import read_toml
-    load_config(path)
-    return read_toml(Path(path))
+    return _config_sections(path, load_config)
 
 
 def _emulator_config(path: str | None) -> dict:
     """As `_controller_config`, for the emulator (the plant: payload, supply, parameters)."""
+    from plant_emulator.params import load_config
+    return _config_sections(path, load_config)
+
+
+def _config_sections(path: str | None, validate) -> dict:
     if path is None:
         return {}
-    from plant_emulator.params import load_config
     from protocol.tomlconfig import read_toml
-    load_config(path)
+    validate(path)
     return read_toml(Path(path))
 
 

@@ -9,6 +9,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from protocol.bus import open_bus
 from protocol.cliutil import number_in_range, output_file
 from protocol.errors import UserInputError
@@ -21,7 +23,6 @@ def _percentiles(values: list[float]) -> dict:
     """p50 / p99 / max of the per-second CPU figures (seconds that carried frames)."""
     if not values:
         return {}
-    import numpy as np
     return {"p50": round(float(np.percentile(values, 50)), 1), "p99": round(float(np.percentile(values, 99)), 1),
             "max": round(max(values), 1), "seconds": len(values)}
 

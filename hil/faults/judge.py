@@ -29,6 +29,9 @@ from .cases import (
     Marks,
 )
 
+# a controlled stop (firmware_py/stopping.py) keeps the healthy legs ACTIVE this long at most
+CONTROLLED_STOP_S = load_config().controlled_stop_s
+
 
 def _mm(value) -> str:
     return "n/a" if value is None or not np.isfinite(value) else f"{value * 1e3:.2f} mm"
@@ -99,9 +102,6 @@ def judge_fault(view: LogView, mark: Marks, baseline: Marks | None, run_dir: Pat
     return passed, measured, {"code": code, "cycles": cycles, "detection_ms": None if cycles is None else
                               round(cycles * view.period_s * 1e3, 1), "excursion_m": excursion,
                               "path_excursion_m": path, "held": held}
-
-# a controlled stop (firmware_py/stopping.py) keeps the healthy legs ACTIVE this long at most
-CONTROLLED_STOP_S = load_config().controlled_stop_s
 
 
 def judge_estop(view: LogView, mark: Marks, baseline: Marks | None, run_dir: Path | None):

@@ -132,8 +132,9 @@ class MonitorApp(App[None]):
         self._frames_mark = 0
         self._cpu_mark = (time.monotonic(), time.process_time(), 0)
         self._started = time.monotonic()
-        self._dk = DirectKinematics(default_geometry())
-        self._leg_min_m = default_geometry().leg_min_m
+        geometry = default_geometry()
+        self._dk = DirectKinematics(geometry)
+        self._leg_min_m = geometry.leg_min_m
         self.shown: Snapshot | None = None
         self._finishing = False
         self.panels: dict[str, Panel] = {}

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import threading
 import time
+from abc import ABC, abstractmethod
 from pathlib import Path
 
 import can
@@ -45,7 +46,7 @@ def check_log(path: str) -> Path:
     raise LogError(f"{path}: no frame of this protocol's DBC in it")
 
 
-class Source:
+class Source(ABC):
     """A thread feeding a BusView; `done` when the source has nothing more."""
 
     def __init__(self, view: BusView):
@@ -70,8 +71,9 @@ class Source:
         finally:
             self.done.set()
 
+    @abstractmethod
     def run(self) -> None:
-        raise NotImplementedError
+        """Feed the view until the source ends or `_stop` is set (in the source's thread)."""
 
 
 class LiveSource(Source):

@@ -47,6 +47,12 @@ COLUMNS = ("position_mm", "force_n", "spool_cmd_pct", "pa_bar", "pb_bar")
 _SCALE = {"position_mm": 1e3, "force_n": 1.0, "spool_cmd_pct": 1e2, "pa_bar": 1e-5, "pb_bar": 1e-5}
 
 
+def _ring_order(written: int, size: int) -> np.ndarray:
+    """Indices of a ring buffer's rows, oldest first, after `written` writes."""
+    n = min(written, size)
+    return (written - n + np.arange(n)) % size
+
+
 def _name(enum, value: float) -> str:
     try:
         return enum(int(value)).name
@@ -335,12 +341,10 @@ class BusView:
 
     # -- reading -----------------------------------------------------------------------
     def _sync_stats(self) -> tuple[float, float, float]:
-        n = min(self._sync_n, len(self._sync_times))
-        if n < 3:
+        order = _ring_order(self._sync_n, len(self._sync_times))
+        if len(order) < 3:
             return float("nan"), float("nan"), float("nan")
-        k = self._sync_n % len(self._sync_times)
-        times = np.concatenate((self._sync_times[k:], self._sync_times[:k]))[-n:]
-        periods = np.diff(times)
+        periods = np.diff(self._sync_times[order])
         nominal = float(np.median(periods))
         error = np.abs(periods - nominal)
         return nominal * 1e6, float(np.percentile(error, 99)) * 1e6, float(error.max()) * 1e6
@@ -379,8 +383,7 @@ class BusView:
         """The per-SYNC rows with end_s - window_s < time <= end_s, oldest first (a copy of
         those rows only: the ring holds a minute)."""
         with self.lock:
-            n = min(self._hist_n, self.rows)
-            order = (self._hist_n - n + np.arange(n)) % self.rows
+            order = _ring_order(self._hist_n, self.rows)
             times = self._hist[order, 0]
             lo = np.searchsorted(times, end_s - window_s, side="right")
             hi = np.searchsorted(times, end_s, side="right")
