@@ -64,6 +64,7 @@ class RunOptions:
     short: bool = False
     controllers: tuple[str, ...] | None = None
     loads: tuple[float, ...] | None = None    # kg; scenarios that sweep loads: these instead of the plan's
+    positions_m: tuple[float, ...] | None = None   # scenarios that step at several positions: these instead
     duration_s: float | None = None  # realtime scenarios: how long
     valve_watchdog_periods: float | None = None   # realtime: the emulated valves' SYNC watchdog
     start_timeout_s: float = START_TIMEOUT_S       # a slow machine (a VM in software emulation) needs more
@@ -287,6 +288,8 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
                                  f"(it runs: {', '.join(scenario.controllers)})")
     if options.loads and not scenario.sweeps_loads:
         raise UserInputError(f"--loads: {scenario.name} does not run at several loads")
+    if options.positions_m:
+        scenario.check_positions(options.positions_m)
     if options.time_scale is not None:
         if not scenario.time_scalable:
             raise UserInputError(f"--time-scale: {scenario.name} has no movement timing to scale "

@@ -7,6 +7,8 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from protocol.errors import UserInputError
+
 from .logdata import LogData
 
 
@@ -69,6 +71,10 @@ class Scenario(ABC):
 
     def chosen_loads(self, run, planned: tuple[float, ...]) -> tuple[float, ...]:
         return run.options.loads or planned
+
+    def check_positions(self, positions_m: tuple[float, ...]) -> None:
+        """`--positions`: only the scenarios that step at several working positions take it."""
+        raise UserInputError(f"--positions: {self.name} does not step at several working positions")
 
     @abstractmethod
     def script(self, run) -> None:

@@ -26,6 +26,7 @@ BAD_TEXT = {
     "--summary": ("/nonexistent/dir/summary.json", "--summary"),
     "--controllers": ("pi,fuzzy", "fuzzy"),
     "--loads": ("3,heavy", "heavy"),
+    "--positions": ("50,high", "high"),
     "--targets": ("decoder,nope", "nope"),
     "--rigs": ("testbench,crane", "crane"),
     "--fit": ("nonsense", "nonsense"),

@@ -131,6 +131,8 @@ def test_the_monitor_replays_the_sha_step_log(sha_step_run):
     (["hil", "run", "sha-step", "--controllers", "pi,fuzzy"], "fuzzy"),
     (["hil", "run", "sha-step", "--controllers", "model-based"], "model-based"),
     (["hil", "run", "pm-circle", "--loads", "3"], "pm-circle"),
+    (["hil", "run", "pm-circle", "--positions", "50"], "pm-circle"),
+    (["hil", "run", "sha-step", "--positions", "50,300"], "300 mm"),
     (["hil", "run", "pm-circle", "--emulator-config", "/nonexistent/plant.toml"], "plant.toml"),
     (["hil", "analyze", "/nonexistent/run.blf", "--scenario", "sha-step"], "run.blf"),
     (["hil", "analyze", "x.txt", "--scenario", "sha-step"], "x.txt"),

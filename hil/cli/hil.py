@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 
+from physics.constants import MM
 from protocol.cliutil import number_in_range
 from protocol.errors import UserInputError
 
@@ -48,6 +50,22 @@ def _loads(text: str | None) -> tuple[float, ...] | None:
     return tuple(loads)
 
 
+def _positions(text: str | None) -> tuple[float, ...] | None:
+    """Comma-separated working positions in mm, as metres (the scenario checks their range)."""
+    if text is None:
+        return None
+    positions = []
+    for item in text.split(","):
+        try:
+            position_mm = float(item)
+        except ValueError:
+            position_mm = float("nan")
+        if not math.isfinite(position_mm):
+            raise UserInputError(f"--positions: {item.strip()!r} is not a stroke in mm")
+        positions.append(position_mm * MM)
+    return tuple(positions)
+
+
 def _finish(args, doc: dict) -> int:
     from ..report import format_budget, format_terminal
     print(json.dumps(doc, indent=1, default=str) if args.json else format_terminal(doc))
@@ -62,6 +80,7 @@ def _run(args) -> int:
     out = Path(args.out) if args.out else Path("hil-out") / scenario.name
     options = RunOptions(out_dir=out, bus=args.bus, pacing=args.pacing, rate_hz=500.0, short=args.short,
                          controllers=_controllers(args.controllers), loads=_loads(args.loads),
+                         positions_m=_positions(args.positions),
                          duration_s=args.duration_s, plots=not args.no_plots,
                          valve_watchdog_periods=args.valve_watchdog_periods, start_timeout_s=args.start_timeout_s,
                          controller_config=_controller_config(args.controller_config),
@@ -165,6 +184,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--controllers", metavar="LIST", help="comma-separated subset of the scenario's controllers")
     p.add_argument("--loads", metavar="LIST",
                    help="comma-separated loads in kg, for the scenarios that run at several (sha-step, sha-tracking)")
+    p.add_argument("--positions", metavar="LIST",
+                   help="comma-separated working positions in mm, for the scenarios that step at several (sha-step)")
     p.add_argument("--duration-s", type=number_in_range(float, 1.0, 86400.0), default=None,
                    help="realtime scenarios: seconds of running (default 60; 10 with --short)")
     p.add_argument("--time-scale", type=number_in_range(float, 0.5, 10.0), default=None,

@@ -6,7 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
+from firmware_py.config import load_config
 from physics.constants import MM
+from protocol.errors import UserInputError
 
 from ..logdata import LogData
 from ..metrics import step_response
@@ -34,6 +36,8 @@ PI_SETTLING_MAX_S = 0.8
 ADAPTIVE_OVERSHOOT_MAX_PCT = 14.0
 ADAPTIVE_SETTLING_MAX_S = 1.5
 PRE_STEP_S = 0.1
+STEP_M = THESIS["step_mm"] * MM
+END_CLEARANCE_M = 10.0 * MM          # `--positions`: the square wave's distance from the end stops
 # Beyond the thesis: the computed-torque controller on the same steps, held to the thesis's
 # adaptive claim (< 14 %, settling <= 1 s) on every step
 NEW_SETTLING_MAX_S = 1.0
@@ -47,21 +51,30 @@ class ShaStep(Scenario):
     controllers = TESTBENCH_CONTROLLERS
 
     def plan(self, short: bool):
-        positions = (50.0, 250.0) if short else (50.0, 150.0, 250.0)
+        positions_m = tuple(p * MM for p in ((50.0, 250.0) if short else (50.0, 150.0, 250.0)))
         loads = (0.0, 6.0) if short else (0.0, 3.0, 6.0)
-        return positions, loads, (1.2 if short else 2.0)
+        return positions_m, loads, (1.2 if short else 2.0)
+
+    def check_positions(self, positions_m: tuple[float, ...]) -> None:
+        """Each square wave stays END_CLEARANCE_M away from the bench cylinder's end stops."""
+        stroke_m = load_config().stroke_m
+        lo, hi = END_CLEARANCE_M, stroke_m - STEP_M - END_CLEARANCE_M
+        for position_m in positions_m:
+            if not lo <= position_m <= hi:
+                raise UserInputError(f"--positions: {position_m / MM:g} mm is outside {lo / MM:g}..{hi / MM:g} mm "
+                                     f"(a {STEP_M / MM:g} mm step on a {stroke_m / MM:g} mm stroke)")
 
     def script(self, run) -> None:
         # At each working position: move there, then a 10 mm square wave up, down, up. Only the
         # last up-step is measured: it alone starts from the same state everywhere.
-        positions, loads, hold_s = self.plan(run.short)
-        here = 0.150
+        planned_m, loads, hold_s = self.plan(run.short)
+        here_m = 0.150
         for _ in each_controller_and_load(run, loads):
-            for position in positions:
-                move_stroke(run, position * MM, settle_s=1.0, from_m=here)
-                for target in (position + THESIS["step_mm"], position, position + THESIS["step_mm"]):
-                    step_stroke(run, target * MM, hold_s)
-                here = (position + THESIS["step_mm"]) * MM
+            for position_m in run.options.positions_m or planned_m:
+                move_stroke(run, position_m, settle_s=1.0, from_m=here_m)
+                for target_m in (position_m + STEP_M, position_m, position_m + STEP_M):
+                    step_stroke(run, target_m, hold_s)
+                here_m = position_m + STEP_M
 
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
         period = 1.0 / rate_hz
