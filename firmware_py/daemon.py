@@ -49,6 +49,7 @@ def run_daemon(args) -> int:
     stop = StopFlag()
     bus = open_bus(spec)
     loop = ControllerLoop(bus, controller, args.rate_hz, args.pacing, log=log)
+    bus.set_filters(loop.decoder.can_filters())       # the CAN controller's acceptance filter
     code = 0
     notes = realtime_setup(cfg, args.pacing == "realtime")
     if notes:

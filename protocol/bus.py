@@ -28,6 +28,7 @@ from pathlib import Path
 import can
 from can.interfaces.udp_multicast.utils import pack_message, unpack_message
 
+from . import udpfilter
 from .errors import UserInputError
 
 BUS_FORMS = ("socketcan:<interface> | udp_multicast:<group>[:<port>] "
@@ -148,6 +149,7 @@ class HostMulticastBus(can.BusABC):
     - own frames are not received back (each bus tags what it sends with a random token
       carried in the frame's `channel` field; a datagram bearing it is dropped unparsed);
     - a datagram that is not a python-can frame is counted in `rx_garbage`, not raised;
+    - `set_filters` runs in the kernel (a BPF acceptance filter), and python-can checks again;
     - classic CAN only (FD frames are rejected on send and dropped on receive);
     - the receive path reads what is queued without a system call to wait, and waits on
       the socket (select, microsecond timeout) only when the queue is empty.
@@ -166,6 +168,12 @@ class HostMulticastBus(can.BusABC):
         self._readable = [self._socket]
         self._destination = (group, port)
         self._cmsg_bytes = socket.CMSG_SPACE(_TIMESPEC.size)
+        self._apply_filters(self._filters)
+
+    def _apply_filters(self, filters) -> None:
+        """In the kernel (`udpfilter`): frames no filter accepts never wake this process."""
+        if hasattr(self, "_socket"):              # BusABC.__init__ sets filters before the socket exists
+            udpfilter.attach(self._socket, filters)
 
     def fileno(self) -> int:
         return self._socket.fileno()

@@ -33,6 +33,8 @@ from . import e2e
 from .dbc import Schedule, load_database, schedule_of, schedules
 from .e2e import RxStatus
 
+STANDARD_ID_MASK = 0x7FF          # the protocol uses 11-bit ids only
+
 # Engineering unit in the DBC -> factor to SI. A unit not listed here fails at import,
 # so a DBC edit cannot silently introduce an unconverted unit.
 UNIT_TO_SI = {
@@ -234,6 +236,11 @@ class FrameDecoder:
         # copied into one of these, one per length so decoding sees exactly dlc bytes.
         self._scratch = tuple(bytearray(length) for length in range(9))
         self._no_new_data = np.int8(RxStatus.NO_NEW_DATA)
+
+    def can_filters(self) -> list[dict]:
+        """python-can acceptance filters for exactly this decoder's messages (standard ids, as
+        the protocol's): `bus.set_filters` keeps every other frame out of the node."""
+        return [{"can_id": c.frame_id, "can_mask": STANDARD_ID_MASK, "extended": False} for c in self.codecs]
 
     def expected_mask(self, names: Iterable[str]) -> np.ndarray:
         """A boolean mask over this decoder's messages, for `end_cycle`."""
