@@ -93,7 +93,8 @@ def resolve_bus(text: str | None) -> BusSpec:
     return parse_bus_spec(text)
 
 
-def _toml(data: dict) -> str:
+def toml_sections(data: dict) -> str:
+    """Config sections as TOML text (the sections of a config file: tables of scalars)."""
     lines = []
     for section, values in data.items():
         lines.append(f"[{section}]")
@@ -133,7 +134,7 @@ class Run:
                               f"{watchdog:g} periods (--valve-watchdog-periods; docs/TIMING.md)")
         name = self._child_name("emulator")
         config = self.out / f"{name}.toml"
-        config.write_text(_toml(merge_sections(self.scenario.emulator_overrides, self.options.emulator_config)))
+        config.write_text(toml_sections(merge_sections(self.scenario.emulator_overrides, self.options.emulator_config)))
         child = Child(name, ["-m", "plant_emulator", "--bus", str(self.spec), "--rig", self.scenario.rig,
                              "--rate-hz", str(self.options.rate_hz), "--load-kg", str(self.scenario.load_kg),
                              "--sync-watchdog-periods", f"{watchdog:g}", "--config", str(config),
@@ -159,7 +160,7 @@ class Run:
             merged.setdefault("timing", {}).setdefault("stall_fault_periods", self.valve_watchdog_periods())
         name = self._child_name("controller")
         config = self.out / f"{name}.toml"
-        config.write_text(_toml(merged))
+        config.write_text(toml_sections(merged))
         child = Child(name, ["-m", "firmware_py", "--bus", str(self.spec), "--rig", self.scenario.rig,
                              "--rate-hz", str(self.options.rate_hz), "--pacing", self.pacing,
                              "--controller", controller, "--config", str(config),

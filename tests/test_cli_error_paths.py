@@ -41,10 +41,13 @@ BAD_TEXT = {
     "--replay": ("/nonexistent/run.blf", "/nonexistent/run.blf"),
     "--snapshot": ("/nonexistent/dir/screen.svg", "--snapshot"),
     "--export-dir": ("/nonexistent/dir", "/nonexistent/dir"),
+    "spec": ("/nonexistent/campaign.toml", "/nonexistent/campaign.toml"),
+    "--scheduler": ("tcp//nohost", "tcp//nohost"),
 }
 OUTPUT_DIRS = ("--out", "--plot")          # given a path below a regular file: cannot be created
 # what a command needs before the option under test is reached
-REQUIRED = {("hil", "run"): ["sha-step"], ("hil", "analyze"): ["{tmp}/run.blf", "--scenario", "sha-step"]}
+REQUIRED = {("hil", "run"): ["sha-step"], ("hil", "analyze"): ["{tmp}/run.blf", "--scenario", "sha-step"],
+            ("campaign", "run"): ["{tmp}/campaign.toml"]}
 
 
 def _walk(parser: argparse.ArgumentParser, path: tuple[str, ...] = ()):
@@ -99,6 +102,7 @@ def _cases(tmp_dir: str):
 def tmp_dir(tmp_path_factory):
     d = tmp_path_factory.mktemp("cli-errors")
     (d / "a-file").write_text("a regular file, not a directory\n")
+    (d / "campaign.toml").write_text('[campaign]\nscenario = "sha-step"\n')      # a valid spec
     with can.Logger(str(d / "run.blf")) as log:           # a small, readable log for `hil analyze`
         for k in range(1, 5):
             log(can.Message(arbitration_id=0x080, data=[k], is_extended_id=False, timestamp=float(k)))

@@ -14,7 +14,7 @@ configure()     # before any kernel is defined (see physics/numba_cache.py)
 
 from protocol.cliutil import OneLineArgumentParser, run  # noqa: E402
 
-from . import controller, design, emulator, hil, kinematics, monitor, protocol  # noqa: E402
+from . import campaign, controller, design, emulator, hil, kinematics, monitor, protocol  # noqa: E402
 
 PROG = "hydrapod"
 
@@ -24,7 +24,7 @@ def build_parser() -> OneLineArgumentParser:
                                                           "Stewart-Gough platform over CAN")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineArgumentParser,
                                 metavar="COMMAND")
-    for module in (protocol, controller, kinematics, emulator, hil, design, monitor):
+    for module in (protocol, controller, kinematics, emulator, hil, campaign, design, monitor):
         module.add_parsers(sub)
     return parser
 

@@ -1,0 +1,112 @@
+"""One campaign run on a worker: `hydrapod hil run` as a process of its own (which starts the
+emulator and the controller on a fresh on-host multicast group and port, hop limit 0), its
+configs written beside its output. A run that fails or hangs comes back as a row with its
+reason and its logs on disk; nothing here raises for a failed run."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from ..runner import toml_sections
+
+METRICS_PREFIX = "metric."
+
+
+def command(task: dict, out: Path) -> list[str]:
+    """The `hydrapod hil run` command line of a task."""
+    params = task["params"]
+    argv = [sys.executable, "-m", "hil.cli", "hil", "run", task["scenario"], "--pacing", "lockstep",
+            "--out", str(out / "run"), "--json", "--no-plots"]
+    if task["short"]:
+        argv.append("--short")
+    if "controller" in params:
+        argv += ["--controllers", params["controller"]]
+    if "load_kg" in params:
+        argv += ["--loads", repr(float(params["load_kg"]))]
+    if "position_mm" in params:
+        argv += ["--positions", repr(float(params["position_mm"]))]
+    if task["controller_config"]:
+        argv += ["--controller-config", str(out / "controller-overrides.toml")]
+    if task["emulator_config"]:
+        argv += ["--emulator-config", str(out / "emulator-overrides.toml")]
+    return argv
+
+
+def flatten_metrics(doc: dict, controller: str | None) -> dict:
+    """Every number the run reports, as `metric.<path>` columns. A level named after the run's
+    controller is dropped, so runs of different controllers share their columns."""
+    row: dict = {}
+
+    def walk(prefix: str, value) -> None:
+        if isinstance(value, dict):
+            for key, item in value.items():
+                if str(key).startswith("_"):
+                    continue
+                walk(prefix if key == controller else f"{prefix}.{key}" if prefix else str(key), item)
+        elif isinstance(value, bool):
+            row[METRICS_PREFIX + prefix] = bool(value)
+        elif isinstance(value, (int, float)):
+            row[METRICS_PREFIX + prefix] = float(value)
+
+    walk("", doc.get("metrics", {}).get("summary", doc.get("metrics", {})))
+    for check in doc.get("checks", []):
+        row[f"check.{check['name']}"] = bool(check["passed"])
+    return row
+
+
+def _attempt_dir(run_dir: Path) -> Path:
+    """A directory of its own for this attempt: a run re-queued after its worker died gets a
+    new one, while the first attempt's orphaned process may still be writing the old."""
+    run_dir.mkdir(parents=True, exist_ok=True)
+    for attempt in range(1000):
+        try:
+            (run_dir / f"attempt-{attempt}").mkdir()
+            return run_dir / f"attempt-{attempt}"
+        except FileExistsError:
+            continue
+    raise RuntimeError(f"{run_dir}: 1000 attempts")
+
+
+def run_one(task: dict) -> dict:
+    """Run one task; its row: parameters, status (ok, failed, hung, error), reason, wall time,
+    output directory, and the run's metrics."""
+    out = _attempt_dir(Path(task["out_dir"]))
+    (out / "task.json").write_text(json.dumps(task, indent=1, default=float))
+    if task["controller_config"]:
+        (out / "controller-overrides.toml").write_text(toml_sections(task["controller_config"]))
+    if task["emulator_config"]:
+        (out / "emulator-overrides.toml").write_text(toml_sections(task["emulator_config"]))
+    row = {"run_id": task["run_id"], **{f"param.{k}": v for k, v in task["params"].items()},
+           "out_dir": str(out), "attempt": int(out.name.split("-")[1]), "worker_pid": os.getpid()}
+    started = time.monotonic()
+    proc = subprocess.Popen(command(task, out), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True, cwd=task.get("cwd"))
+    try:
+        stdout, stderr = proc.communicate(timeout=task["timeout_s"])
+        hung = False
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)              # the run and the daemons it started
+        stdout, stderr = proc.communicate()
+        hung = True
+    row["wall_s"] = round(time.monotonic() - started, 3)
+    (out / "run.stdout.log").write_text(stdout)
+    (out / "run.stderr.log").write_text(stderr)
+    tail = (stderr.strip().splitlines() or [""])[-1][:300]
+    if hung:
+        return {**row, "status": "hung", "passed": False, "reason": f"still running after {task['timeout_s']:g} s"}
+    try:
+        doc = json.loads(stdout)
+    except json.JSONDecodeError:
+        return {**row, "status": "error", "passed": False,
+                "reason": f"exit {proc.returncode}, no metrics: {tail or 'no output'}"}
+    row.update(flatten_metrics(doc, task["params"].get("controller")))
+    failed = [c["name"] for c in doc.get("checks", []) if c.get("required") and not c.get("passed")]
+    passed = bool(doc.get("passed"))
+    reason = doc.get("failure") or ("; ".join(failed) if failed else "")
+    return {**row, "status": "ok" if passed else "failed", "passed": passed, "reason": reason}

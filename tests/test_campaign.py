@@ -1,0 +1,169 @@
+"""Issue 24: HIL campaigns on Dask. The spec is checked whole before anything runs; the smoke
+campaign runs on a LocalCluster of 2 workers and on a real `dask scheduler` with two `dask
+worker` processes, one of them killed mid-run (its run re-queued and completed); the table
+is complete and `--resume` skips what it holds."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pyarrow.csv as pcsv
+import pyarrow.parquet as pq
+import pytest
+
+from hil.campaign.execute import flatten_metrics
+from hil.campaign.spec import SCALES, load_campaign
+from hil.cli import main
+from tests.cli_run import hydrapod
+
+ROOT = Path(__file__).resolve().parents[1]
+SMOKE = ROOT / "hil" / "campaigns" / "smoke.toml"
+ROBUSTNESS = ROOT / "hil" / "campaigns" / "robustness-sha-step.toml"
+BIN = Path(sys.executable).parent
+
+
+def _spec(tmp_path, text: str) -> Path:
+    path = tmp_path / "spec.toml"
+    path.write_text(text)
+    return path
+
+
+GOOD = '[campaign]\nscenario = "sha-step"\n[grid]\ncontroller = ["pi"]\n'
+
+
+@pytest.mark.parametrize("text, culprit", [
+    ('[campaign]\nscenario = "sha-stp"\n', "sha-stp"),
+    ('[campaign]\nscenario = "rt-hexapod"\n', "realtime only"),
+    ('[campaign]\nscenario = "sha-step"\ncolour = 1\n', "campaign.colour"),
+    (GOOD + "[gird]\n", "gird"),
+    (GOOD + "load_kg = [0.0, 99.0]\n", "grid.load_kg"),
+    (GOOD + "position_mm = [300.0]\n", "grid.position_mm"),
+    (GOOD + "supply_bar = []\n", "grid.supply_bar"),
+    (GOOD + "seed = [1.5]\n", "grid.seed"),
+    ('[campaign]\nscenario = "sha-step"\n[grid]\ncontroller = ["model-based"]\n', "model-based"),
+    ('[campaign]\nscenario = "pm-circle"\n[grid]\nload_kg = [3.0]\n', "grid.load_kg"),
+    (GOOD + "[grid.scale]\nviscosity = [1.1]\n", "grid.scale.viscosity"),
+    (GOOD + "[montecarlo]\ndraws = 2\n[montecarlo.scale]\nleakage = 1.5\n", "montecarlo.scale.leakage"),
+    (GOOD + "[montecarlo.scale]\nleakage = 0.2\n", "montecarlo.draws"),
+    (GOOD + "[emulator_config.chambers]\noil_bulk_modulus_bar = -1.0\n", "oil_bulk_modulus_bar"),
+    (GOOD + "[controller_config.nope]\nx = 1\n", "nope"),
+    ("[campaign\n", "not valid TOML"),
+])
+def test_a_bad_spec_is_one_line_and_exit_2_before_anything_runs(text, culprit, tmp_path, capsys):
+    code = main(["campaign", "run", str(_spec(tmp_path, text)), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and culprit in err[0] and "Traceback" not in err[0], err
+    assert not (tmp_path / "out" / "runs").exists()
+
+
+def test_the_shipped_specs_check_and_count_their_runs(capsys):
+    assert main(["campaign", "check", str(SMOKE)]) == 0
+    assert "4 runs" in capsys.readouterr().out
+    robustness = load_campaign(ROBUSTNESS)
+    runs = robustness.runs()
+    assert len(runs) == 11 * 3 * 2 * 2                       # Table A.3's 33 points x 2 controllers x 2 draws
+    assert len({r.run_id for r in runs}) == len(runs)
+    assert [r.params for r in load_campaign(ROBUSTNESS).runs()] == [r.params for r in runs]   # seeded draws
+    factors = [r.params[f"scale.{g}"] for r in runs for g in ("stiffness", "leakage", "flow_gain")]
+    assert min(factors) >= 0.8 and max(factors) <= 1.2 and len(set(factors)) > 100
+
+
+def test_a_runs_emulator_sections_scale_the_nominal_plant():
+    from plant_emulator.params import load_raw
+    nominal = load_raw(None, None)
+    campaign = load_campaign(SMOKE)
+    params = {"controller": "pi", "scale.stiffness": 1.1, "scale.flow_gain": 0.9, "supply_bar": 30.0, "noise": 2.0}
+    sections = campaign.emulator_sections(params, nominal)
+    for section, key in SCALES["stiffness"]:
+        assert sections[section][key] == pytest.approx(1.1 * nominal[section][key])
+    assert sections["valve"]["edge_flow_l_min"] == pytest.approx(0.9 * nominal["valve"]["edge_flow_l_min"])
+    assert sections["actuator"]["supply_pressure_bar"] == 30.0
+    assert sections["sensors"]["load_cell_noise_n"] == pytest.approx(2.0 * nominal["sensors"]["load_cell_noise_n"])
+    load_raw(None, sections)                                 # the emulator takes them
+
+
+def test_metrics_flatten_without_the_controllers_level():
+    doc = {"metrics": {"summary": {"pi": {"overshoot_pct_max": 20.0, "steps": 1}}},
+           "checks": [{"name": "PI overshoot", "passed": True}]}
+    assert flatten_metrics(doc, "pi") == {"metric.overshoot_pct_max": 20.0, "metric.steps": 1.0,
+                                          "check.PI overshoot": True}
+
+
+def _table(out: Path) -> list[dict]:
+    rows = pq.read_table(out / "results.parquet").to_pylist()
+    assert pcsv.read_csv(out / "results.csv").num_rows == len(rows)
+    return rows
+
+
+@pytest.mark.hil
+def test_the_smoke_campaign_on_a_local_cluster_of_two_workers_and_resume(tmp_path):
+    out = tmp_path / "smoke"
+    proc = hydrapod("campaign", "run", SMOKE, "--workers", "2", "--out", out, "--json")
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    summary = json.loads(proc.stdout)
+    assert summary["runs"] == summary["ok"] == 4 and summary["workers"] == 2
+    rows = _table(out)
+    assert len(rows) == 4 and all(r["status"] == "ok" and r["passed"] for r in rows)
+    assert {r["param.controller"] for r in rows} == {"pi", "adaptive"}
+    assert all(r["metric.overshoot_pct_max"] > 0 and Path(r["out_dir"], "run", "metrics.json").is_file()
+               for r in rows)
+    # each run on its own plant: the emulator config it was given
+    assert len({Path(r["out_dir"], "emulator-overrides.toml").read_text() for r in rows}) == 4
+    assert (out / "report.md").is_file() and list(out.glob("dist_*.png"))
+    again = hydrapod("campaign", "run", SMOKE, "--out", out, "--resume", "--json")
+    assert again.returncode == 0, again.stderr[-2000:]
+    resumed = json.loads(again.stdout)
+    assert resumed["ran"] == 0 and resumed["skipped"] == 4 and len(_table(out)) == 4
+    refused = hydrapod("campaign", "run", SMOKE, "--out", out)
+    assert refused.returncode == 2 and "--resume" in refused.stderr
+
+
+def _start(argv: list[str], log: Path) -> subprocess.Popen:
+    return subprocess.Popen(argv, stdout=open(log, "w"), stderr=subprocess.STDOUT, cwd=ROOT, start_new_session=True)
+
+
+@pytest.mark.hil
+def test_the_smoke_campaign_on_a_dask_scheduler_survives_a_killed_worker(tmp_path):
+    """`dask scheduler` and two `dask worker` processes on localhost; one worker is killed
+    (SIGKILL) once runs are under way: its run is re-queued on the other and completes."""
+    scheduler_file = tmp_path / "scheduler.json"
+    procs = [_start([str(BIN / "dask"), "scheduler", "--scheduler-file", str(scheduler_file), "--port", "0",
+                     "--host", "127.0.0.1", "--no-dashboard"], tmp_path / "scheduler.log")]
+    try:
+        deadline = time.monotonic() + 60
+        while not scheduler_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        address = json.loads(scheduler_file.read_text())["address"]
+        for k in range(2):
+            procs.append(_start([str(BIN / "dask"), "worker", address, "--nworkers", "1", "--nthreads", "1",
+                                 "--no-dashboard", "--name", f"w{k}"], tmp_path / f"worker{k}.log"))
+        out = tmp_path / "smoke"
+        campaign = subprocess.Popen([str(BIN / "hydrapod"), "campaign", "run", str(SMOKE), "--scheduler", address,
+                                     "--out", str(out), "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                    text=True, cwd=ROOT)
+        # both workers busy: each has an attempt directory of a run under way
+        deadline = time.monotonic() + 120
+        while len(list(out.glob("runs/*/attempt-0"))) < 2 and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert len(list(out.glob("runs/*/attempt-0"))) >= 2, (tmp_path / "worker0.log").read_text()[-2000:]
+        os.killpg(procs[1].pid, signal.SIGKILL)             # the worker (its nanny and process) dies
+        stdout, stderr = campaign.communicate(timeout=600)
+        assert campaign.returncode == 0, stdout[-2000:] + stderr[-3000:]
+        rows = _table(out)
+        assert len(rows) == 4 and all(r["status"] == "ok" for r in rows), [(r["status"], r["reason"]) for r in rows]
+        assert any(r["attempt"] >= 1 for r in rows)          # the killed worker's run ran again
+    finally:
+        for proc in procs:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGTERM)
+        for proc in procs:
+            try:
+                proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
