@@ -13,6 +13,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pyarrow.csv as pcsv
 import pyarrow.parquet as pq
 import pytest
@@ -54,6 +55,7 @@ GOOD = '[campaign]\nscenario = "sha-step"\n[grid]\ncontroller = ["pi"]\n'
     (GOOD + "[emulator_config.chambers]\noil_bulk_modulus_bar = -1.0\n", "oil_bulk_modulus_bar"),
     (GOOD + "[controller_config.nope]\nx = 1\n", "nope"),
     ("[campaign\n", "not valid TOML"),
+    ('[campaign]\nscenario = "pm-circle"\ncompare = "design-robustness"\n', "campaign.compare"),
 ])
 def test_a_bad_spec_is_one_line_and_exit_2_before_anything_runs(text, culprit, tmp_path, capsys):
     code = main(["campaign", "run", str(_spec(tmp_path, text)), "--out", str(tmp_path / "out")])
@@ -115,7 +117,8 @@ def test_the_smoke_campaign_on_a_local_cluster_of_two_workers_and_resume(tmp_pat
                for r in rows)
     # each run on its own plant: the emulator config it was given
     assert len({Path(r["out_dir"], "emulator-overrides.toml").read_text() for r in rows}) == 4
-    assert (out / "report.md").is_file() and list(out.glob("dist_*.png"))
+    report = (out / "report.md").read_text()
+    assert "the linear loop on Table A.3's plants" in report and list(out.glob("dist_*.png"))
     again = hydrapod("campaign", "run", SMOKE, "--out", out, "--resume", "--json")
     assert again.returncode == 0, again.stderr[-2000:]
     resumed = json.loads(again.stdout)
@@ -167,3 +170,27 @@ def test_the_smoke_campaign_on_a_dask_scheduler_survives_a_killed_worker(tmp_pat
                 proc.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 os.killpg(proc.pid, signal.SIGKILL)
+
+
+def test_the_linear_step_prediction_matches_an_ode_integration_of_the_loop():
+    """`design robustness`'s step on a plant (scipy.signal on T = L/(1+L)) against the same
+    loop integrated as ODEs: y''' = -b1 y'' - b0 y' + k01 b0 u, u = Kp e + Ki (integral of e)."""
+    from scipy.integrate import solve_ivp
+
+    from hil.design.plants import table_a3_plants
+    from hil.design.robustness import step_on_plant
+    from hil.metrics import step_response
+    plant = table_a3_plants()[5]
+    kp, ki, step = 0.085e3, 0.46e3, 0.010
+
+    def loop(_, s):
+        x, v, a, z = s
+        u = kp * (step - x) + ki * z
+        return [v, a, -plant.b1 * a - plant.b0 * v + plant.k01 * plant.b0 * u, step - x]
+
+    t = np.linspace(0.0, 3.0, 3001)
+    y = solve_ivp(loop, (0.0, 3.0), [0.0, 0.0, 0.0, 0.0], t_eval=t, rtol=1e-9, atol=1e-12).y[0]
+    ode = step_response(t, y, 0.0, step)
+    linear = step_on_plant(plant, kp, ki)
+    assert linear["overshoot_pct"] == pytest.approx(ode["overshoot_pct"], abs=0.05)
+    assert linear["settling_s"] == pytest.approx(ode["settling_s"], abs=0.002)

@@ -46,27 +46,59 @@ def summarize(rows: list[dict], chosen: tuple[str, ...]) -> dict:
             mine = [r for r in ok if str(r.get("param.controller", "-")) == controller]
             values = _numbers(mine, metric)
             finite = np.isfinite(values)
-            if not finite.any():
+            beyond = np.isposinf(values)               # e.g. a settling time: never within the window
+            if not finite.any() and not beyond.any():
                 continue
-            worst = int(np.nanargmax(values))
+            worst = int(np.flatnonzero(beyond)[0]) if beyond.any() else int(np.nanargmax(values))
             table.setdefault(metric.removeprefix(METRICS_PREFIX), {})[controller] = {
-                "n": int(finite.sum()), "mean": float(np.nanmean(values)), "min": float(np.nanmin(values)),
+                "n": int(finite.sum() + beyond.sum()), "never": int(beyond.sum()),
+                "mean": float(np.mean(values[finite])) if finite.any() else math.nan,
+                "min": float(np.min(values[finite])) if finite.any() else math.nan,
+                "max_finite": float(np.max(values[finite])) if finite.any() else math.nan,
                 "max": float(values[worst]), "worst_run": mine[worst]["run_id"], "worst_dir": mine[worst]["out_dir"]}
     return table
 
 
-def write_report(out: Path, rows: list[dict], summary: dict, chosen: tuple[str, ...], plots: bool = True) -> Path:
+def design_robustness(table: dict, controller_config: dict) -> str:
+    """sha-step: the PI's empirical worst overshoot and settling beside the linear PI loop's
+    on Table A.3's 33 identified plants, with the controller's PI gains."""
+    from firmware_py.config import load_config
+
+    from ..design.plants import table_a3_plants
+    from ..design.robustness import steps_on_plants
+    cfg = load_config(None, controller_config or None)
+    linear = steps_on_plants(table_a3_plants(), cfg.pi_kp, cfg.pi_ki)
+    pi_os = table.get("overshoot_pct_max", {}).get("pi", {})
+    pi_ts = table.get("settling_s_max", {}).get("pi", {})
+    if not pi_os or not pi_ts:
+        return "no PI run with overshoot and settling in the table"
+    settled = f"{pi_ts['max_finite']:.2f} s" + (f" ({pi_ts['never']} never within the window)"
+                                                 if pi_ts["never"] else "")
+    return (f"PI, worst over the runs: overshoot {pi_os['max']:.1f} %, settling {settled}; "
+            f"the linear loop on Table A.3's plants: overshoot {linear['overshoot_pct_min']:.1f}-"
+            f"{linear['overshoot_pct_max']:.1f} % (worst {linear['overshoot_worst_plant']}), settling at most "
+            f"{linear['settling_s_max']:.2f} s ({linear['settling_worst_plant']}).")
+
+
+def write_report(out: Path, rows: list[dict], summary: dict, chosen: tuple[str, ...], plots: bool = True,
+                 compare: str | None = None, controller_config: dict | None = None) -> Path:
     table = summarize(rows, chosen)
+    comparison = design_robustness(table, controller_config or {}) if compare == "design-robustness" else ""
     figures = _plots(out, rows, chosen) if plots and rows else []
     lines = [f"# Campaign {summary['campaign']} ({summary['scenario']})", "",
              f"{summary['runs']} runs: {summary['ok']} ok, {summary['failed']} failed, {summary['hung']} hung, "
-             f"{summary['error']} errors; {summary['ran']} ran now on {summary['workers']} workers in "
-             f"{summary['wall_s']} s ({summary['runs_per_minute']} runs/min). Table: `results.parquet`, `results.csv`.",
-             "", "| metric | controller | runs | mean | min | max (worst run) |", "|---|---|---|---|---|---|"]
+             f"{summary['error']} errors; " + (f"{summary['ran']} ran now on {summary['workers']} workers in "
+                                               f"{summary['wall_s']} s ({summary['runs_per_minute']} runs/min)"
+                                               if summary["ran"] else "none ran now (all in the table)")
+             + ". Table: `results.parquet`, `results.csv`.",
+             "", "| metric | controller | runs | mean | min | max | never settled / inf | worst run |",
+             "|---|---|---|---|---|---|---|---|"]
     for metric, per in table.items():
         for controller, s in per.items():
             lines.append(f"| {metric} | {controller} | {s['n']} | {s['mean']:.4g} | {s['min']:.4g} | "
-                         f"{s['max']:.4g} ([{s['worst_run']}]({Path(s['worst_dir']).relative_to(out.resolve())})) |")
+                         f"{s['max_finite']:.4g} | {s['never']} | [{s['worst_run']}]({_rel(out, s['worst_dir'])}) |")
+    if comparison:
+        lines += ["", "## Beside the linear prediction (`hydrapod design robustness`)", "", comparison]
     bad = [r for r in rows if r.get("status") != "ok"]
     if bad:
         lines += ["", "## Runs not ok", "", "| run | status | reason |", "|---|---|---|"]

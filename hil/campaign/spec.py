@@ -7,6 +7,7 @@ unknown scenario is one line naming the file and the key (exit 2).
     short = true
     timeout_s = 600              # a run still going after this is stopped and recorded as hung
     metrics = ["overshoot_pct_max", "settling_s_max"]   # reported and plotted (default: all)
+    compare = "design-robustness"  # sha-step: the PI's worst beside the linear prediction
 
     [grid]                       # every combination of these lists
     controller = ["pi", "adaptive"]
@@ -60,6 +61,7 @@ GRID_KEYS = {"controller": str, "load_kg": (0.0, 20.0), "position_mm": (0.0, 304
 SCALE_RANGE = (0.1, 10.0)            # a grid scale factor
 SPREAD_RANGE = (0.0, 0.9)            # a Monte-Carlo half-width
 MAX_RUNS = 100_000
+COMPARISONS = {"design-robustness": "sha-step"}      # a prediction the report sets beside the runs
 SECTIONS = ("campaign", "grid", "montecarlo", "controller_config", "emulator_config")
 
 
@@ -86,6 +88,7 @@ class Campaign:
     short: bool
     timeout_s: float
     metrics: tuple[str, ...]
+    compare: str | None
     grid: dict
     draws: int
     draw_seed: int
@@ -173,7 +176,8 @@ def load_campaign(path: str | Path) -> Campaign:
     source = str(path)
     raw = read_toml(path, SpecError)
     _only(source, "", raw, SECTIONS)
-    head = _only(source, "campaign", raw.get("campaign", {}), ("name", "scenario", "short", "timeout_s", "metrics"))
+    head = _only(source, "campaign", raw.get("campaign", {}),
+                 ("name", "scenario", "short", "timeout_s", "metrics", "compare"))
     scenario_name = head.get("scenario")
     if not isinstance(scenario_name, str):
         raise _fail(source, "campaign.scenario", "missing (a name from `hydrapod hil list`)")
@@ -190,6 +194,10 @@ def load_campaign(path: str | Path) -> Campaign:
     metrics = head.get("metrics", [])
     if not isinstance(metrics, list) or not all(isinstance(m, str) for m in metrics):
         raise _fail(source, "campaign.metrics", "is not a list of metric names")
+    compare = head.get("compare")
+    if compare is not None and (compare not in COMPARISONS or scenario_name not in COMPARISONS[compare]):
+        raise _fail(source, "campaign.compare", f"{compare!r}: not a comparison for {scenario_name} "
+                                                f"(known: {', '.join(f'{k} ({v})' for k, v in COMPARISONS.items())})")
 
     grid_raw = _only(source, "grid", raw.get("grid", {}), (*GRID_KEYS, "scale"))
     grid: dict = {}
@@ -242,7 +250,8 @@ def load_campaign(path: str | Path) -> Campaign:
             raise _fail(source, name, str(error)) from None
 
     campaign = Campaign(name=str(head.get("name", path.stem)), scenario=scenario_name, short=short,
-                        timeout_s=timeout_s, metrics=tuple(metrics), grid=grid, draws=draws, draw_seed=draw_seed,
+                        timeout_s=timeout_s, metrics=tuple(metrics), compare=compare, grid=grid, draws=draws,
+                        draw_seed=draw_seed,
                         spreads=spreads, controller_config=controller_config, emulator_config=emulator_config,
                         source=source)
     count = (math.prod(len(v) for v in grid.values()) if grid else 1) * max(draws, 1)

@@ -28,7 +28,8 @@ def _run(args) -> int:
     summary = run_campaign(campaign, out, scheduler=args.scheduler, workers=args.workers, resume=args.resume)
     from ..campaign.engine import read_results
     rows = read_results(out)
-    summary["report"] = str(write_report(out, rows, summary, campaign.metrics, plots=not args.no_plots))
+    summary["report"] = str(write_report(out, rows, summary, campaign.metrics, plots=not args.no_plots,
+                                         compare=campaign.compare, controller_config=campaign.controller_config))
     if args.json:
         from ..campaign.report import summarize
         print(json.dumps({**summary, "metrics": summarize(rows, campaign.metrics)}, indent=1, default=str))

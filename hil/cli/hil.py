@@ -31,39 +31,35 @@ def _controllers(text: str | None) -> tuple[str, ...] | None:
     return names
 
 
+def _number_list(text: str, option: str, valid, what: str) -> tuple[float, ...]:
+    """Comma-separated numbers, each `valid`; else one line naming the item."""
+    values = []
+    for item in text.split(","):
+        try:
+            value = float(item)
+        except ValueError:
+            value = float("nan")
+        if not valid(value):
+            raise UserInputError(f"{option}: {item.strip()!r} is not {what}")
+        values.append(value)
+    return tuple(values)
+
+
 def _loads(text: str | None) -> tuple[float, ...] | None:
     """Comma-separated masses in kg, each within what EMU_CTRL's LOAD_MASS carries."""
     if text is None:
         return None
     from protocol.codec import CODECS
     signal = CODECS["EMU_CTRL"].signals[CODECS["EMU_CTRL"].index["LOAD_MASS"]]
-    loads = []
-    for item in text.split(","):
-        try:
-            load = float(item)
-        except ValueError:
-            load = float("nan")
-        if not signal.minimum <= load <= signal.maximum:
-            raise UserInputError(f"--loads: {item.strip()!r} is not a mass in "
-                                 f"{signal.minimum:g}..{signal.maximum:g} {signal.unit}")
-        loads.append(load)
-    return tuple(loads)
+    return _number_list(text, "--loads", lambda kg: signal.minimum <= kg <= signal.maximum,
+                        f"a mass in {signal.minimum:g}..{signal.maximum:g} {signal.unit}")
 
 
 def _positions(text: str | None) -> tuple[float, ...] | None:
     """Comma-separated working positions in mm, as metres (the scenario checks their range)."""
     if text is None:
         return None
-    positions = []
-    for item in text.split(","):
-        try:
-            position_mm = float(item)
-        except ValueError:
-            position_mm = float("nan")
-        if not math.isfinite(position_mm):
-            raise UserInputError(f"--positions: {item.strip()!r} is not a stroke in mm")
-        positions.append(position_mm * MM)
-    return tuple(positions)
+    return tuple(mm * MM for mm in _number_list(text, "--positions", math.isfinite, "a stroke in mm"))
 
 
 def _finish(args, doc: dict) -> int:

@@ -77,7 +77,8 @@ def robustness_doc(plants: list[Plant], source: str, kp_v_mm: float, ki_v_mm_s: 
           "thesis_poles": _complex(thesis_poles),
           "thesis_poles_imply": {"b1": float(implied[1]), "b0": float(implied[2]),
                                  "kp_v_mm": float(implied[3] / kb_mm), "ki_v_mm_s": float(implied[4] / kb_mm)},
-          "every_plant_stabilised": worst < 0, "slowest_pole_real_over_set": worst}
+          "every_plant_stabilised": worst < 0, "slowest_pole_real_over_set": worst,
+          "steps_on_plants": rb.steps_on_plants(plants, kp, ki)}
 
     w = rb.grid()
     errors = rb.multiplicative_error(plants, p0, w)
@@ -139,7 +140,11 @@ def format_robustness(doc: dict) -> str:
               "those of a smaller Ki than the one it states",
               "- ||map||inf of eq. 7.17-7.20 (SI): " + ", ".join(f"{k} {v:.4g}" for k, v in pi["map_hinf"].items()),
               f"- every plant of the set stabilised by this PI: {pi['every_plant_stabilised']} "
-              f"(slowest pole over the set: Re {pi['slowest_pole_real_over_set']:.3f} 1/s)", "",
+              f"(slowest pole over the set: Re {pi['slowest_pole_real_over_set']:.3f} 1/s)",
+              f"- its 10 mm step on each plant of the set (linear): overshoot "
+              f"{pi['steps_on_plants']['overshoot_pct_min']:.1f}-{pi['steps_on_plants']['overshoot_pct_max']:.1f} % "
+              f"(worst {pi['steps_on_plants']['overshoot_worst_plant']}), settling (5 %) at most "
+              f"{pi['steps_on_plants']['settling_s_max']:.2f} s ({pi['steps_on_plants']['settling_worst_plant']})", "",
               "## Multiplicative uncertainty and robust stability (eq. 7.14-7.15, 7.22)", "",
               f"- largest |P/P0 - 1| over w in {u['range_rad_s']} rad/s: {u['max_error']:.3f} at "
               f"{u['max_error_at_rad_s']:.1f} rad/s",

@@ -194,6 +194,25 @@ def sensitivity(plant: Plant, kp: float, ki: float) -> tuple[np.ndarray, np.ndar
     return dl, np.polyadd(dl, nl)
 
 
+def step_on_plant(plant: Plant, kp: float, ki: float, step_m: float = 0.010, t_end_s: float = 3.0) -> dict:
+    """The linear loop's step response (T = L / (1 + L)) on one plant: overshoot (%) and
+    settling (5 %) as the HIL analysis measures them (`hil.metrics.step_response`)."""
+    from ..metrics import step_response
+    t = np.linspace(0.0, t_end_s, 3001)
+    _, y = signal.step(complementary(plant, kp, ki), T=t)
+    return step_response(t, y * step_m, 0.0, step_m)
+
+
+def steps_on_plants(plants: list[Plant], kp: float, ki: float) -> dict:
+    """The worst overshoot and settling of the linear PI loop over a plant set."""
+    rows = [(p, step_on_plant(p, kp, ki)) for p in plants]
+    worst_os = max(rows, key=lambda r: r[1]["overshoot_pct"])
+    worst_ts = max(rows, key=lambda r: r[1]["settling_s"])
+    return {"overshoot_pct_max": worst_os[1]["overshoot_pct"], "overshoot_worst_plant": worst_os[0].label,
+            "overshoot_pct_min": min(r[1]["overshoot_pct"] for r in rows),
+            "settling_s_max": worst_ts[1]["settling_s"], "settling_worst_plant": worst_ts[0].label}
+
+
 def small_gain(plant: Plant, kp: float, ki: float, w1: tuple[np.ndarray, np.ndarray]) -> tuple[float, float]:
     """||W1 T||inf (eq. 7.22, Theorem 2): <= 1 means robustly stable for every plant in the set."""
     nt, dt = complementary(plant, kp, ki)
