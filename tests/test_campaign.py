@@ -56,6 +56,8 @@ GOOD = '[campaign]\nscenario = "sha-step"\n[grid]\ncontroller = ["pi"]\n'
     (GOOD + "[controller_config.nope]\nx = 1\n", "nope"),
     ("[campaign\n", "not valid TOML"),
     ('[campaign]\nscenario = "pm-circle"\ncompare = "design-robustness"\n', "campaign.compare"),
+    (GOOD + '[grid.controller_config]\n"pi.kp_v_mm" = [500.0]\n', "grid.controller_config.pi.kp_v_mm"),
+    (GOOD + '[grid.emulator_config]\n"valve" = [1.0]\n', "grid.emulator_config.valve"),
 ])
 def test_a_bad_spec_is_one_line_and_exit_2_before_anything_runs(text, culprit, tmp_path, capsys):
     code = main(["campaign", "run", str(_spec(tmp_path, text)), "--out", str(tmp_path / "out")])
@@ -74,6 +76,16 @@ def test_the_shipped_specs_check_and_count_their_runs(capsys):
     assert [r.params for r in load_campaign(ROBUSTNESS).runs()] == [r.params for r in runs]   # seeded draws
     factors = [r.params[f"scale.{g}"] for r in runs for g in ("stiffness", "leakage", "flow_gain")]
     assert min(factors) >= 0.8 and max(factors) <= 1.2 and len(set(factors)) > 100
+
+
+@pytest.mark.parametrize("table", ['"pi.kp_v_mm" = [0.06, 0.085]', "pi.kp_v_mm = [0.06, 0.085]"])
+def test_a_grid_over_a_config_key_gives_each_run_its_value(table, tmp_path):
+    from hil.campaign.engine import tasks
+    campaign = load_campaign(_spec(tmp_path, GOOD + "[grid.controller_config]\n" + table + "\n"
+                                   "[grid.emulator_config]\n\"valve.spool_time_constant_ms\" = [3.0]\n"))
+    runs = tasks(campaign, tmp_path / "out")
+    assert sorted(t["controller_config"]["pi"]["kp_v_mm"] for t in runs) == [0.06, 0.085]
+    assert all(t["emulator_config"]["valve"]["spool_time_constant_ms"] == 3.0 for t in runs)
 
 
 def test_a_runs_emulator_sections_scale_the_nominal_plant():

@@ -6,6 +6,8 @@ import ast
 from collections import Counter
 from pathlib import Path
 
+import pytest
+
 TESTS_DIR = Path(__file__).resolve().parent
 
 
@@ -70,3 +72,12 @@ def test_guard_detects_shadowing_and_stray_files(tmp_path):
                    "def test_a():\n    pass\n")
     assert _redefined(src) == ["test_a"]
     assert _defined_tests(src) == {"test_a", "test_b"}
+
+
+@pytest.mark.xdist_group("integrity-check")
+def test_xdist_groups_reach_the_scheduler(request):
+    """Tests sharing one module-scoped run (an xdist_group) go to one worker only if xdist
+    tags their node ids with the group: a pytest that ignores the tag (9.x with xdist 3.8)
+    splits them, and each worker repeats the run."""
+    if request.config.getoption("dist", "no") == "loadgroup":
+        assert request.node.nodeid.endswith("@integrity-check"), request.node.nodeid

@@ -61,7 +61,7 @@ def tasks(campaign: Campaign, out: Path) -> list[dict]:
     nominal = load_raw(None, None)
     return [{"run_id": run.run_id, "params": run.params, "scenario": campaign.scenario, "short": campaign.short,
              "timeout_s": campaign.timeout_s, "out_dir": str((out / "runs" / run.run_id).resolve()),
-             "controller_config": campaign.controller_config,
+             "controller_config": campaign.controller_sections(run.params),
              "emulator_config": campaign.emulator_sections(run.params, nominal), "cwd": str(ROOT)}
             for run in campaign.runs()]
 

@@ -19,6 +19,10 @@ unknown scenario is one line naming the file and the key (exit 2).
     seed = [1]                   # the emulator's noise seed
     [grid.scale]                 # plant parameters, x their emulator value
     leakage = [0.8, 1.2]
+    [grid.controller_config]     # any controller config key, "section.key" = values
+    "pi.kp_v_mm" = [0.06, 0.085]
+    [grid.emulator_config]       # any emulator config key, the same way
+    "valve.spool_time_constant_ms" = [1.5, 3.0]
 
     [montecarlo]                 # draws for every grid point
     draws = 4
@@ -114,10 +118,15 @@ class Campaign:
                 runs.append(Run(params))
         return runs
 
+    def controller_sections(self, params: dict) -> dict:
+        """The run's controller config sections: the campaign's, then its grid's keys."""
+        return _with_keys(self.controller_config, params, "controller_config.")
+
     def emulator_sections(self, params: dict, nominal: dict) -> dict:
-        """The run's emulator config sections: the campaign's, then supply, payload, noise,
-        seed and the scaled plant parameters (`nominal`: the emulator's values, thesis units)."""
-        sections = {s: dict(v) for s, v in self.emulator_config.items()}
+        """The run's emulator config sections: the campaign's and its grid's keys, then supply,
+        payload, noise, seed and the scaled plant parameters (`nominal`: the emulator's values,
+        thesis units)."""
+        sections = _with_keys(self.emulator_config, params, "emulator_config.")
 
         def put(section: str, key: str, value) -> None:
             sections.setdefault(section, {})[key] = value
@@ -140,6 +149,16 @@ class Campaign:
                 for section, key in pairs:
                     put(section, key, base(section, key) * float(factor))
         return sections
+
+
+def _with_keys(sections: dict, params: dict, prefix: str) -> dict:
+    """`sections` with the params named `<prefix><section>.<key>` set."""
+    out = {section: dict(values) for section, values in sections.items()}
+    for name, value in params.items():
+        if name.startswith(prefix):
+            section, key = name.removeprefix(prefix).split(".", 1)
+            out.setdefault(section, {})[key] = value
+    return out
 
 
 def _fail(source: str, where: str, why: str) -> SpecError:
@@ -168,6 +187,46 @@ def _list(source: str, where: str, value) -> list:
     if not isinstance(value, list) or not value:
         raise _fail(source, where, "is not a non-empty list")
     return value
+
+
+def _config_grid(source: str, table: str, values) -> dict:
+    """`[grid.controller_config]` / `[grid.emulator_config]`: "section.key" = [values], each
+    value checked by that config's own validation."""
+    if not isinstance(values, dict):
+        raise _fail(source, f"grid.{table}", "is not a table of \"section.key\" = [values]")
+    load = CONFIG_GRIDS[table]()
+    grid = {}
+    flat = {}
+    for name, options in values.items():          # "section.key" = [...], or section.key = [...] (nested)
+        if isinstance(options, dict):
+            flat.update({f"{name}.{key}": v for key, v in options.items()})
+        else:
+            flat[name] = options
+    for name, options in flat.items():
+        where = f"grid.{table}.{name}"
+        if not isinstance(name, str) or name.count(".") != 1:
+            raise _fail(source, where, "not \"section.key\"")
+        section, key = name.split(".")
+        for value in _list(source, where, options):
+            try:
+                load(None, {section: {key: value}})
+            except UserInputError as error:
+                raise _fail(source, where, str(error)) from None
+        grid[f"{table}.{name}"] = list(options)
+    return grid
+
+
+def _controller_loader():
+    from firmware_py.config import load_config
+    return load_config
+
+
+def _emulator_loader():
+    from plant_emulator.params import load_raw
+    return load_raw
+
+
+CONFIG_GRIDS = {"controller_config": _controller_loader, "emulator_config": _emulator_loader}
 
 
 def load_campaign(path: str | Path) -> Campaign:
@@ -199,9 +258,12 @@ def load_campaign(path: str | Path) -> Campaign:
         raise _fail(source, "campaign.compare", f"{compare!r}: not a comparison for {scenario_name} "
                                                 f"(known: {', '.join(f'{k} ({v})' for k, v in COMPARISONS.items())})")
 
-    grid_raw = _only(source, "grid", raw.get("grid", {}), (*GRID_KEYS, "scale"))
+    grid_raw = _only(source, "grid", raw.get("grid", {}), (*GRID_KEYS, "scale", *CONFIG_GRIDS))
     grid: dict = {}
     for key, values in grid_raw.items():
+        if key in CONFIG_GRIDS:
+            grid.update(_config_grid(source, key, values))
+            continue
         if key == "scale":
             _only(source, "grid.scale", values, tuple(SCALES))
             for name, factors in values.items():
@@ -260,6 +322,7 @@ def load_campaign(path: str | Path) -> Campaign:
     nominal = emulator_load(None, None)
     for run in campaign.runs()[:1]:            # the scaled keys exist and stay in range
         try:
+            controller_load(None, campaign.controller_sections(run.params) or None)
             emulator_load(None, campaign.emulator_sections(run.params, nominal))
         except UserInputError as error:
             raise _fail(source, "grid", str(error)) from None
