@@ -19,7 +19,7 @@ from pathlib import Path
 
 from firmware_py.control import CONTROLLER_NAMES
 from protocol.bus import BusSpec, default_bus_spec, open_bus, parse_bus_spec
-from protocol.enums import Ack, Command, Fault, State
+from protocol.enums import Ack, Command, EmuCommand, EmuFault, Fault, State
 from protocol.errors import UserInputError
 from protocol.realtime import freeze_gc, thaw_gc
 
@@ -65,6 +65,7 @@ class RunOptions:
     controllers: tuple[str, ...] | None = None
     loads: tuple[float, ...] | None = None    # kg; scenarios that sweep loads: these instead of the plan's
     positions_m: tuple[float, ...] | None = None   # scenarios that step at several positions: these instead
+    inject: tuple[tuple[str, int, int], ...] = ()   # emulator faults (EMU_CTRL name, target, param) at the start
     duration_s: float | None = None  # realtime scenarios: how long
     valve_watchdog_periods: float | None = None   # realtime: the emulated valves' SYNC watchdog
     start_timeout_s: float = START_TIMEOUT_S       # a slow machine (a VM in software emulation) needs more
@@ -319,6 +320,9 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
     try:
         run.start_emulator()
         run.start_controller(scenario.first_controller(options.controllers, options.short))
+        for fault, target, param in options.inject:      # a plant or sensor fault for the whole experiment
+            run.host.emulator(EmuCommand.INJECT_FAULT, target=target, fault=EmuFault[fault], param=param)
+            run.notes.append(f"injected {fault} on node {target} (param {param}) before the script")
         if pacing == "realtime":            # the recorder: no long collection while it records
             freeze_gc(disable=False)
         scenario.script(run)

@@ -58,6 +58,7 @@ GOOD = '[campaign]\nscenario = "sha-step"\n[grid]\ncontroller = ["pi"]\n'
     ('[campaign]\nscenario = "pm-circle"\ncompare = "design-robustness"\n', "campaign.compare"),
     (GOOD + '[grid.controller_config]\n"pi.kp_v_mm" = [500.0]\n', "grid.controller_config.pi.kp_v_mm"),
     (GOOD + '[grid.emulator_config]\n"valve" = [1.0]\n', "grid.emulator_config.valve"),
+    (GOOD + 'fault = ["", "LEAK:1:3"]\n', "grid.fault"),
 ])
 def test_a_bad_spec_is_one_line_and_exit_2_before_anything_runs(text, culprit, tmp_path, capsys):
     code = main(["campaign", "run", str(_spec(tmp_path, text)), "--out", str(tmp_path / "out")])
@@ -100,6 +101,15 @@ def test_a_runs_emulator_sections_scale_the_nominal_plant():
     assert sections["actuator"]["supply_pressure_bar"] == 30.0
     assert sections["sensors"]["load_cell_noise_n"] == pytest.approx(2.0 * nominal["sensors"]["load_cell_noise_n"])
     load_raw(None, sections)                                 # the emulator takes them
+
+
+def test_a_fault_in_the_grid_reaches_the_run_command(tmp_path):
+    from hil.campaign.engine import tasks
+    from hil.campaign.execute import command
+    campaign = load_campaign(_spec(tmp_path, GOOD + 'fault = ["", "SEAL_LEAK:1:10"]\n'))
+    argvs = [command(t, tmp_path) for t in tasks(campaign, tmp_path / "out")]
+    assert ["--inject" in a for a in argvs] == [False, True]
+    assert argvs[1][argvs[1].index("--inject") + 1] == "SEAL_LEAK:1:10"
 
 
 def test_metrics_flatten_without_the_controllers_level():

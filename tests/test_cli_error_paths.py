@@ -27,6 +27,7 @@ BAD_TEXT = {
     "--controllers": ("pi,fuzzy", "fuzzy"),
     "--loads": ("3,heavy", "heavy"),
     "--positions": ("50,high", "high"),
+    "--inject": ("LEAK:1:3", "LEAK:1:3"),
     "--targets": ("decoder,nope", "nope"),
     "--rigs": ("testbench,crane", "crane"),
     "--fit": ("nonsense", "nonsense"),

@@ -125,6 +125,18 @@ def test_the_monitor_replays_the_sha_step_log(sha_step_run):
     assert_replay_shows_the_log(out / "run.blf")
 
 
+@pytest.mark.hil
+def test_an_injected_fault_lasts_the_whole_experiment(tmp_path):
+    """`hil run --inject`: the emulator gets the fault before the script, and says so."""
+    proc = hydrapod("hil", "run", "sha-step", "--short", "--controllers", "pi", "--loads", "0", "--positions", "50",
+                    "--inject", "SEAL_LEAK:1:10", "--no-plots", "--out", tmp_path, "--json")
+    assert proc.returncode in (0, 1), proc.stderr[-2000:]
+    doc = json.loads(proc.stdout)
+    assert any("injected SEAL_LEAK on node 1 (param 10)" in n for n in doc["notes"])
+    emulator = json.loads((tmp_path / "emulator.json").read_text())
+    assert emulator["injected"].get("SEAL_LEAK", 0) >= 1, emulator["injected"]
+
+
 @pytest.mark.parametrize("argv, culprit", [
     (["hil", "run", "no-such"], "no-such"),
     (["hil", "run", "sha-step", "--bus", "udp_multicast:10.0.0.1"], "10.0.0.1"),

@@ -29,6 +29,8 @@ def command(task: dict, out: Path) -> list[str]:
         argv += ["--controllers", params["controller"]]
     if "load_kg" in params:
         argv += ["--loads", repr(float(params["load_kg"]))]
+    if params.get("fault"):
+        argv += ["--inject", params["fault"]]
     if "position_mm" in params:
         argv += ["--positions", repr(float(params["position_mm"]))]
     if task["controller_config"]:

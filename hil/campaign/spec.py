@@ -11,6 +11,7 @@ unknown scenario is one line naming the file and the key (exit 2).
 
     [grid]                       # every combination of these lists
     controller = ["pi", "adaptive"]
+    fault = ["", "SEAL_LEAK:1:10"]   # emulator faults for the whole run (as `hil run --inject`)
     load_kg = [0.0, 6.0]         # scenarios that run at several loads
     position_mm = [50.0]         # sha-step's working positions
     payload_kg = [0.0]           # the hexapod's payload
@@ -60,8 +61,8 @@ SCALES = {
 NOISES = (("sensors", "load_cell_noise_n"), ("sensors", "pressure_noise_bar"), ("sensors", "imu_angle_noise_rad"),
           ("sensors", "imu_rate_noise_rad_s"))
 # grid keys: kind and range
-GRID_KEYS = {"controller": str, "load_kg": (0.0, 20.0), "position_mm": (0.0, 304.0), "payload_kg": (0.0, 500.0),
-             "supply_bar": (5.0, 210.0), "noise": (0.0, 100.0), "seed": (0, 2**31 - 1)}
+GRID_KEYS = {"controller": str, "fault": "fault", "load_kg": (0.0, 20.0), "position_mm": (0.0, 304.0),
+             "payload_kg": (0.0, 500.0), "supply_bar": (5.0, 210.0), "noise": (0.0, 100.0), "seed": (0, 2**31 - 1)}
 SCALE_RANGE = (0.1, 10.0)            # a grid scale factor
 SPREAD_RANGE = (0.0, 0.9)            # a Monte-Carlo half-width
 MAX_RUNS = 100_000
@@ -273,7 +274,16 @@ def load_campaign(path: str | Path) -> Campaign:
             continue
         values = _list(source, f"grid.{key}", values)
         kind = GRID_KEYS[key]
-        if kind is str:
+        if kind == "fault":                     # "" none, else FAULT:TARGET:PARAM[,...] as `hil run --inject`
+            from ..injection import parse_faults
+            for value in values:
+                if not isinstance(value, str):
+                    raise _fail(source, f"grid.{key}", f"{value!r} is not a string")
+                try:
+                    parse_faults(value, "fault")
+                except UserInputError as error:
+                    raise _fail(source, f"grid.{key}", str(error)) from None
+        elif kind is str:
             bad = [v for v in values if v not in scenario.controllers]
             if bad:
                 raise _fail(source, f"grid.{key}", f"{bad[0]!r} is not run by {scenario_name} "

@@ -62,6 +62,11 @@ def _positions(text: str | None) -> tuple[float, ...] | None:
     return tuple(mm * MM for mm in _number_list(text, "--positions", math.isfinite, "a stroke in mm"))
 
 
+def _inject(text: str | None) -> tuple[tuple[str, int, int], ...]:
+    from ..injection import parse_faults
+    return parse_faults(text)
+
+
 def _finish(args, doc: dict) -> int:
     from ..report import format_budget, format_terminal
     print(json.dumps(doc, indent=1, default=str) if args.json else format_terminal(doc))
@@ -76,7 +81,7 @@ def _run(args) -> int:
     out = Path(args.out) if args.out else Path("hil-out") / scenario.name
     options = RunOptions(out_dir=out, bus=args.bus, pacing=args.pacing, rate_hz=500.0, short=args.short,
                          controllers=_controllers(args.controllers), loads=_loads(args.loads),
-                         positions_m=_positions(args.positions),
+                         positions_m=_positions(args.positions), inject=_inject(args.inject),
                          duration_s=args.duration_s, plots=not args.no_plots,
                          valve_watchdog_periods=args.valve_watchdog_periods, start_timeout_s=args.start_timeout_s,
                          controller_config=_controller_config(args.controller_config),
@@ -182,6 +187,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="comma-separated loads in kg, for the scenarios that run at several (sha-step, sha-tracking)")
     p.add_argument("--positions", metavar="LIST",
                    help="comma-separated working positions in mm, for the scenarios that step at several (sha-step)")
+    p.add_argument("--inject", metavar="LIST",
+                   help="emulator faults for the whole experiment, FAULT:TARGET:PARAM[,...] "
+                        "(e.g. SEAL_LEAK:1:10; the DBC's EMU_CTRL.FAULT names)")
     p.add_argument("--duration-s", type=number_in_range(float, 1.0, 86400.0), default=None,
                    help="realtime scenarios: seconds of running (default 60; 10 with --short)")
     p.add_argument("--time-scale", type=number_in_range(float, 0.5, 10.0), default=None,
