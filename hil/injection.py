@@ -15,10 +15,10 @@ def parse_faults(text: str | None, option: str = "--inject") -> tuple[tuple[str,
     from protocol.enums import EmuFault
     codec = CODECS["EMU_CTRL"]
     ranges = {name: codec.signals[codec.index[name]] for name in ("TARGET", "FAULT_PARAM")}
+    known = [f.name for f in EmuFault if f is not EmuFault.NONE]
     faults = []
     for item in text.split(","):
         parts = item.strip().split(":")
-        known = [f.name for f in EmuFault if f is not EmuFault.NONE]
         if len(parts) != 3 or parts[0] not in known:
             raise UserInputError(f"{option}: {item.strip()!r} is not FAULT:TARGET:PARAM with FAULT one of "
                                  f"{', '.join(known)}")

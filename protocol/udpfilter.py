@@ -11,6 +11,7 @@ that is passed on for the bus to count as garbage: the filter only drops frames 
 from __future__ import annotations
 
 import ctypes
+import itertools
 import socket
 import struct
 
@@ -59,31 +60,18 @@ def acceptance_program(filters: list[dict]) -> list[tuple[int, int, int, int]]:
     program = [_ins(_LD_LEN), _ins(_JGE_K, UDP_HEADER + _MIN_FRAME, jt=1), _ins(_RET_K, _ACCEPT)]
     program += _accept_unless(_AT_MAP, _MAP11) + _accept_unless(_AT_FLOAT, _FLOAT64)
     program += _accept_unless(_AT_ID_KEY, _FIXSTR14)
-    # the id's form: each branch reads it and jumps to the filters (patched below)
+    # the id's form picks a branch that reads it; each branch then jumps to the filters
     branches = [_read_id(_LDB_ABS, _AT_ID, 1)]
     branches += [_read_id(load, _AT_ID + 1, length) for _, load, length in _ID_FORMS]
-    tests = [_ins(_LDB_ABS, UDP_HEADER + _AT_ID), _ins(_JGE_K, 0x80, jf=0)]      # < 0x80: a fixint
-    for marker, _, _ in _ID_FORMS:
-        tests.append(_ins(_JEQ_K, marker))
-    tests.append(_ins(_RET_K, _ACCEPT))                   # a float, negative or 8-byte id: not ours
-    # lay out: tests, then each branch followed by a jump to the filters
-    body_start = len(program) + len(tests)
-    starts, at = [], body_start
-    for branch in branches:
-        starts.append(at)
-        at += len(branch) + 1
-    filters_at = at
-    for i, branch in enumerate(branches):
-        branch.append(_ins(_JA, filters_at - (starts[i] + len(branch)) - 1))
-    # fixint test: jt falls through to the JEQ chain, jf jumps to the fixint branch
-    jge = len(program) + 1
-    tests[1] = _ins(_JGE_K, 0x80, jt=0, jf=starts[0] - jge - 1)
-    for j in range(len(_ID_FORMS)):
-        here = len(program) + 2 + j
-        tests[2 + j] = _ins(_JEQ_K, _ID_FORMS[j][0], jt=starts[1 + j] - here - 1)
-    program += tests
-    for branch in branches:
-        program += branch
+    tests_at = len(program)
+    starts = list(itertools.accumulate((len(b) + 1 for b in branches), initial=tests_at + 3 + len(_ID_FORMS)))
+    program.append(_ins(_LDB_ABS, UDP_HEADER + _AT_ID))
+    program.append(_ins(_JGE_K, 0x80, jf=starts[0] - (tests_at + 1) - 1))    # < 0x80: a fixint
+    for j, (marker, _, _) in enumerate(_ID_FORMS):
+        program.append(_ins(_JEQ_K, marker, jt=starts[1 + j] - (tests_at + 2 + j) - 1))
+    program.append(_ins(_RET_K, _ACCEPT))                 # a float, negative or 8-byte id: not ours
+    for branch, start in zip(branches, starts):
+        program += branch + [_ins(_JA, starts[-1] - (start + len(branch)) - 1)]
     for f in filters:
         mask = int(f.get("can_mask", 0x1FFFFFFF)) & 0xFFFFFFFF
         can_id = int(f["can_id"]) & mask

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from protocol.errors import UserInputError
 
-from .execute import run_one
+from .execute import base_row, run_one
 from .spec import Campaign
 
 RESULTS = "results"                    # results.parquet, results.csv
@@ -80,8 +80,8 @@ def _client(scheduler: str | None, workers: int):
 
 
 def _failed_row(task: dict, reason: str) -> dict:
-    return {"run_id": task["run_id"], **{f"param.{k}": v for k, v in task["params"].items()},
-            "out_dir": task["out_dir"], "status": "error", "passed": False, "reason": reason, "wall_s": math.nan}
+    return {**base_row(task, task["out_dir"]), "status": "error", "passed": False, "reason": reason,
+            "wall_s": math.nan}
 
 
 def run_campaign(campaign: Campaign, out: Path, scheduler: str | None = None, workers: int = 2,
@@ -99,8 +99,8 @@ def run_campaign(campaign: Campaign, out: Path, scheduler: str | None = None, wo
     started = time.monotonic()
     client, cluster = _client(scheduler, workers)
     try:
-        # pure=False: a re-run is a new experiment; retries: a task is re-queued when its worker dies
-        futures = {client.submit(run_one, task, pure=False, key=f"run-{task['run_id']}", retries=0): task
+        # pure=False: a re-run is a new experiment; the scheduler re-queues a dead worker's task
+        futures = {client.submit(run_one, task, pure=False, key=f"run-{task['run_id']}"): task
                    for task in todo}
         for future in as_completed(futures):
             task = futures[future]

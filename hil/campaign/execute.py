@@ -62,6 +62,12 @@ def flatten_metrics(doc: dict, controller: str | None) -> dict:
     return row
 
 
+def base_row(task: dict, out_dir: Path | str) -> dict:
+    """A run's row before its outcome: its hash, parameters and output directory."""
+    return {"run_id": task["run_id"], **{f"param.{k}": v for k, v in task["params"].items()},
+            "out_dir": str(out_dir)}
+
+
 def _attempt_dir(run_dir: Path) -> Path:
     """A directory of its own for this attempt: a run re-queued after its worker died gets a
     new one, while the first attempt's orphaned process may still be writing the old."""
@@ -84,8 +90,7 @@ def run_one(task: dict) -> dict:
         (out / "controller-overrides.toml").write_text(toml_sections(task["controller_config"]))
     if task["emulator_config"]:
         (out / "emulator-overrides.toml").write_text(toml_sections(task["emulator_config"]))
-    row = {"run_id": task["run_id"], **{f"param.{k}": v for k, v in task["params"].items()},
-           "out_dir": str(out), "attempt": int(out.name.split("-")[1]), "worker_pid": os.getpid()}
+    row = {**base_row(task, out), "attempt": int(out.name.split("-")[1]), "worker_pid": os.getpid()}
     started = time.monotonic()
     proc = subprocess.Popen(command(task, out), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True, cwd=task.get("cwd"))

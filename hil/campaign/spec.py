@@ -46,8 +46,12 @@ from pathlib import Path
 
 import numpy as np
 
+from firmware_py.config import load_config as controller_config_load
+from plant_emulator.params import load_raw as emulator_raw_load
 from protocol.errors import UserInputError
 from protocol.tomlconfig import read_toml
+
+from ..injection import parse_faults
 
 # plant parameter groups: the emulator's (section, key) scaled together
 SCALES = {
@@ -195,7 +199,7 @@ def _config_grid(source: str, table: str, values) -> dict:
     value checked by that config's own validation."""
     if not isinstance(values, dict):
         raise _fail(source, f"grid.{table}", "is not a table of \"section.key\" = [values]")
-    load = CONFIG_GRIDS[table]()
+    load = CONFIGS[table]
     grid = {}
     flat = {}
     for name, options in values.items():          # "section.key" = [...], or section.key = [...] (nested)
@@ -217,17 +221,8 @@ def _config_grid(source: str, table: str, values) -> dict:
     return grid
 
 
-def _controller_loader():
-    from firmware_py.config import load_config
-    return load_config
-
-
-def _emulator_loader():
-    from plant_emulator.params import load_raw
-    return load_raw
-
-
-CONFIG_GRIDS = {"controller_config": _controller_loader, "emulator_config": _emulator_loader}
+# each config's own validation: defaults, a file (None), then the sections given
+CONFIGS = {"controller_config": controller_config_load, "emulator_config": emulator_raw_load}
 
 
 def load_campaign(path: str | Path) -> Campaign:
@@ -259,10 +254,10 @@ def load_campaign(path: str | Path) -> Campaign:
         raise _fail(source, "campaign.compare", f"{compare!r}: not a comparison for {scenario_name} "
                                                 f"(known: {', '.join(f'{k} ({v})' for k, v in COMPARISONS.items())})")
 
-    grid_raw = _only(source, "grid", raw.get("grid", {}), (*GRID_KEYS, "scale", *CONFIG_GRIDS))
+    grid_raw = _only(source, "grid", raw.get("grid", {}), (*GRID_KEYS, "scale", *CONFIGS))
     grid: dict = {}
     for key, values in grid_raw.items():
-        if key in CONFIG_GRIDS:
+        if key in CONFIGS:
             grid.update(_config_grid(source, key, values))
             continue
         if key == "scale":
@@ -275,7 +270,6 @@ def load_campaign(path: str | Path) -> Campaign:
         values = _list(source, f"grid.{key}", values)
         kind = GRID_KEYS[key]
         if kind == "fault":                     # "" none, else FAULT:TARGET:PARAM[,...] as `hil run --inject`
-            from ..injection import parse_faults
             for value in values:
                 if not isinstance(value, str):
                     raise _fail(source, f"grid.{key}", f"{value!r} is not a string")
@@ -310,14 +304,11 @@ def load_campaign(path: str | Path) -> Campaign:
 
     controller_config = raw.get("controller_config", {})
     emulator_config = raw.get("emulator_config", {})
-    from firmware_py.config import load_config as controller_load
-    from plant_emulator.params import load_raw as emulator_load
-    for name, sections, load in (("controller_config", controller_config, controller_load),
-                                 ("emulator_config", emulator_config, emulator_load)):
+    for name, sections in (("controller_config", controller_config), ("emulator_config", emulator_config)):
         if not isinstance(sections, dict):
             raise _fail(source, name, "is not a table of config sections")
         try:
-            load(None, sections or None)
+            CONFIGS[name](None, sections or None)
         except UserInputError as error:
             raise _fail(source, name, str(error)) from None
 
@@ -329,11 +320,11 @@ def load_campaign(path: str | Path) -> Campaign:
     count = (math.prod(len(v) for v in grid.values()) if grid else 1) * max(draws, 1)
     if count > MAX_RUNS:
         raise _fail(source, "grid", f"{count} runs (at most {MAX_RUNS})")
-    nominal = emulator_load(None, None)
+    nominal = emulator_raw_load(None, None)
     for run in campaign.runs()[:1]:            # the scaled keys exist and stay in range
         try:
-            controller_load(None, campaign.controller_sections(run.params) or None)
-            emulator_load(None, campaign.emulator_sections(run.params, nominal))
+            controller_config_load(None, campaign.controller_sections(run.params) or None)
+            emulator_raw_load(None, campaign.emulator_sections(run.params, nominal))
         except UserInputError as error:
             raise _fail(source, "grid", str(error)) from None
     return campaign
