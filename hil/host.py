@@ -23,6 +23,7 @@ CONTROLLER_MESSAGES = ["SYNC", "CTRL_STATUS", "CTRL_ACK"]    # what the host rea
 # ... and leg 1's encoder: the identification tests choose their next input from the last
 # one's velocity, as a lab's tool reading the sensor would (scenarios/friction.py)
 HOST_MESSAGES = CONTROLLER_MESSAGES + ["LEG_STATE_1"]
+ANSWER_WALL_S = 2.0                                             # a named wait's least wall time
 TRACK_CYCLES = 2000                                             # leg 1's last positions kept
 # the nodes' heartbeats (not the controller's): the emulator is up when they come
 NODE_HEARTBEAT_IDS = frozenset(CODECS[f"HEARTBEAT_{node}"].frame_id for node in NODE_IDS.values()
@@ -114,9 +115,14 @@ class Host:
         end = self.syncs + max_cycles
         last_traffic = time.monotonic()
         give_up = None if wall_timeout_s is None else last_traffic + wall_timeout_s
+        # a named wait (an ack, a state) also lasts ANSWER_WALL_S: in lockstep the cycles run as
+        # fast as the pair can, and on a loaded machine an ack stamped by the kernel 0.5 ms after
+        # its command reached the host's socket after 513 later SYNCs (a campaign of 2 runs)
+        floor = last_traffic + (ANSWER_WALL_S if what is not None else 0.0)
         # a start-up wait names its own, longer bound (the processes may still be importing)
         stall_s = max(self.stall_timeout_s, wall_timeout_s or 0.0)
-        while self.syncs < end and (give_up is None or time.monotonic() < give_up):
+        while ((self.syncs < end or time.monotonic() < floor)
+               and (give_up is None or time.monotonic() < give_up)):
             if condition():
                 return True
             if self.pump(0.05) is not None:
