@@ -16,6 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
+from physics import hydraulics as hy
 from physics.actuator import piston_force
 from physics.constants import GRAVITY_M_S2
 from protocol.dbc import signal_scale
@@ -29,7 +30,7 @@ from .hostlink import HostLink
 from .identification import TEST_MODES, IdentificationSignal
 from .interfaces import Measurements, ValveCommands
 from .monitors import FrameMonitor, LimitMonitor, LoopMonitor, NodeMonitor
-from .plausibility import AttitudeCrossCheck, FrozenLoadCells, MotionPlausibility
+from .plausibility import AttitudeCrossCheck, FrozenLoadCells, MotionPlausibility, SupplyPressure
 from .reference import Reference
 from .residuals import ActuatorResiduals
 from .stopping import ControlledStop
@@ -104,6 +105,9 @@ class Controller:
             cfg.encoder_resolution_m, cfg.residual_gain, cfg.residual_filter_s, cfg.residual_persistence,
             cfg.residual_flow_spread)
         self.residuals_running = False
+        # the valves' P-port transducers against the supply the model assumes
+        self.supply = SupplyPressure(n, cfg.supply_pressure_pa, cfg.hydraulics[hy.HP_TANK], cfg.residual_flow_spread,
+                                     cfg.residual_supply_legs)
         # spool setpoints sent: the last cycle's (applied at this SYNC) and the one before (applied
         # over the period this cycle's measurements close)
         self.spool_sent = np.zeros(n)
@@ -111,7 +115,8 @@ class Controller:
         # the false-alarm margin's measure: the largest |r| / threshold before the first fault,
         # less the PEAK_DELAY cycles before it (a fault's own rise)
         self.residual_peak = 0.0
-        self._peaks = np.zeros(PEAK_DELAY)
+        self.supply_peak = 0.0                   # the same for the supply's samples
+        self._peaks = np.zeros((PEAK_DELAY, 2))
         self.stop = ControlledStop(n, round(cfg.controlled_stop_s / period_s) if self.hexapod else 0)
         # identification tests (HOST_TEST, test bench only: chapter 6.4)
         self.test = None if self.hexapod else IdentificationSignal(
@@ -399,15 +404,22 @@ class Controller:
             return
         if not self.residuals_running:
             res.start(meas.position_m, meas.force_n, self.gravity_axial, meas.pressure_valid, meas.pa_pa, meas.pb_pa)
+            self.supply.reset()
             self.residuals_running = True
             return
+        supply_faulty, lone_leg = self.supply.update(meas.ps_pa, meas.pressure_fresh)
         faulty = res.update(self.spool_applied, meas.fresh, meas.position_m, meas.force_n, self.gravity_axial,
                             self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
-        slot = self.cycles % PEAK_DELAY
-        if self.sup.faults == 0 and self._peaks[slot] > self.residual_peak:
-            self.residual_peak = float(self._peaks[slot])
-        self._peaks[slot] = res.peak
-        if faulty >= self.cfg.residual_supply_legs:
+        peaks = self._peaks[self.cycles % PEAK_DELAY]
+        if self.sup.faults == 0:
+            self.residual_peak = max(self.residual_peak, float(peaks[0]))
+            self.supply_peak = max(self.supply_peak, float(peaks[1]))
+        peaks[0], peaks[1] = res.peak, self.supply.cycle_peak
+        if supply_faulty:
+            self.sup.fault(Fault.SUPPLY_PRESSURE)
+        elif lone_leg >= 0:
+            self.sup.fault(Fault.SENSOR_FAULT, lone_leg + 1)
+        elif faulty >= self.cfg.residual_supply_legs:
             self.sup.fault(Fault.SUPPLY_PRESSURE)
         elif faulty:
             if self.stop.cycles > 0 and self.sup.state in ACTIVE:

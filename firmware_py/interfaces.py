@@ -23,6 +23,7 @@ class Measurements:
         # LEG_PRESSURE_n, every 16th cycle: the latest valid sample
         self.pa_pa = np.zeros(n_legs)
         self.pb_pa = np.zeros(n_legs)
+        self.ps_pa = np.zeros(n_legs)                  # the supply at the valve's P port
         self.pressure_valid = np.zeros(n_legs, dtype=bool)
         self.pressure_fresh = np.zeros(n_legs, dtype=bool)    # a valid sample arrived since the last cycle
         # IMU_ATTITUDE (hexapod): roll, pitch, yaw of R = Rz Ry Rx

@@ -103,7 +103,7 @@ class ControllerLoop:
         self._emcy_of_id = {CODECS[f"EMCY_{node}"].frame_id: node for node in self.nodes}
         self._host_ids = {CODECS[name].frame_id: name for name in HOST_FRAMES}
         index = CODECS["LEG_PRESSURE_1"].index
-        self._i_pa, self._i_pb = index["PA"], index["PB"]
+        self._i_pa, self._i_pb, self._i_ps = index["PA"], index["PB"], index["PS"]
         self._i_pfault = (index["SENSOR_FAULT_A"], index["SENSOR_FAULT_B"])
         self._pressure_of_id = {CODECS[f"LEG_PRESSURE_{i}"].frame_id: i - 1 for i in self.legs}
         self._pressure_values = [self.decoder.values[f"LEG_PRESSURE_{i}"] for i in self.legs]
@@ -173,6 +173,7 @@ class ControllerLoop:
             if valid:
                 self.meas.pa_pa[leg] = values[self._i_pa]
                 self.meas.pb_pa[leg] = values[self._i_pb]
+                self.meas.ps_pa[leg] = values[self._i_ps]
                 self._pressure_new[leg] = True
             return
         if frame_id == self._imu_attitude_id:
@@ -490,6 +491,6 @@ class ControllerLoop:
         return {"rig": c.rig, "controller": c.sup.controller, "pacing": self.pacing,
                 "cycles": s.cycles, "overruns": s.overruns, "e2e_errors": s.e2e_errors,
                 "missing_frames": s.missing_frames, "faults": s.faults, "fault_code": c.sup.fault_code.name,
-                "residual_peak": round(c.residual_peak, 3),
+                "residual_peak": round(c.residual_peak, 3), "supply_peak": round(c.supply_peak, 3),
                 "state": c.state.name, "emergencies": s.emergencies, "host_commands": s.host_commands,
                 "frames_sent": s.frames_sent, "timing": self.timing()}

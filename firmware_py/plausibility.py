@@ -150,3 +150,49 @@ class FrozenLoadCells:
 
     def update(self, force_n: np.ndarray, fresh: np.ndarray) -> int:
         return frozen_step(force_n, fresh, self.last, self.run, self.limit)
+
+
+
+@njit(cache=True)
+def supply_step(ps, fresh, tank_pa, drop_pa, flow_spread, ratio, run, legs_needed):
+    """Judge each leg's fresh supply sample: the valve's flow goes with the square root of the
+    pressure the power unit gives above the tank (the orifice law), so a supply p gives
+    sqrt((p - p_T) / (p_S - p_T)) of the model's flow; ratio[i] = |that - 1| / flow_spread, the
+    sample beyond the model's flow-gain spread when above 1. Returns (legs whose latest sample
+    is beyond, the first leg beyond for two samples in a row or -1, the largest fresh ratio).
+    The supply is common to every valve: `legs_needed` legs beyond it mean the power unit, one
+    leg alone its own transducer (or its P line)."""
+    count, lone, peak = 0, -1, 0.0
+    for i in range(ps.shape[0]):
+        if fresh[i]:
+            ratio[i] = abs(math.sqrt(max(ps[i] - tank_pa, 0.0) / drop_pa) - 1.0) / flow_spread
+            run[i] = run[i] + 1 if ratio[i] > 1.0 else 0
+            peak = max(peak, ratio[i])
+        if ratio[i] > 1.0:
+            count += 1
+            if run[i] >= 2 and lone < 0:
+                lone = i
+    return count, (lone if count < legs_needed else -1), peak
+
+
+class SupplyPressure:
+    """The power unit's pressure as each valve's P-port transducer reads it (LEG_PRESSURE's PS,
+    every 16th cycle per leg) against the supply the model assumes. `update` returns (supply
+    faulty, the leg whose transducer alone disagrees or -1); `cycle_peak` is the largest ratio
+    of the cycle's fresh samples."""
+
+    def __init__(self, n_legs: int, nominal_pa: float, tank_pa: float, flow_spread: float, legs_needed: int):
+        self.tank_pa, self.drop_pa, self.flow_spread = tank_pa, nominal_pa - tank_pa, flow_spread
+        self.legs_needed = min(legs_needed, n_legs)
+        self.ratio = np.zeros(n_legs)
+        self.run = np.zeros(n_legs, dtype=np.int64)
+        self.cycle_peak = 0.0
+
+    def reset(self) -> None:
+        self.ratio[:] = 0.0
+        self.run[:] = 0
+
+    def update(self, ps_pa: np.ndarray, fresh: np.ndarray) -> tuple[bool, int]:
+        count, lone, self.cycle_peak = supply_step(ps_pa, fresh, self.tank_pa, self.drop_pa, self.flow_spread,
+                                                   self.ratio, self.run, self.legs_needed)
+        return count >= self.legs_needed, lone

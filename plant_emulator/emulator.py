@@ -510,6 +510,7 @@ class Emulator:
                 box = self.out[name]
                 box.values[box.index["PA"]] = rig.state[i, hy.S_PA] + cfg.pressure_noise_pa * rng.standard_normal()
                 box.values[box.index["PB"]] = rig.state[i, hy.S_PB] + cfg.pressure_noise_pa * rng.standard_normal()
+                box.values[box.index["PS"]] = rig.supply_pressure_pa + cfg.pressure_noise_pa * rng.standard_normal()
                 self._emit(n, name)
             name = f"VALVE_STATUS_{n}"
             if self._due(name, counter):

@@ -1,7 +1,8 @@
 """The actuator residuals (firmware_py/residuals.py) in the controller's cycle, on the
 emulator's hexapod in process: quiet on a healthy move (margin >= 1.5), the leg named when
 its spool sticks (within 25 cycles) or its rod seizes (30 cycles measured: the valve first
-has to open against the blocked piston), SUPPLY_PRESSURE when the supply is lost."""
+has to open against the blocked piston), SUPPLY_PRESSURE when the supply is lost; the valves'
+supply transducers judged against the model's supply."""
 
 import numpy as np
 import pytest
@@ -49,6 +50,8 @@ def run_move(fault: str | None, cycles: int = 700, residuals: bool = True, super
                                      meas.pa_pa)
             meas.pb_pa[:] = np.where(meas.pressure_fresh, rig.state[:, hy.S_PB] + 2e3 * sample_noise.standard_normal(6),
                                      meas.pb_pa)
+            supply = rig.supply_pressure_pa + 2e3 * sample_noise.standard_normal(6)
+            meas.ps_pa[:] = np.where(meas.pressure_fresh, supply, meas.ps_pa)
         meas.valve_state[:] = ValveState.ACTIVE if applied.any() or ctl.state in (State.READY,) else ValveState.HOLD
         ctl.update(meas, cmd)
         rig.command[:] = applied                     # the valves apply the last command at the SYNC
@@ -183,3 +186,48 @@ def test_chamber_pressure_samples_keep_the_margin_and_the_detection():
     _, detected, ctl, _ = run_move("seized", pressures=True)
     assert detected is not None and detected <= DETECT_WITHIN
     assert ctl.sup.fault_code is Fault.ACTUATOR_RESIDUAL and ctl.sup.fault_leg == 1
+
+
+def test_the_supply_band_is_the_flow_gains_spread_through_the_orifice_law():
+    """A supply p gives sqrt((p - p_T) / (p_S - p_T)) of the model's flow: the band's edges are
+    where that leaves 1 -+ the spread (ratio 1)."""
+    from firmware_py.plausibility import supply_step
+    tank, drop, spread = 0.9e5, 24.1e5, 0.135
+    ps = tank + np.array([(1 - spread) ** 2, (1 + spread) ** 2, 1.0, 0.0]) * drop
+    ratio, run = np.zeros(4), np.zeros(4, dtype=np.int64)
+    count, lone, peak = supply_step(ps, np.ones(4, dtype=bool), tank, drop, spread, ratio, run, 3)
+    assert ratio[:3] == pytest.approx([1.0, 1.0, 0.0]) and ratio[3] == pytest.approx(1.0 / spread)
+    assert peak == pytest.approx(1.0 / spread)
+    assert count == 1 and lone == -1                   # the lone leg's first sample: not yet its fault
+
+
+def test_supply_samples_name_the_power_unit_or_the_lone_transducer():
+    from firmware_py.plausibility import SupplyPressure
+    nominal, tank = 25e5, 0.9e5
+    low = np.full(6, nominal)
+    monitor = SupplyPressure(6, nominal, tank, 0.135, 3)
+    for leg in range(6):                               # the legs' samples come one per cycle
+        fresh = np.arange(6) == leg
+        low[leg] = 12e5
+        faulty, lone = monitor.update(low, fresh)
+        assert faulty == (leg >= 2) and lone == -1     # the third leg beyond: the supply
+    monitor = SupplyPressure(6, nominal, tank, 0.135, 3)
+    ps = np.full(6, nominal)
+    ps[4] = 0.0                                        # leg 5's transducer dead
+    only_5 = np.arange(6) == 4
+    assert monitor.update(ps, only_5) == (False, -1)   # one sample: wait for its next
+    assert monitor.update(ps, np.ones(6, dtype=bool)) == (False, 4)
+    bench = SupplyPressure(1, nominal, tank, 0.135, 3)   # one valve: its transducer is the supply's
+    assert bench.update(np.array([15e5]), np.ones(1, dtype=bool)) == (True, -1)
+
+
+@pytest.mark.parametrize("fault", ["supply", "supply60"])
+def test_the_supply_transducers_find_a_lost_or_dropped_supply(fault):
+    """Supply lost (to the tank) or down to 60 %, both with the power unit's 50 ms decay: it
+    leaves the band at 14.5 ms and 50 ms; SUPPLY_PRESSURE once three legs' samples, on their
+    phases of 16 cycles, have seen it. Healthy, the samples stay within 1 / 1.5 of the band."""
+    _, detected, ctl, _ = run_move(None, pressures=True)
+    assert detected is None and ctl.supply_peak * 1.5 < 1.0
+    _, detected, ctl, _ = run_move(fault, pressures=True)
+    assert ctl.sup.fault_code is Fault.SUPPLY_PRESSURE and ctl.sup.fault_leg == 0
+    assert detected is not None and detected <= (DETECT_WITHIN if fault == "supply" else 45), detected

@@ -25,9 +25,11 @@ HOLD_WITHIN_PERIODS = 3           # case 1: every valve in FAULT_HOLD this long 
 # the last command's lag behind its SYNC and a non-RT host's wake-up latency (at 3.0 the
 # test bench's EMCY came 3.04 periods after the last command)
 VALVE_WATCHDOG_PERIODS = 2.5
-PLANT_FAULT_MAX_CYCLES = 250      # stuck encoder: FAULT within 0.5 s
 RESIDUAL_MAX_CYCLES = 25          # the aim for faults the actuators' residuals see: within 50 ms ...
 RESIDUAL_PATH_MAX_M = 5e-3        # ... and the platform within 5 mm of the no-fault run's path
+# a supply drop to 60 % leaves the model's band only after 25 cycles (the power unit's 50 ms
+# decay); the samples' phases and the frame add up to 14
+SUPPLY_DROP_MAX_CYCLES = 40
 TRY_LIMIT = 8                     # realtime: attempts of a case (or a recovery) a machine stall may spoil
 
 
@@ -124,10 +126,15 @@ LOCKSTEP_CASES = [
          f"ACTUATOR_RESIDUAL within {RESIDUAL_MAX_CYCLES} cycles, <= 5 mm off the path", CaseKind.PLANT, "LEG_JAM", 1,
          0, ("ACTUATOR_RESIDUAL",), RESIDUAL_MAX_CYCLES, RESIDUAL_PATH_MAX_M,
          on_testbench={"bound": "ACTUATOR_RESIDUAL within 50 cycles, <= 5 mm off the path", "max_cycles": 50}),
-    Case("5d", "loss of supply pressure", "SUPPLY_PRESSURE or ACTUATOR_RESIDUAL within 250 cycles", CaseKind.PLANT,
-         "SUPPLY_LOSS", 0, 0, ("SUPPLY_PRESSURE", "ACTUATOR_RESIDUAL"), PLANT_FAULT_MAX_CYCLES,
-         on_testbench={"bound": "ACTUATOR_RESIDUAL or MOTION_PLAUSIBILITY within 250 cycles",
-                       "expect": ("ACTUATOR_RESIDUAL", "MOTION_PLAUSIBILITY")}),
+    # the supply: the valves' P-port transducers (LEG_PRESSURE's PS, each leg every 16th cycle)
+    # against the model's band; the power unit's pressure decays with 50 ms, leaving the band
+    # 14.5 ms after a loss and 50 ms (25 cycles) after a drop to 60 %, then the samples' phases
+    # (up to 13 cycles for three legs) and the frame's cycle
+    Case("5d", "loss of supply pressure", f"SUPPLY_PRESSURE within {RESIDUAL_MAX_CYCLES} cycles, <= 5 mm off the "
+         "path", CaseKind.PLANT, "SUPPLY_LOSS", 0, 0, ("SUPPLY_PRESSURE",), RESIDUAL_MAX_CYCLES, RESIDUAL_PATH_MAX_M),
+    Case("5i", "supply pressure drops to 60 %", f"SUPPLY_PRESSURE within {SUPPLY_DROP_MAX_CYCLES} cycles, <= 5 mm "
+         "off the path", CaseKind.PLANT, "SUPPLY_DROP", 0, 60, ("SUPPLY_PRESSURE",), SUPPLY_DROP_MAX_CYCLES,
+         RESIDUAL_PATH_MAX_M),
     Case("5e", "valve spool stuck open at 20 %, leg 1", f"ACTUATOR_RESIDUAL within {RESIDUAL_MAX_CYCLES} cycles",
          CaseKind.PLANT, "SPOOL_STUCK", 1, 20, ("ACTUATOR_RESIDUAL",), RESIDUAL_MAX_CYCLES),
     Case("5f", "piston seal leaking 10x the calibrated leakage, leg 1", "ACTUATOR_RESIDUAL within 2 s",

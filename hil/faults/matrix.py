@@ -29,7 +29,7 @@ def run_matrix(out: Path, short: bool, bus: str | None = None, start_timeout_s: 
         doc = run_scenario(session, options)
         runs.append({"session": session.name, "passed": doc["passed"], "failure": doc.get("failure"),
                      "e2e_errors": doc["e2e_errors"], "wall_time_s": doc.get("wall_time_s"),
-                     "residual_peak": residual_peak(doc)})
+                     "residual_peak": residual_peak(doc), "supply_peak": residual_peak(doc, "supply_peak")})
         results += doc["metrics"].get("cases", [])
         expected = {c.key for c in session.cases}
         missing = expected - {r["key"] for r in doc["metrics"].get("cases", [])}
@@ -44,10 +44,11 @@ def run_matrix(out: Path, short: bool, bus: str | None = None, start_timeout_s: 
     return doc
 
 
-def residual_peak(doc: dict) -> float | None:
+def residual_peak(doc: dict, key: str = "residual_peak") -> float | None:
     """The controllers' largest residual / threshold before their first fault (the false-alarm
-    margin is its inverse), from their summaries; None when none reported it."""
-    peaks = [child.get("summary", {}).get("residual_peak") for name, child in doc.get("children", {}).items()
+    margin is its inverse; `supply_peak` the same for the supply samples), from their
+    summaries; None when none reported it."""
+    peaks = [child.get("summary", {}).get(key) for name, child in doc.get("children", {}).items()
              if name.startswith("controller")]
     peaks = [p for p in peaks if p is not None]
     return max(peaks) if peaks else None
@@ -62,11 +63,11 @@ def format_matrix(doc: dict) -> str:
     noted = [r for r in doc["cases"] if r["detail"].get("notes")]
     if noted:     # spoiled attempts and repeated recoveries (machine stalls), in the open
         lines += ["", "Notes:"] + [f"- {r['key']} ({r['rig']}): " + " | ".join(r["detail"]["notes"]) for r in noted]
-    lines += ["", "| session | passed | wall s | E2E errors | residual / threshold before the first fault | failure |",
-              "|---|---|---|---|---|---|"]
+    lines += ["", "| session | passed | wall s | E2E errors | residual / threshold before the first fault "
+                  "| supply / threshold, the same | failure |", "|---|---|---|---|---|---|---|"]
     for s in doc["sessions"]:
         lines.append(f"| {s['session']} | {s['passed']} | {s['wall_time_s']} | {s['e2e_errors']} | "
-                     f"{s.get('residual_peak')} | "
+                     f"{s.get('residual_peak')} | {s.get('supply_peak')} | "
                      f"{(s['failure'] or '').splitlines()[0] if s['failure'] else ''} |")
     return "\n".join(lines) + "\n"
 
