@@ -119,6 +119,26 @@ def test_metrics_flatten_without_the_controllers_level():
                                           "check.PI overshoot": True}
 
 
+def test_the_controllers_summaries_reach_the_row():
+    """Faults and the monitors' peaks, the worst of the run's controllers: what a false-alarm
+    campaign reads."""
+    doc = {"metrics": {}, "children": {
+        "controller-pi": {"summary": {"faults": 0, "residual_peak": 0.4, "supply_peak": 0.01}},
+        "controller-adaptive": {"summary": {"faults": 1, "residual_peak": 0.6, "supply_peak": 0.02}},
+        "emulator": {"summary": {"faults": 7}}}}
+    assert flatten_metrics(doc, None) == {"metric.controller.faults": 1.0, "metric.controller.residual_peak": 0.6,
+                                          "metric.controller.supply_peak": 0.02}
+
+
+def test_a_supply_in_the_grid_is_the_controllers_model_supply_too(tmp_path):
+    campaign = load_campaign(_spec(tmp_path, GOOD + "supply_bar = [20.0, 40.0]\n"))
+    runs = campaign.runs()
+    assert [campaign.controller_sections(r.params)["hydraulic_model"]["supply_pressure_bar"] for r in runs] == [20, 40]
+    told = load_campaign(_spec(tmp_path, GOOD + 'supply_bar = [20.0]\n[grid.controller_config]\n'
+                                                '"hydraulic_model.supply_pressure_bar" = [25.0]\n'))
+    assert told.controller_sections(told.runs()[0].params)["hydraulic_model"]["supply_pressure_bar"] == 25.0
+
+
 def _table(out: Path) -> list[dict]:
     rows = pq.read_table(out / "results.parquet").to_pylist()
     assert pcsv.read_csv(out / "results.csv").num_rows == len(rows)

@@ -16,6 +16,7 @@ from pathlib import Path
 from ..runner import toml_sections
 
 METRICS_PREFIX = "metric."
+CONTROLLER_SUMMARY_KEYS = ("faults", "residual_peak", "supply_peak")
 
 
 def command(task: dict, out: Path) -> list[str]:
@@ -59,6 +60,14 @@ def flatten_metrics(doc: dict, controller: str | None) -> dict:
     walk("", doc.get("metrics", {}).get("summary", doc.get("metrics", {})))
     for check in doc.get("checks", []):
         row[f"check.{check['name']}"] = bool(check["passed"])
+    # the controllers' own summaries: faults latched and the monitors' largest ratio before
+    # the first (the false-alarm margin's inverse), the worst over the run's controllers
+    summaries = [child.get("summary", {}) for name, child in doc.get("children", {}).items()
+                 if name.startswith("controller")]
+    for key in CONTROLLER_SUMMARY_KEYS:
+        values = [float(s[key]) for s in summaries if isinstance(s.get(key), (int, float))]
+        if values:
+            row[f"{METRICS_PREFIX}controller.{key}"] = max(values)
     return row
 
 

@@ -15,7 +15,7 @@ unknown scenario is one line naming the file and the key (exit 2).
     load_kg = [0.0, 6.0]         # scenarios that run at several loads
     position_mm = [50.0]         # sha-step's working positions
     payload_kg = [0.0]           # the hexapod's payload
-    supply_bar = [25.0]
+    supply_bar = [25.0]          # the power unit's, and the controller's model's unless set
     noise = [1.0]                # the sensors' noise, x the emulator's
     seed = [1]                   # the emulator's noise seed
     [grid.scale]                 # plant parameters, x their emulator value
@@ -124,8 +124,13 @@ class Campaign:
         return runs
 
     def controller_sections(self, params: dict) -> dict:
-        """The run's controller config sections: the campaign's, then its grid's keys."""
-        return _with_keys(self.controller_config, params, "controller_config.")
+        """The run's controller config sections: the campaign's, then its grid's keys; a
+        `supply_bar` is the controller's model supply too unless one of those sets it (as a
+        rig's operator sets `supply_pressure_bar` to the power unit's)."""
+        sections = _with_keys(self.controller_config, params, "controller_config.")
+        if "supply_bar" in params and "supply_pressure_bar" not in sections.get("hydraulic_model", {}):
+            sections.setdefault("hydraulic_model", {})["supply_pressure_bar"] = float(params["supply_bar"])
+        return sections
 
     def emulator_sections(self, params: dict, nominal: dict) -> dict:
         """The run's emulator config sections: the campaign's and its grid's keys, then supply,
