@@ -158,6 +158,7 @@ class Controller:
                              meas.pb_pa)
         self.residuals.update(self.spool_applied, meas.fresh, meas.position_m, meas.force_n, self.gravity_axial,
                               self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
+        self.supply.update(meas.ps_pa, meas.pressure_fresh)
         valve_commands(VALVES_HOLD, self.joint.u_v, 1.0, False, -1, cmd.enable, cmd.hold, cmd.active, cmd.reset,
                        cmd.spool)
         ref.play(through_points(np.array([self.home_strokes, self.home_strokes + 1e-3]), 0.1, 0.2), [0], 0)
@@ -178,6 +179,7 @@ class Controller:
         self.frames.reset()
         self.load_cells.reset()
         self.plausibility.reset()
+        self.supply.reset()
         self.limits.recovery_left[0] = 0
         self.joint.reset(0.0)
 
@@ -289,6 +291,11 @@ class Controller:
         """Activation is over (valves in HOLD): IDLE, or READY holding the measured position."""
         self.sup.booted(auto_enable)
         self._do_action()
+
+    def shut_down(self) -> None:
+        """The loop forces the valves to HOLD, then DISABLED: IDLE from here, so nothing judges
+        the legs as if their valves still followed the controller."""
+        self.sup.shut_down()
 
     def initialise(self, meas: Measurements, keep_load: bool = False) -> None:
         """First measurements are in (or the first after a RESET): estimators and the reference

@@ -147,6 +147,7 @@ class ControllerLoop:
         self._pressure_new = np.zeros(len(self.legs), dtype=bool)    # LEG_PRESSURE since the last read
         self._stall_s = self.cfg.stall_fault_periods * self.period_s if pacing == "realtime" else math.inf
         self._forced: bool | None = None            # shutdown: True HOLD, False DISABLED
+        self.state_at_stop = None                   # the controller's state when the shutdown began
 
     # -- receive --------------------------------------------------------------------------
     def dispatch(self, msg) -> None:
@@ -470,6 +471,8 @@ class ControllerLoop:
     def shutdown(self) -> None:
         """Valves to HOLD, then DISABLED, over a few cycles; SYNC keeps running meanwhile."""
         never = lambda: False  # noqa: E731
+        self.state_at_stop = self.controller.state
+        self.controller.shut_down()
         self._forced = True
         self._run_cycles(self.cfg.shutdown_hold_cycles, never)
         self._forced = False
@@ -492,5 +495,5 @@ class ControllerLoop:
                 "cycles": s.cycles, "overruns": s.overruns, "e2e_errors": s.e2e_errors,
                 "missing_frames": s.missing_frames, "faults": s.faults, "fault_code": c.sup.fault_code.name,
                 "residual_peak": round(c.residual_peak, 3), "supply_peak": round(c.supply_peak, 3),
-                "state": c.state.name, "emergencies": s.emergencies, "host_commands": s.host_commands,
-                "frames_sent": s.frames_sent, "timing": self.timing()}
+                "state": (self.state_at_stop or c.state).name, "emergencies": s.emergencies,
+                "host_commands": s.host_commands, "frames_sent": s.frames_sent, "timing": self.timing()}

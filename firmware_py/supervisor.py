@@ -164,6 +164,13 @@ class Supervisor:
     def start_running(self) -> None:
         self._go(State.RUNNING)
 
+    def shut_down(self) -> None:
+        """The daemon stops: the valves are forced to HOLD from any state, so IDLE (the active
+        checks end with them); a latched fault or e-stop stays."""
+        if self.state not in LATCHED:
+            self.parking = False
+            self._go(State.IDLE)
+
     def motion_done(self) -> None:
         """The current move reached its end at rest."""
         if self.state in MOVING:

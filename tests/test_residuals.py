@@ -23,7 +23,7 @@ PRESSURE_PHASES = np.arange(6, 12)     # LEG_PRESSURE_1..6's SyncPhase (the DBC)
 
 
 def run_move(fault: str | None, cycles: int = 700, residuals: bool = True, supervisor: dict | None = None,
-             hook=None, noise=None, frozen=None, pressures: bool = False):
+             hook=None, noise=None, frozen=None, pressures: bool = False, forced_hold: dict | None = None):
     """Home, then every leg +30 mm at 20 mm/s with the adaptive controller; `fault` injected
     FAULT_AT cycles in. Returns (max |r| / threshold before the fault, the cycle after the
     fault at which the controller faulted or None, the controller, the platform's positions)."""
@@ -54,6 +54,8 @@ def run_move(fault: str | None, cycles: int = 700, residuals: bool = True, super
             meas.ps_pa[:] = np.where(meas.pressure_fresh, supply, meas.ps_pa)
         meas.valve_state[:] = ValveState.ACTIVE if applied.any() or ctl.state in (State.READY,) else ValveState.HOLD
         ctl.update(meas, cmd)
+        if forced_hold and forced_hold.get("on"):      # the loop's shutdown overrides the commands
+            cmd.hold_all()
         rig.command[:] = applied                     # the valves apply the last command at the SYNC
         rig.ports_open[:] = active                   # ... and close the load-holding valves outside ACTIVE
         applied[:] = cmd.spool
@@ -231,3 +233,24 @@ def test_the_supply_transducers_find_a_lost_or_dropped_supply(fault):
     _, detected, ctl, _ = run_move(fault, pressures=True)
     assert ctl.sup.fault_code is Fault.SUPPLY_PRESSURE and ctl.sup.fault_leg == 0
     assert detected is not None and detected <= (DETECT_WITHIN if fault == "supply" else 45), detected
+
+
+@pytest.mark.parametrize("told", [True, False])
+def test_the_daemons_shutdown_is_no_fault(told):
+    """At SIGTERM the loop forces every valve to HOLD mid-move. The controller, told
+    (`shut_down`), goes IDLE and judges nothing; a controller not told would see its legs stop
+    under an active command and latch a residual fault (ACTUATOR_RESIDUAL at the end of two
+    HIL runs of 18; all six legs at once here: SUPPLY_PRESSURE)."""
+    forced = {}
+
+    def hook(k, ctl, rig):
+        if k == FAULT_AT:
+            forced["on"] = True
+            if told:
+                ctl.shut_down()
+
+    _, detected, ctl, _ = run_move(None, cycles=FAULT_AT + 60, hook=hook, forced_hold=forced)
+    if told:
+        assert detected is None and ctl.state is State.IDLE and ctl.sup.faults == 0
+    else:
+        assert ctl.sup.fault_code in (Fault.ACTUATOR_RESIDUAL, Fault.SUPPLY_PRESSURE)
