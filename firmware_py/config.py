@@ -38,7 +38,8 @@ RANGES: dict[str, dict[str, object]] = {
                   "guide_coulomb_n": (0.0, 1000.0), "guide_viscous_ns_mm": (0.0, 100.0)},
     "identification": {"force_gain_v_n": (0.0, 10.0), "force_filter_hz": (0.01, 100.0),
                        "stroke_guard_mm": (0.0, 500.0)},
-    "hexapod": {"park_stroke_mm": (0.0, 2000.0), "kp_factor": (0.01, 10.0), "ki_factor": (0.0, 10.0)},
+    "hexapod": {"park_stroke_mm": (0.0, 2000.0), "kp_factor": (0.01, 10.0), "ki_factor": (0.0, 10.0),
+                "payload_kg": (0.0, 500.0)},
     "friction": {
         "alpha0_pos_n": (-1000.0, 1000.0), "alpha1_pos_n": (-1000.0, 1000.0), "vs_pos_mm_s": (0.01, 1e4),
         "sigma2_pos_ns_mm": (0.0, 100.0), "alpha0_neg_n": (-1000.0, 1000.0), "alpha1_neg_n": (-1000.0, 1000.0),
@@ -136,6 +137,7 @@ class ControllerConfig:
     hexapod_park_stroke_m: float
     hexapod_kp_factor: float          # every controller's Kp on the hexapod (see controller.toml)
     hexapod_ki_factor: float          # every controller's Ki on the hexapod
+    hexapod_payload_kg: float         # carried at the platform's centre of mass (the dynamics' model)
     # estimation
     friction: np.ndarray              # LuGre vector of the seals (physics.lugre layout)
     observer_gain_per_s: float        # k of the friction observer (eq. 7.30)
@@ -294,7 +296,7 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         test_force_gain_v_n=ident["force_gain_v_n"],
         test_force_filter_hz=ident["force_filter_hz"], test_stroke_guard_m=ident["stroke_guard_mm"] * MM,
         hexapod_park_stroke_m=raw["hexapod"]["park_stroke_mm"] * MM, hexapod_kp_factor=raw["hexapod"]["kp_factor"],
-        hexapod_ki_factor=raw["hexapod"]["ki_factor"],
+        hexapod_ki_factor=raw["hexapod"]["ki_factor"], hexapod_payload_kg=raw["hexapod"]["payload_kg"],
         friction=friction, observer_gain_per_s=f["observer_gain_per_s"], jerk_psd=k["jerk_psd_mm2_s5"] * MM ** 2,
         kalman_adaptive_gain=k["adaptive_gain"],
         kalman_velocity_ref_m_s=k["adaptive_velocity_ref_mm_s"] * MM,

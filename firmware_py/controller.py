@@ -54,7 +54,7 @@ class Controller:
         self.n = n = 6 if self.hexapod else 1
         if self.hexapod:
             from .platform import PlatformModel
-            self.geometry = geometry or default_geometry()
+            self.geometry = (geometry or default_geometry()).with_payload(cfg.hexapod_payload_kg)
             self.platform = PlatformModel(self.geometry, cfg.dk_tolerance_m, cfg.dk_max_iterations, period_s)
             self.stroke_m = self.geometry.stroke_m
             self.home_strokes = self.platform.lengths - self.geometry.leg_min_m     # lengths at home

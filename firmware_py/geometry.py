@@ -11,7 +11,7 @@ through the spherical joint centres, w (its z) normal to the platform.
 from __future__ import annotations
 
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
@@ -62,6 +62,13 @@ class Geometry:
     @property
     def leg_max_m(self) -> float:
         return self.leg_min_m + self.stroke_m
+
+    def with_payload(self, payload_kg: float) -> Geometry:
+        """The platform carrying a payload at its centre of mass (a point mass there adds no
+        inertia about it), as the rig's operator declares it."""
+        if payload_kg == 0.0:
+            return self
+        return replace(self, platform=replace(self.platform, mass_kg=self.platform.mass_kg + payload_kg))
 
     @property
     def home_quaternion(self) -> np.ndarray:

@@ -135,9 +135,14 @@ class Run:
                               f"{watchdog:g} periods (--valve-watchdog-periods; docs/TIMING.md)")
         name = self._child_name("emulator")
         config = self.out / f"{name}.toml"
-        config.write_text(toml_sections(merge_sections(self.scenario.emulator_overrides, self.options.emulator_config)))
+        # the scenario's load at start, under the user's --emulator-config (a payload set there
+        # must not be overridden by a command-line load)
+        load = {"testbench": {"load_kg": self.scenario.load_kg}} if self.scenario.rig == "testbench" else \
+            {"hexapod": {"payload_kg": self.scenario.load_kg}}
+        config.write_text(toml_sections(merge_sections(load, self.scenario.emulator_overrides,
+                                                       self.options.emulator_config)))
         child = Child(name, ["-m", "plant_emulator", "--bus", str(self.spec), "--rig", self.scenario.rig,
-                             "--rate-hz", str(self.options.rate_hz), "--load-kg", str(self.scenario.load_kg),
+                             "--rate-hz", str(self.options.rate_hz),
                              "--sync-watchdog-periods", f"{watchdog:g}", "--config", str(config),
                              "--summary", str(self.out / f"{name}.json"),
                              *(["--realtime"] if self.pacing == "realtime" else [])], self.out)

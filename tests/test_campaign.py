@@ -19,7 +19,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from hil.campaign.execute import flatten_metrics
-from hil.campaign.spec import SCALES, load_campaign
+from hil.campaign.spec import SCALES, SpecError, load_campaign
 from hil.cli import main
 from tests.cli_run import hydrapod
 
@@ -128,6 +128,19 @@ def test_the_controllers_summaries_reach_the_row():
         "emulator": {"summary": {"faults": 7}}}}
     assert flatten_metrics(doc, None) == {"metric.controller.faults": 1.0, "metric.controller.residual_peak": 0.6,
                                           "metric.controller.supply_peak": 0.02}
+
+
+def test_a_time_scale_reaches_the_pm_runs_only(tmp_path):
+    from hil.campaign.engine import tasks
+    from hil.campaign.execute import command
+    campaign = load_campaign(_spec(tmp_path, '[campaign]\nscenario = "pm-circle"\n[grid]\ntime_scale = [2.0]\n'
+                                             'payload_kg = [3.0]\n'))
+    task = tasks(campaign, tmp_path / "out")[0]
+    argv = command(task, tmp_path)
+    assert argv[argv.index("--time-scale") + 1] == "2.0"
+    assert task["controller_config"]["hexapod"]["payload_kg"] == 3.0 == task["emulator_config"]["hexapod"]["payload_kg"]
+    with pytest.raises(SpecError, match="grid.time_scale"):
+        load_campaign(_spec(tmp_path, GOOD + "time_scale = [2.0]\n"))
 
 
 def test_a_supply_in_the_grid_is_the_controllers_model_supply_too(tmp_path):

@@ -140,3 +140,17 @@ def test_the_plant_reads_the_geometry_file_as_the_controller_does():
         assert mine.mass_kg == theirs.mass_kg
         np.testing.assert_allclose(mine.com_m, theirs.com_m, atol=1e-15)
         np.testing.assert_allclose(mine.inertia_kg_m2, theirs.inertia_kg_m2, atol=1e-15)
+
+
+def test_the_declared_payload_is_in_every_dynamics_model_of_the_controller():
+    """[hexapod] payload_kg: a point mass at the platform's centre of mass, in the platform
+    model, computed torque and the waypoints' force check alike."""
+    from firmware_py.config import load_config
+    from firmware_py.control import CONTROLLER_NAMES
+    from firmware_py.controller import Controller
+    base = default_geometry().platform.mass_kg
+    ctl = Controller(load_config(overrides={"hexapod": {"payload_kg": 3.0}}), "hexapod", 0.002,
+                     CONTROLLER_NAMES["computed-torque"])
+    for dynamics in (ctl.platform.dynamics, ctl.computed_torque.dynamics, ctl.waypoints.check.dynamics):
+        assert dynamics.masses[0] == pytest.approx(base + 3.0)
+    assert default_geometry().with_payload(0.0).platform.mass_kg == base

@@ -88,3 +88,31 @@ def test_a_lockstep_start_fault_fails_at_once(tmp_path, monkeypatch):
     with pytest.raises(HostError, match="FAULT while starting"):
         run.start_controller("model-based")
     assert run.start_retries == [] and Command.RESET not in run.host.commands
+
+
+class FakeHeartbeatHost(FakeHost):
+    node_heartbeats = 0
+
+    def wait_until(self, *args, **kwargs):
+        pass
+
+
+@pytest.mark.parametrize(("scenario", "section", "key"), [("pm-diagonal", "hexapod", "payload_kg"),
+                                                           ("sha-step", "testbench", "load_kg")])
+def test_the_users_emulator_config_sets_the_load(tmp_path, monkeypatch, scenario, section, key):
+    """A payload (or bench load) in --emulator-config reaches the emulator: the scenario's
+    start load sits under it, not on its command line (which once overrode it silently)."""
+    import tomllib
+    started = []
+    monkeypatch.setattr(runner, "Child", lambda name, args, out: started.append(args) or FakeChild(name, args, out))
+    options = RunOptions(out_dir=tmp_path, pacing="lockstep", emulator_config={section: {key: 6.0}})
+    run = Run(SCENARIOS[scenario], options, runner.fresh_bus_spec(), tmp_path)
+    run.host = FakeHeartbeatHost(0)
+    run.start_emulator()
+    argv = started[0]
+    config = tomllib.loads(Path(argv[argv.index("--config") + 1]).read_text())
+    assert config[section][key] == 6.0 and "--load-kg" not in argv
+    run.options.emulator_config = {}
+    run.start_emulator()
+    config = tomllib.loads(Path(started[1][started[1].index("--config") + 1]).read_text())
+    assert config[section][key] == SCENARIOS[scenario].load_kg

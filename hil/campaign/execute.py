@@ -34,6 +34,8 @@ def command(task: dict, out: Path) -> list[str]:
         argv += ["--inject", params["fault"]]
     if "position_mm" in params:
         argv += ["--positions", repr(float(params["position_mm"]))]
+    if "time_scale" in params:
+        argv += ["--time-scale", repr(float(params["time_scale"]))]
     if task["controller_config"]:
         argv += ["--controller-config", str(out / "controller-overrides.toml")]
     if task["emulator_config"]:

@@ -14,7 +14,8 @@ unknown scenario is one line naming the file and the key (exit 2).
     fault = ["", "SEAL_LEAK:1:10"]   # emulator faults for the whole run (as `hil run --inject`)
     load_kg = [0.0, 6.0]         # scenarios that run at several loads
     position_mm = [50.0]         # sha-step's working positions
-    payload_kg = [0.0]           # the hexapod's payload
+    payload_kg = [0.0]           # the hexapod's payload, declared to the controller too
+    time_scale = [1.0]           # pm-*: the thesis's timing, this many times slower
     supply_bar = [25.0]          # the power unit's, and the controller's model's unless set
     noise = [1.0]                # the sensors' noise, x the emulator's
     seed = [1]                   # the emulator's noise seed
@@ -66,7 +67,10 @@ NOISES = (("sensors", "load_cell_noise_n"), ("sensors", "pressure_noise_bar"), (
           ("sensors", "imu_rate_noise_rad_s"))
 # grid keys: kind and range
 GRID_KEYS = {"controller": str, "fault": "fault", "load_kg": (0.0, 20.0), "position_mm": (0.0, 304.0),
-             "payload_kg": (0.0, 500.0), "supply_bar": (5.0, 210.0), "noise": (0.0, 100.0), "seed": (0, 2**31 - 1)}
+             "payload_kg": (0.0, 65.0), "supply_bar": (5.0, 210.0), "noise": (0.0, 100.0), "seed": (0, 2**31 - 1),
+             "time_scale": (0.5, 20.0)}
+# grid keys that are the controller's to know as well (an operator sets them on the rig)
+TOLD = {"supply_bar": ("hydraulic_model", "supply_pressure_bar"), "payload_kg": ("hexapod", "payload_kg")}
 SCALE_RANGE = (0.1, 10.0)            # a grid scale factor
 SPREAD_RANGE = (0.0, 0.9)            # a Monte-Carlo half-width
 MAX_RUNS = 100_000
@@ -125,11 +129,12 @@ class Campaign:
 
     def controller_sections(self, params: dict) -> dict:
         """The run's controller config sections: the campaign's, then its grid's keys; a
-        `supply_bar` is the controller's model supply too unless one of those sets it (as a
-        rig's operator sets `supply_pressure_bar` to the power unit's)."""
+        `supply_bar` or `payload_kg` is the controller's too unless one of those sets it (as a
+        rig's operator sets `supply_pressure_bar` to the power unit's and declares the payload)."""
         sections = _with_keys(self.controller_config, params, "controller_config.")
-        if "supply_bar" in params and "supply_pressure_bar" not in sections.get("hydraulic_model", {}):
-            sections.setdefault("hydraulic_model", {})["supply_pressure_bar"] = float(params["supply_bar"])
+        for name, (section, key) in TOLD.items():
+            if name in params and key not in sections.get(section, {}):
+                sections.setdefault(section, {})[key] = float(params[name])
         return sections
 
     def emulator_sections(self, params: dict, nominal: dict) -> dict:
@@ -293,6 +298,8 @@ def load_campaign(path: str | Path) -> Campaign:
         grid[key] = list(values)
     if "load_kg" in grid and not scenario.sweeps_loads:
         raise _fail(source, "grid.load_kg", f"{scenario_name} does not run at several loads (use payload_kg)")
+    if "time_scale" in grid and not scenario.time_scalable:
+        raise _fail(source, "grid.time_scale", f"{scenario_name} has no movement timing to scale")
     if "position_mm" in grid:
         try:
             scenario.check_positions(tuple(p * 1e-3 for p in grid["position_mm"]))
