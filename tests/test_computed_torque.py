@@ -60,6 +60,19 @@ def test_the_packaged_plant_data_is_what_the_design_command_derives(cfg, tmp_pat
     assert cfg.ct_stiffness_n_m == pytest.approx(derived.ct_stiffness_n_m, rel=1e-3)
 
 
+def test_a_map_made_at_another_supply_says_so_and_opens_less(cfg, tmp_path):
+    """`--supply-bar 40`: the map of a stiffer supply (less spool for the same force and
+    velocity, by about sqrt(25 / 40) from the orifice law; the grid's edges beyond the 25 bar
+    supply's reach differ) and the controller's model supply with it."""
+    path = tmp_path / "ct40.toml"
+    assert main(["design", "computed-torque", "--out", str(path), "--supply-bar", "40", "--json"]) == 0
+    derived = load_config(path)
+    assert derived.supply_pressure_pa == pytest.approx(40e5)
+    moving = np.abs(cfg.valve_map_velocity_m_s) >= 0.2            # where the flow, not the lap, sets it
+    ratio = np.abs(derived.valve_map_spool[:, moving]) / np.abs(cfg.valve_map_spool[:, moving])
+    assert np.percentile(ratio, 90) < 1.0 and np.median(ratio) == pytest.approx(np.sqrt(25 / 40), rel=0.1)
+
+
 def test_at_rest_on_the_reference_the_valves_get_the_maps_holding_spool(cfg):
     """Measured pose = reference, nothing moving, load cells reading the model's forces: the
     spool is the map's at those forces and zero velocity (no feedback term acts)."""

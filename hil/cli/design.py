@@ -4,9 +4,9 @@
     hydrapod design schedule [--plants SRC] [--out FILE] [--ki-scale] [--kp-fraction] [--ti-fraction] [--json]
     hydrapod design modes [--pose X,Y,Z,ROLL,PITCH,YAW] [--payload-kg M] [--supply-bar P] [--along] [--sealed]
                           [--json] [--plot DIR]
-    hydrapod design computed-torque [--out FILE] [--bandwidth-hz] [--damping] [--integral-fraction]
-                                    [--velocity-gain] [--testbench-velocity-gain] [--force-gain-pct-n]
-                                    [--velocity-filter-hz] [--json]
+    hydrapod design computed-torque [--out FILE] [--supply-bar P] [--bandwidth-hz] [--damping]
+                                    [--integral-fraction] [--velocity-gain] [--testbench-velocity-gain]
+                                    [--force-gain-pct-n] [--velocity-filter-hz] [--json]
 
 SRC: `table-a3` (the thesis's plants), `emulator` (the emulator's linearisation) or the
 metrics.json of a `hil run sha-identification`.
@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from physics.constants import BAR
 from protocol.cliutil import number_in_range, output_file
 from protocol.errors import UserInputError
 
@@ -144,7 +145,8 @@ def _computed_torque(args) -> int:
     from plant_emulator.params import load_config
 
     from ..design.computed_torque import computed_torque_toml, leg_stiffness_n_m, valve_map
-    cfg = load_config()
+    supply = {} if args.supply_bar is None else {"actuator": {"supply_pressure_bar": args.supply_bar}}
+    cfg = load_config(overrides=supply or None)     # the map holds at the supply it was made at
     spool, unreachable = valve_map(cfg)
     stiffness = leg_stiffness_n_m(cfg)
     packaged = load_controller_config().raw["computed_torque"]       # an option not given keeps its value
@@ -153,7 +155,10 @@ def _computed_torque(args) -> int:
              "testbench_velocity_gain_per_s": args.testbench_velocity_gain, "force_gain_pct_n": args.force_gain_pct_n,
              "velocity_filter_hz": args.velocity_filter_hz}
     gains = {key: packaged[key] if value is None else value for key, value in given.items()}
-    text = computed_torque_toml(spool, stiffness, gains, "the emulator's configuration")
+    source = f"the emulator's configuration at {cfg.supply_pressure_pa / BAR:g} bar"
+    text = computed_torque_toml(spool, stiffness, gains, source)
+    if supply:                                     # the residuals' model and the supply check at it too
+        text += f"\n[hydraulic_model]\nsupply_pressure_bar = {args.supply_bar:g}\n"
     out = Path(args.out)
     try:
         out.write_text(text)
@@ -221,6 +226,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                                                       "and leg stiffness from the emulator's model, and its gains")
     p.add_argument("--out", type=output_file, default="hil-out/computed_torque.toml", metavar="FILE",
                    help="the controller config file to write (default: hil-out/computed_torque.toml)")
+    p.add_argument("--supply-bar", type=number_in_range(float, 1.0, 40.0), default=None,
+                   help="the power unit's pressure to make the map at (default: the emulator's, 25 bar); "
+                        "the file then sets [hydraulic_model] supply_pressure_bar to it")
     # each gain defaults to the packaged controller.toml's [computed_torque]
     p.add_argument("--bandwidth-hz", type=number_in_range(float, 0.1, 50.0),
                    help="task-space loop: Kp = w^2, Kd = 2 zeta w")
