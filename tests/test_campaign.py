@@ -249,3 +249,22 @@ def test_the_linear_step_prediction_matches_an_ode_integration_of_the_loop():
     linear = step_on_plant(plant, kp, ki)
     assert linear["overshoot_pct"] == pytest.approx(ode["overshoot_pct"], abs=0.05)
     assert linear["settling_s"] == pytest.approx(ode["settling_s"], abs=0.002)
+
+
+@pytest.mark.parametrize(("missing", "status", "attempts"), [([3.0, 0.0], "ok", 2), ([2.0] * 5, "spoiled", 3),
+                                                             ([0.0], "ok", 1)])
+def test_a_lockstep_run_whose_frames_missed_their_window_runs_again(monkeypatch, missing, status, attempts):
+    """Frames that missed the controller's lockstep window mean the machine was too loaded
+    for lockstep: the run's faults are not the plant's. It runs again, then is spoiled."""
+    import hil.campaign.execute as execute
+    calls = []
+
+    def attempt(task):
+        calls.append(1)
+        return {"run_id": "x", "out_dir": f"a{len(calls)}", "status": "ok", "passed": True, "reason": "",
+                "metric.controller.missing_frames": missing[len(calls) - 1]}
+
+    monkeypatch.setattr(execute, "_run_attempt", attempt)
+    row = execute.run_one({})
+    assert len(calls) == attempts and row["spoiled_attempts"] == attempts - (status == "ok")
+    assert row["status"] == status

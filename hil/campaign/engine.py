@@ -17,6 +17,7 @@ from .execute import base_row, run_one
 from .spec import Campaign
 
 RESULTS = "results"                    # results.parquet, results.csv
+STATUSES = ("ok", "failed", "hung", "error", "spoiled")
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -119,7 +120,7 @@ def run_campaign(campaign: Campaign, out: Path, scheduler: str | None = None, wo
     if not rows:
         write_results(out, rows)
     wall = time.monotonic() - started
-    counts = {s: sum(1 for r in rows if r.get("status") == s) for s in ("ok", "failed", "hung", "error")}
+    counts = {s: sum(1 for r in rows if r.get("status") == s) for s in STATUSES}
     return {"campaign": campaign.name, "scenario": campaign.scenario, "runs": len(rows), "ran": len(todo),
             "skipped": len(previous), **counts, "workers": n_workers, "wall_s": round(wall, 1),
             "runs_per_minute": round(len(todo) / wall * 60.0, 2) if todo and wall > 0 else None,

@@ -87,6 +87,7 @@ def write_report(out: Path, rows: list[dict], summary: dict, chosen: tuple[str, 
     figures = _plots(out, rows, chosen) if plots and rows else []
     lines = [f"# Campaign {summary['campaign']} ({summary['scenario']})", "",
              f"{summary['runs']} runs: {summary['ok']} ok, {summary['failed']} failed, {summary['hung']} hung, "
+             f"{summary['spoiled']} spoiled by load, "
              f"{summary['error']} errors; " + (f"{summary['ran']} ran now on {summary['workers']} workers in "
                                                f"{summary['wall_s']} s ({summary['runs_per_minute']} runs/min)"
                                                if summary["ran"] else "none ran now (all in the table)")

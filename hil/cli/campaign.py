@@ -35,7 +35,8 @@ def _run(args) -> int:
         print(json.dumps({**summary, "metrics": summarize(rows, campaign.metrics)}, indent=1, default=str))
     else:
         print(f"campaign {campaign.name}: {summary['runs']} runs, {summary['ok']} ok, {summary['failed']} failed, "
-              f"{summary['hung']} hung, {summary['error']} errors; {summary['runs_per_minute']} runs/min on "
+              f"{summary['hung']} hung, {summary['spoiled']} spoiled by load, {summary['error']} errors; "
+              f"{summary['runs_per_minute']} runs/min on "
               f"{summary['workers']} workers; {summary['report']}")
     return 0 if summary["ok"] == summary["runs"] else 1
 
