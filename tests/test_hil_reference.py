@@ -73,3 +73,20 @@ def test_rebuilt_reference_of_a_host_start_equals_the_controllers():
     ref = rebuild(log, "testbench", loop.period_s, initial_position=initial)
     assert [m.seqs for m in ref.motions] == [[0]]
     np.testing.assert_array_equal(ref.yr[30:, 0], np.array(yr[30:]))
+
+
+def test_sha_tracking_reports_a_sweep_whose_light_load_at_the_lowest_w_was_cut(monkeypatch):
+    """A fault cut the lightest load's run at the lowest w (it is not in the log's runs): the
+    analysis judges the lowest w's lightest run it has instead of failing with an exception."""
+    import hil.scenarios.sha_tracking as sha_tracking
+    from hil.scenarios import SCENARIOS
+
+    def run(controller, load, w, error):
+        return {"controller": controller, "load_kg": load, "w_rad_s": w, "max_error_mm": error,
+                "rms_error_mm": error / 2, "reference_vs_sine_mm": 0.0, "fault": 0}
+
+    runs = [run("pi", 0.0, 0.5, 3.0), run("pi", 3.0, 0.1, 1.0), run("pi", 6.0, 0.1, 1.2)]
+    monkeypatch.setattr(sha_tracking, "sine_runs", lambda log, period: runs)
+    analysis = SCENARIOS["sha-tracking"].analyze(None, None)
+    light = next(c for c in analysis.checks if c.name.startswith("pi: rms error at the lowest w (0.1 rad/s)"))
+    assert light.name.endswith("3 kg") and light.measured == "0.50 mm"

@@ -156,7 +156,7 @@ class ShaTracking(Scenario):
             summary[controller] = {str(w): max(r["max_error_mm"] for r in mine if r["w_rad_s"] == w) for w in ws}
             low = ws[0]
             worst = summary[controller][str(low)]
-            light = min((r["load_kg"] or 0.0) for r in mine)
+            light = min((r["load_kg"] or 0.0) for r in mine if r["w_rad_s"] == low)   # runs a fault cut are missing
             rms_light = max(r["rms_error_mm"] for r in mine if r["w_rad_s"] == low and (r["load_kg"] or 0.0) == light)
             rms_all = max(r["rms_error_mm"] for r in mine if r["w_rad_s"] == low)
             checks.append(Check(f"{controller}: rms error at the lowest w ({low:g} rad/s), {light:g} kg",
