@@ -1,5 +1,6 @@
 """Plausibility of the measurements: commanded against measured motion per leg, the
-legs' platform attitude against the IMU's, and load cells that stop changing.
+legs' platform attitude against the IMU's, load cells that stop changing, and the valves'
+supply transducers against the supply the actuator model assumes.
 
 MotionPlausibility, commanded against measured motion, per leg: a valve that is driven hard must move its
 cylinder. It catches what the other limits only see late or never: a stuck encoder (the
@@ -150,7 +151,6 @@ class FrozenLoadCells:
 
     def update(self, force_n: np.ndarray, fresh: np.ndarray) -> int:
         return frozen_step(force_n, fresh, self.last, self.run, self.limit)
-
 
 
 @njit(cache=True)
