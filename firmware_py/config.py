@@ -27,7 +27,7 @@ RANGES: dict[str, dict[str, object]] = {
         "activation_timeout_s": (0.1, 600.0), "hold_cycles": (1, 10000), "shutdown_hold_cycles": (1, 10000),
         "shutdown_disable_cycles": (1, 10000), "heartbeat_ms": (10.0, 10000.0),
         "heartbeat_timeout_ms": (10.0, 60000.0), "realtime_priority": (1, 99),
-        "cpu": (-1, 1023), "stall_fault_periods": (1.0, 10000.0),
+        "cpu": (-1, 1023), "cpu_latency_us": (-1, 100000), "stall_fault_periods": (1.0, 10000.0),
     },
     "actuator": {
         "bore_radius_mm": (0.5, 100.0), "rod_radius_mm": (0.1, 99.0), "stroke_mm": (10.0, 2000.0),
@@ -116,6 +116,7 @@ class ControllerConfig:
     heartbeat_s: float
     heartbeat_timeout_s: float
     realtime_priority: int
+    cpu_latency_us: int               # realtime: PM QoS wake-up latency asked of the CPUs (-1: none)
     cpu: int
     # actuator
     piston_area_m2: float             # A_A, the bore: PL = pA - alpha pB acts on it
@@ -286,7 +287,7 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         hold_cycles=t["hold_cycles"], shutdown_hold_cycles=t["shutdown_hold_cycles"],
         shutdown_disable_cycles=t["shutdown_disable_cycles"], heartbeat_s=t["heartbeat_ms"] * 1e-3,
         heartbeat_timeout_s=t["heartbeat_timeout_ms"] * 1e-3,
-        realtime_priority=t["realtime_priority"], cpu=t["cpu"],
+        realtime_priority=t["realtime_priority"], cpu=t["cpu"], cpu_latency_us=t["cpu_latency_us"],
         piston_area_m2=area, area_ratio=ratio, stroke_m=a["stroke_mm"] * MM, moving_mass_kg=a["moving_mass_kg"],
         valve_full_scale_v=a["valve_full_scale_v"], encoder_resolution_m=a["encoder_resolution_mm"] * MM,
         slide_mass_kg=tb["slide_mass_kg"], testbench_home_m=tb["home_mm"] * MM, testbench_park_m=tb["park_mm"] * MM,

@@ -11,7 +11,7 @@ import json
 import sys
 
 from protocol.cliutil import StopFlag
-from protocol.realtime import applied, freeze_gc, lock_memory, pin_cpu, set_fifo, thaw_gc
+from protocol.realtime import applied, freeze_gc, lock_memory, pin_cpu, request_cpu_latency, set_fifo, thaw_gc
 
 from .config import ControllerConfig, load_config
 from .control import CONTROLLER_NAMES
@@ -22,7 +22,8 @@ def log(text: str) -> None:
 
 
 def realtime_setup(cfg: ControllerConfig, realtime: bool) -> list[str]:
-    """GC frozen and disabled always; scheduling, memory locking, affinity for realtime."""
+    """GC frozen and disabled always; scheduling, memory locking, affinity and the CPUs' wake-up
+    latency for realtime."""
     freeze_gc(disable=True)
     if not realtime:
         return []
@@ -30,6 +31,8 @@ def realtime_setup(cfg: ControllerConfig, realtime: bool) -> list[str]:
                 "mlockall": lock_memory()}
     if cfg.cpu >= 0:
         measures[f"CPU {cfg.cpu}"] = pin_cpu(cfg.cpu)
+    if cfg.cpu_latency_us >= 0:
+        measures[f"CPU wake-up latency <= {cfg.cpu_latency_us} us"] = request_cpu_latency(cfg.cpu_latency_us)
     return applied(measures, log)
 
 

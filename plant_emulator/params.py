@@ -57,7 +57,7 @@ RANGES: dict[str, dict[str, tuple]] = {
         "hold_blocks_ports": bool,
         "spool_jam_threshold_pct": (0.1, 100.0), "spool_jam_syncs": (1, 10000),
         "leg_pressure_divisor": (0, 240), "imu_divisor": (0, 240), "valve_status_divisor": (0, 240),
-        "realtime_priority": (1, 99),
+        "realtime_priority": (1, 99), "cpu_latency_us": (-1, 100000),
     },
 }
 
@@ -134,6 +134,7 @@ class EmulatorConfig:
     spool_jam_syncs: int
     leg_pressure_divisor: int
     realtime_priority: int
+    cpu_latency_us: int               # --realtime: PM QoS wake-up latency asked of the CPUs (-1: none)
     imu_divisor: int
     valve_status_divisor: int
 
@@ -200,7 +201,7 @@ def build(raw: dict) -> EmulatorConfig:
         spool_jam_threshold=n["spool_jam_threshold_pct"] / 100.0,
         spool_jam_syncs=n["spool_jam_syncs"], leg_pressure_divisor=n["leg_pressure_divisor"],
         imu_divisor=n["imu_divisor"], valve_status_divisor=n["valve_status_divisor"],
-        realtime_priority=n["realtime_priority"],
+        realtime_priority=n["realtime_priority"], cpu_latency_us=n["cpu_latency_us"],
     )
 
 

@@ -2,9 +2,9 @@
 host's recorder. Once a process's start-up is over: its start-up objects are frozen out of
 the garbage collector (a collection then scans only what the run created, not the whole
 heap of NumPy, SciPy and MuJoCo objects), its memory is locked (no page fault in the loop),
-and it may run SCHED_FIFO and pinned to a CPU. A measure that is not permitted returns the
-reason, for the process to log; none of them is fatal. And the one summary of a loop's
-duration records (percentiles in us).
+it may run SCHED_FIFO and pinned to a CPU, and it asks that idle CPUs wake within a bound.
+A measure that is not permitted returns the reason, for the process to log; none of them is
+fatal. And the one summary of a loop's duration records (percentiles in us).
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import ctypes.util
 import gc
 import os
 import resource
+import struct
 
 import numpy as np
 
@@ -86,6 +87,32 @@ def pin_cpu(cpu: int) -> str | None:
         os.sched_setaffinity(0, {cpu})
     except (OSError, AttributeError) as exc:
         return f"CPU affinity {cpu} not permitted ({exc})"
+    return None
+
+
+CPU_LATENCY_PATH = "/dev/cpu_dma_latency"
+_latency_fd: int | None = None          # the request lasts while this stays open
+
+
+def request_cpu_latency(latency_us: int, path: str = CPU_LATENCY_PATH) -> str | None:
+    """PM QoS: ask the kernel to keep every CPU's wake-up latency within `latency_us` for the
+    rest of this process's life (0: no idle state deeper than polling, as cyclictest asks).
+    A halted virtual CPU waits for its hypervisor to run it again when woken; on this kind of
+    machine that was most of the 500 Hz loops' overruns (docs/TIMING.md). None when done,
+    else why not."""
+    global _latency_fd
+    try:
+        fd = os.open(path, os.O_WRONLY)
+    except OSError as exc:
+        return f"CPU wake-up latency not requested ({path}: {exc.strerror}); idle CPUs may halt"
+    try:
+        os.write(fd, struct.pack("i", latency_us))
+    except OSError as exc:
+        os.close(fd)
+        return f"CPU wake-up latency not requested ({path}: {exc.strerror}); idle CPUs may halt"
+    if _latency_fd is not None:
+        os.close(_latency_fd)
+    _latency_fd = fd
     return None
 
 

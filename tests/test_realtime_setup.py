@@ -43,6 +43,7 @@ def test_the_emulator_applies_each_measure_or_logs_why_not():
     else:
         assert "SCHED_FIFO not permitted" in log, (notes, log)
     assert "mlockall" in notes or "memory not locked" in log or "mlockall" in log, (notes, log)
+    assert "CPU wake-up latency <= 0 us" in notes or "CPU wake-up latency not requested" in log, (notes, log)
 
 
 def test_the_controller_daemon_applies_each_measure_or_logs_why_not():
@@ -53,3 +54,19 @@ def test_the_controller_daemon_applies_each_measure_or_logs_why_not():
     notes, log = proc.stdout, proc.stderr
     assert "SCHED_FIFO priority" in notes or "SCHED_FIFO not permitted" in log, (notes, log)
     assert "mlockall" in notes or "memory not locked" in log or "mlockall" in log, (notes, log)
+    assert "CPU wake-up latency <= 0 us" in notes or "CPU wake-up latency not requested" in log, (notes, log)
+
+
+def test_the_cpu_latency_request_is_written_and_held_or_says_why(tmp_path):
+    """The PM QoS request is the value written to the device, kept open for the process's
+    life; a device that cannot be opened is a reason, not an exception."""
+    import os
+    import struct
+    target = tmp_path / "cpu_dma_latency"
+    target.write_bytes(b"")
+    assert realtime.request_cpu_latency(0, str(target)) is None
+    assert struct.unpack("i", target.read_bytes()) == (0,)
+    held = realtime._latency_fd
+    assert held is not None and os.fstat(held).st_ino == target.stat().st_ino
+    problem = realtime.request_cpu_latency(0, str(tmp_path / "missing"))
+    assert problem is not None and "not requested" in problem and realtime._latency_fd == held
