@@ -417,11 +417,12 @@ class Controller:
         supply_faulty, lone_leg = self.supply.update(meas.ps_pa, meas.pressure_fresh)
         faulty = res.update(self.spool_applied, meas.fresh, meas.position_m, meas.force_n, self.gravity_axial,
                             self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
-        peaks = self._peaks[self.cycles % PEAK_DELAY]
+        slot = self.cycles % PEAK_DELAY
         if self.sup.faults == 0:
-            self.residual_peak = max(self.residual_peak, float(peaks[0]))
-            self.supply_peak = max(self.supply_peak, float(peaks[1]))
-        peaks[0], peaks[1] = res.peak, self.supply.cycle_peak
+            self.residual_peak = max(self.residual_peak, float(self._peaks[slot, 0]))
+            self.supply_peak = max(self.supply_peak, float(self._peaks[slot, 1]))
+        self._peaks[slot, 0] = res.peak
+        self._peaks[slot, 1] = self.supply.cycle_peak
         if supply_faulty:
             self.sup.fault(Fault.SUPPLY_PRESSURE)
         elif lone_leg >= 0:

@@ -11,7 +11,7 @@ import json
 import sys
 
 from protocol.cliutil import StopFlag
-from protocol.realtime import applied, freeze_gc, lock_memory, pin_cpu, request_cpu_latency, set_fifo, thaw_gc
+from protocol.realtime import applied, cpu_latency_measure, freeze_gc, lock_memory, pin_cpu, set_fifo, thaw_gc
 
 from .config import ControllerConfig, load_config
 from .control import CONTROLLER_NAMES
@@ -31,9 +31,7 @@ def realtime_setup(cfg: ControllerConfig, realtime: bool) -> list[str]:
                 "mlockall": lock_memory()}
     if cfg.cpu >= 0:
         measures[f"CPU {cfg.cpu}"] = pin_cpu(cfg.cpu)
-    if cfg.cpu_latency_us >= 0:
-        measures[f"CPU wake-up latency <= {cfg.cpu_latency_us} us"] = request_cpu_latency(cfg.cpu_latency_us)
-    return applied(measures, log)
+    return applied({**measures, **cpu_latency_measure(cfg.cpu_latency_us)}, log)
 
 
 def realtime_teardown() -> None:

@@ -66,8 +66,6 @@ class Geometry:
     def with_payload(self, payload_kg: float) -> Geometry:
         """The platform carrying a payload at its centre of mass (a point mass there adds no
         inertia about it), as the rig's operator declares it."""
-        if payload_kg == 0.0:
-            return self
         return replace(self, platform=replace(self.platform, mass_kg=self.platform.mass_kg + payload_kg))
 
     @property

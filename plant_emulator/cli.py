@@ -8,7 +8,7 @@ import json
 import sys
 
 from protocol.cliutil import StopFlag, number_in_range, output_file
-from protocol.realtime import applied, freeze_gc, lock_memory, request_cpu_latency, set_fifo
+from protocol.realtime import applied, cpu_latency_measure, freeze_gc, lock_memory, set_fifo
 
 from .params import load_config
 
@@ -35,9 +35,8 @@ def realtime_setup(cfg) -> list[str]:
     """Memory locked, SCHED_FIFO at the config's priority and the CPUs' wake-up latency;
     returns what was applied and logs each measure that is not permitted (never fatal)."""
     measures = {"mlockall": lock_memory(),
-                f"SCHED_FIFO priority {cfg.realtime_priority}": set_fifo(cfg.realtime_priority)}
-    if cfg.cpu_latency_us >= 0:
-        measures[f"CPU wake-up latency <= {cfg.cpu_latency_us} us"] = request_cpu_latency(cfg.cpu_latency_us)
+                f"SCHED_FIFO priority {cfg.realtime_priority}": set_fifo(cfg.realtime_priority),
+                **cpu_latency_measure(cfg.cpu_latency_us)}
     return applied(measures, lambda text: print(f"emulator: {text}", file=sys.stderr, flush=True))
 
 

@@ -103,17 +103,24 @@ def request_cpu_latency(latency_us: int, path: str = CPU_LATENCY_PATH) -> str | 
     global _latency_fd
     try:
         fd = os.open(path, os.O_WRONLY)
+        try:
+            os.write(fd, struct.pack("i", latency_us))
+        except OSError:
+            os.close(fd)
+            raise
     except OSError as exc:
-        return f"CPU wake-up latency not requested ({path}: {exc.strerror}); idle CPUs may halt"
-    try:
-        os.write(fd, struct.pack("i", latency_us))
-    except OSError as exc:
-        os.close(fd)
         return f"CPU wake-up latency not requested ({path}: {exc.strerror}); idle CPUs may halt"
     if _latency_fd is not None:
         os.close(_latency_fd)
     _latency_fd = fd
     return None
+
+
+def cpu_latency_measure(latency_us: int) -> dict[str, str | None]:
+    """The request as a measure for `applied` ({} for -1: ask nothing)."""
+    if latency_us < 0:
+        return {}
+    return {f"CPU wake-up latency <= {latency_us} us": request_cpu_latency(latency_us)}
 
 
 def applied(measures: dict[str, str | None], log) -> list[str]:

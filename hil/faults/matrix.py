@@ -29,7 +29,7 @@ def run_matrix(out: Path, short: bool, bus: str | None = None, start_timeout_s: 
         doc = run_scenario(session, options)
         runs.append({"session": session.name, "passed": doc["passed"], "failure": doc.get("failure"),
                      "e2e_errors": doc["e2e_errors"], "wall_time_s": doc.get("wall_time_s"),
-                     "residual_peak": residual_peak(doc), "supply_peak": residual_peak(doc, "supply_peak")})
+                     **{key: controllers_peak(doc, key) for key in ("residual_peak", "supply_peak")}})
         results += doc["metrics"].get("cases", [])
         expected = {c.key for c in session.cases}
         missing = expected - {r["key"] for r in doc["metrics"].get("cases", [])}
@@ -44,10 +44,10 @@ def run_matrix(out: Path, short: bool, bus: str | None = None, start_timeout_s: 
     return doc
 
 
-def residual_peak(doc: dict, key: str = "residual_peak") -> float | None:
-    """The controllers' largest residual / threshold before their first fault (the false-alarm
-    margin is its inverse; `supply_peak` the same for the supply samples), from their
-    summaries; None when none reported it."""
+def controllers_peak(doc: dict, key: str) -> float | None:
+    """The controllers' largest `key` (`residual_peak`: residual / threshold before their first
+    fault, the false-alarm margin's inverse; `supply_peak` the same for the supply samples),
+    from their summaries; None when none reported it."""
     peaks = [child.get("summary", {}).get(key) for name, child in doc.get("children", {}).items()
              if name.startswith("controller")]
     peaks = [p for p in peaks if p is not None]
