@@ -72,7 +72,8 @@ RANGES: dict[str, dict[str, object]] = {
                         "tank_pressure_bar": (0.0, 10.0)},
     "residuals": {"enabled": bool, "correction_gain": (0.001, 1.0), "filter_ms": (0.1, 1000.0),
                   "persistence_cycles": (1, 10000), "flow_spread_pct": (0.0, 100.0), "supply_legs": (2, 6),
-                  "load_cell_noise_n": (0.0, 100.0)},
+                  "load_cell_noise_n": (0.0, 100.0), "spool_check": bool, "spool_floor_pct": (0.1, 100.0),
+                  "spool_lag_spread_pct": (0.0, 99.0), "spool_persistence_cycles": (1, 10000)},
     "limits": {
         "stroke_margin_mm": (0.0, 100.0), "velocity_max_mm_s": (1.0, 1e4), "force_max_n": (1.0, 1e6),
         "tracking_error_max_mm": (0.1, 1000.0), "spool_max_pct": (1.0, 100.0),
@@ -187,6 +188,10 @@ class ControllerConfig:
     residual_flow_spread: float       # relative
     residual_supply_legs: int
     load_cell_noise_n: float          # 1-sigma: the frozen load-cell check's limit follows from it
+    spool_check: bool                 # the valves report their spool (LEG_STATE's SPOOL): judge it
+    spool_floor: float                # the spool residual's floor, fraction of full input
+    spool_lag_spread: float           # the spool's time constant known to within this, relative
+    spool_persistence: int
     # limits and supervisor
     stroke_margin_m: float
     velocity_max_m_s: float
@@ -319,6 +324,8 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         residual_gain=rs["correction_gain"], residual_filter_s=rs["filter_ms"] * 1e-3,
         residual_persistence=rs["persistence_cycles"], residual_flow_spread=rs["flow_spread_pct"] / 100.0,
         residual_supply_legs=rs["supply_legs"], load_cell_noise_n=rs["load_cell_noise_n"],
+        spool_check=rs["spool_check"], spool_floor=rs["spool_floor_pct"] / 100.0, spool_lag_spread=rs["spool_lag_spread_pct"] / 100.0,
+        spool_persistence=rs["spool_persistence_cycles"],
         stroke_margin_m=lim["stroke_margin_mm"] * MM, velocity_max_m_s=lim["velocity_max_mm_s"] * MM,
         force_max_n=lim["force_max_n"], tracking_error_max_m=lim["tracking_error_max_mm"] * MM,
         spool_max=lim["spool_max_pct"] / 100.0,

@@ -20,7 +20,7 @@ from physics import hydraulics as hy
 from physics.actuator import piston_force
 from physics.constants import GRAVITY_M_S2
 from protocol.dbc import signal_scale
-from protocol.enums import Ack, Command, Fault, State, TestMode, WaypointFlag
+from protocol.enums import Ack, Command, Fault, State, TestMode, ValveState, WaypointFlag
 
 from .computed_torque import ComputedTorque, LegComputedTorque
 from .config import ControllerConfig
@@ -32,7 +32,7 @@ from .interfaces import Measurements, ValveCommands
 from .monitors import FrameMonitor, LimitMonitor, LoopMonitor, NodeMonitor
 from .plausibility import AttitudeCrossCheck, FrozenLoadCells, MotionPlausibility, SupplyPressure
 from .reference import Reference
-from .residuals import ActuatorResiduals
+from .residuals import ActuatorResiduals, SpoolResidual
 from .stopping import ControlledStop
 from .supervisor import ACTIVE, LATCHED, Action, Supervisor
 from .trajectory import through_points
@@ -104,19 +104,24 @@ class Controller:
             self.geometry.rod.mass_kg if self.hexapod else cfg.moving_mass_kg, cfg.ct_stiffness_n_m,
             cfg.encoder_resolution_m, cfg.residual_gain, cfg.residual_filter_s, cfg.residual_persistence,
             cfg.residual_flow_spread)
+        self.spool_check = SpoolResidual(n, cfg.hydraulics, period_s, cfg.spool_floor, cfg.spool_lag_spread,
+                                         cfg.spool_persistence, int(ValveState.ACTIVE))
         self.residuals_running = False
         # the valves' P-port transducers against the supply the model assumes
         self.supply = SupplyPressure(n, cfg.supply_pressure_pa, cfg.hydraulics[hy.HP_TANK], cfg.residual_flow_spread,
                                      cfg.residual_supply_legs)
-        # spool setpoints sent: the last cycle's (applied at this SYNC) and the one before (applied
-        # over the period this cycle's measurements close)
+        # spool setpoints sent: the last cycle's (applied at this SYNC), the one before (applied
+        # over the period this cycle's measurements close) and the one before that (applied
+        # then when the other came late)
         self.spool_sent = np.zeros(n)
         self.spool_applied = np.zeros(n)
+        self.spool_late = np.zeros(n)
         # the false-alarm margin's measure: the largest |r| / threshold before the first fault,
         # less the PEAK_DELAY cycles before it (a fault's own rise)
         self.residual_peak = 0.0
         self.supply_peak = 0.0                   # the same for the supply's samples
-        self._peaks = np.zeros((PEAK_DELAY, 2))
+        self.spool_peak = 0.0                    # ... and for the valves' spools
+        self._peaks = np.zeros((PEAK_DELAY, 3))
         self.stop = ControlledStop(n, round(cfg.controlled_stop_s / period_s) if self.hexapod else 0)
         # identification tests (HOST_TEST, test bench only: chapter 6.4)
         self.test = None if self.hexapod else IdentificationSignal(
@@ -159,6 +164,7 @@ class Controller:
         self.residuals.update(self.spool_applied, meas.fresh, meas.position_m, meas.force_n, self.gravity_axial,
                               self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
         self.supply.update(meas.ps_pa, meas.pressure_fresh)
+        self.spool_check.update(self.spool_applied, self.spool_late, meas.spool, meas.fresh, meas.valve_state)
         valve_commands(VALVES_HOLD, self.joint.u_v, 1.0, False, -1, cmd.enable, cmd.hold, cmd.active, cmd.reset,
                        cmd.spool)
         ref.play(through_points(np.array([self.home_strokes, self.home_strokes + 1e-3]), 0.1, 0.2), [0], 0)
@@ -411,28 +417,40 @@ class Controller:
             return
         if not self.residuals_running:
             res.start(meas.position_m, meas.force_n, self.gravity_axial, meas.pressure_valid, meas.pa_pa, meas.pb_pa)
+            self.spool_check.start()
             self.supply.reset()
             self.residuals_running = True
             return
         supply_faulty, lone_leg = self.supply.update(meas.ps_pa, meas.pressure_fresh)
         faulty = res.update(self.spool_applied, meas.fresh, meas.position_m, meas.force_n, self.gravity_axial,
                             self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
+        spools = self.spool_check.update(self.spool_applied, self.spool_late, meas.spool, meas.fresh,
+                                         meas.valve_state) if self.cfg.spool_check else 0
         slot = self.cycles % PEAK_DELAY
         if self.sup.faults == 0:
             self.residual_peak = max(self.residual_peak, float(self._peaks[slot, 0]))
             self.supply_peak = max(self.supply_peak, float(self._peaks[slot, 1]))
+            self.spool_peak = max(self.spool_peak, float(self._peaks[slot, 2]))
         self._peaks[slot, 0] = res.peak
         self._peaks[slot, 1] = self.supply.cycle_peak
+        self._peaks[slot, 2] = self.spool_check.peak
         if supply_faulty:
             self.sup.fault(Fault.SUPPLY_PRESSURE)
         elif lone_leg >= 0:
             self.sup.fault(Fault.SENSOR_FAULT, lone_leg + 1)
+        elif spools:
+            self._leg_fault(Fault.SPOOL_MISMATCH, self.spool_check.worst_leg)
         elif faulty >= self.cfg.residual_supply_legs:
             self.sup.fault(Fault.SUPPLY_PRESSURE)
         elif faulty:
-            if self.stop.cycles > 0 and self.sup.state in ACTIVE:
-                self.stop.begin(res.worst_leg, self.reference.yr, self.platform.jacobian_scaled)
-            self.sup.fault(Fault.ACTUATOR_RESIDUAL, res.worst_leg + 1)
+            self._leg_fault(Fault.ACTUATOR_RESIDUAL, res.worst_leg)
+
+    def _leg_fault(self, fault: Fault, leg: int) -> None:
+        """A fault isolated to one leg: that leg holds while the others stop (the hexapod's
+        controlled stop), then every valve."""
+        if self.stop.cycles > 0 and self.sup.state in ACTIVE:
+            self.stop.begin(leg, self.reference.yr, self.platform.jacobian_scaled)
+        self.sup.fault(fault, leg + 1)
 
     def _stop_checks(self, meas: Measurements) -> None:
         """A controlled stop ends at once (every valve holds) on anything the limits see."""
@@ -474,6 +492,7 @@ class Controller:
                 VALVES_ACTIVE if state in ACTIVE or self.stop.active else VALVES_HOLD)
         valve_commands(mode, self.joint.u_v, self.cfg.valve_full_scale_v, self._reset_pulse, self.stop.leg,
                        cmd.enable, cmd.hold, cmd.active, cmd.reset, cmd.spool)
+        np.copyto(self.spool_late, self.spool_applied)
         np.copyto(self.spool_applied, self.spool_sent)
         np.copyto(self.spool_sent, cmd.spool)
 

@@ -18,6 +18,7 @@ class Measurements:
         self.force_n = np.zeros(n_legs)                # load cell, + = the rod pushes the load
         self.valve_state = np.zeros(n_legs, dtype=np.int64)   # CiA 408 state the valve reported
         self.sensor_fault = np.zeros(n_legs, dtype=bool)
+        self.spool = np.zeros(n_legs)                  # the valve's actual spool, fraction of full input
         self.fresh = np.zeros(n_legs, dtype=bool)      # a valid LEG_STATE arrived this cycle
         self.rejected = np.zeros(n_legs, dtype=bool)   # a LEG_STATE failed the E2E check this cycle
         # LEG_PRESSURE_n, every 16th cycle: the latest valid sample

@@ -45,6 +45,8 @@ from .controller import RESET_GRACE_CYCLES, Controller
 from .supervisor import LATCHED, emergency_code
 
 PACINGS = ("realtime", "lockstep")
+# the summary's false-alarm measures: each monitor's largest ratio to its threshold before the first fault
+PEAK_KEYS = ("residual_peak", "supply_peak", "spool_peak")
 HISTORY = 1 << 16                       # cycles kept for the timing percentiles
 # the cycle's phases, in order (seconds each, per cycle, in `phase_s`): SYNC sent; the sensor
 # window less the frames' handling; the frames' handling (decode, dispatch); read; update;
@@ -95,7 +97,7 @@ class ControllerLoop:
         self._leg_slots = [self.decoder.slot[f"LEG_STATE_{i}"] for i in self.legs]
         self._leg_values = [self.decoder.values[f"LEG_STATE_{i}"] for i in self.legs]
         index = CODECS["LEG_STATE_1"].index
-        self._i_pos, self._i_force = index["POSITION"], index["FORCE"]
+        self._i_pos, self._i_force, self._i_spool = index["POSITION"], index["FORCE"], index["SPOOL"]
         self._i_valve, self._i_sensor = index["VALVE_STATE"], index["SENSOR_FAULT"]
         self._leg_of_id = {CODECS[f"LEG_STATE_{i}"].frame_id: i - 1 for i in self.legs}
         self._heartbeat_of_id = {CODECS[f"HEARTBEAT_{node}"].frame_id: k for k, node in enumerate(self.nodes)}
@@ -271,6 +273,7 @@ class ControllerLoop:
             if ok:
                 meas.position_m[leg] = values[self._i_pos]
                 meas.force_n[leg] = values[self._i_force]
+                meas.spool[leg] = values[self._i_spool]
                 meas.valve_state[leg] = int(values[self._i_valve])
                 meas.sensor_fault[leg] = values[self._i_sensor] != 0.0
         np.subtract(now, self.heartbeat_seen, out=meas.heartbeat_age_s)
@@ -494,6 +497,6 @@ class ControllerLoop:
         return {"rig": c.rig, "controller": c.sup.controller, "pacing": self.pacing,
                 "cycles": s.cycles, "overruns": s.overruns, "e2e_errors": s.e2e_errors,
                 "missing_frames": s.missing_frames, "faults": s.faults, "fault_code": c.sup.fault_code.name,
-                "residual_peak": round(c.residual_peak, 3), "supply_peak": round(c.supply_peak, 3),
+                **{key: round(getattr(c, key), 3) for key in PEAK_KEYS},
                 "state": (self.state_at_stop or c.state).name, "emergencies": s.emergencies,
                 "host_commands": s.host_commands, "frames_sent": s.frames_sent, "timing": self.timing()}

@@ -23,6 +23,15 @@ by `gain` each cycle, sums to at most spread K T / gain times that average. A le
 stays above it for `persistence` cycles is faulty (several legs at once point at the supply).
 What it sees: a valve that does not follow its command, a seized rod, a lost supply, a
 frozen encoder. Allocation-free on arrays made here.
+
+Per valve, its reported spool (LEG_STATE's SPOOL) against where the spool's first-order lag
+(`HP_TAU_SPOOL`) takes its previous report under the command it applied over the period:
+    x_pred     = u + (x_prev - u) exp(-T / tau)
+    threshold  = floor + |u - x_prev| max|exp(-T / tau') - exp(-T / tau)|, tau' = tau (1 -+ spread)
+A command that reached the valve after its SYNC is applied a period late, so the residual
+is the smaller of the two candidates (this period's command and the one before). A jammed
+spool is off by its jam at the first report; the force residual sees it only through the
+flow it causes.
 """
 
 from __future__ import annotations
@@ -166,4 +175,70 @@ class ActuatorResiduals:
                                                                        self.flow_bound, self.gain, self.floor_n,
                                                             self.flow_n_per_m_s, self.persistence, self.above,
                                                             self.ratio)
+        return self.legs_faulty
+
+
+@njit(cache=True)
+def spool_step_check(hp, period_s, applied, applied_late, spool, fresh, valve_state, active_state, floor, lag_spread,
+                     persistence, seeded, spool_prev, above, ratio):
+    """One cycle of every valve's spool residual; returns (legs faulty, the worst faulty leg,
+    the largest ratio). A leg without a fresh frame, or whose valve is not ACTIVE, starts
+    again from its next report."""
+    decay = math.exp(-period_s / hp[hy.HP_TAU_SPOOL])
+    persisted, worst, worst_ratio, peak = 0, -1, 0.0, 0.0
+    for i in range(spool.shape[0]):
+        if not (fresh[i] and valve_state[i] == active_state):
+            seeded[i], above[i], ratio[i] = False, 0, 0.0
+            continue
+        if not seeded[i]:
+            seeded[i], spool_prev[i], above[i], ratio[i] = True, spool[i], 0, 0.0
+            continue
+        best = math.inf
+        for u in (applied[i], applied_late[i]):
+            target = min(max(u, -1.0), 1.0)
+            gap = target - spool_prev[i]
+            best = min(best, abs(spool[i] - (target - gap * decay)) / (floor + abs(gap) * lag_spread))
+        ratio[i] = best
+        spool_prev[i] = spool[i]
+        peak = max(peak, best)
+        above[i] = above[i] + 1 if best > 1.0 else 0
+        if above[i] >= persistence:
+            persisted += 1
+            if best > worst_ratio:
+                worst, worst_ratio = i, best
+    return persisted, worst, peak
+
+
+def lag_uncertainty(period_s: float, tau_s: float, spread: float) -> float:
+    """The largest change of the lag's one-period decay exp(-T / tau) over tau (1 -+ spread)."""
+    nominal = math.exp(-period_s / tau_s)
+    return max(abs(math.exp(-period_s / (tau_s * (1.0 + s))) - nominal) for s in (-spread, spread))
+
+
+class SpoolResidual:
+    """Every valve's spool residual. `start()` when the valves go ACTIVE, `update(...)` every
+    cycle after; `legs_faulty`, `worst_leg` (-1: none), `ratio` and `peak` as for the chambers."""
+
+    def __init__(self, n_legs: int, hp: np.ndarray, period_s: float, floor: float, lag_spread: float,
+                 persistence: int, active_state: int):
+        self.hp, self.period_s, self.floor, self.persistence = hp, period_s, floor, persistence
+        self.active_state = active_state
+        self.lag_spread = lag_uncertainty(period_s, float(hp[hy.HP_TAU_SPOOL]), lag_spread)
+        self.seeded = np.zeros(n_legs, dtype=np.bool_)
+        self.spool_prev = np.zeros(n_legs)
+        self.above = np.zeros(n_legs, dtype=np.int64)
+        self.ratio = np.zeros(n_legs)
+        self.legs_faulty, self.worst_leg, self.peak = 0, -1, 0.0
+
+    def start(self) -> None:
+        self.seeded[:] = False
+        self.above[:] = 0
+        self.legs_faulty, self.worst_leg = 0, -1
+
+    def update(self, applied, applied_late, spool, fresh, valve_state) -> int:
+        """`applied` the setpoint each valve applied over the period the reports close (sent
+        two cycles before), `applied_late` the one before it. Returns the legs faulty."""
+        self.legs_faulty, self.worst_leg, self.peak = spool_step_check(
+            self.hp, self.period_s, applied, applied_late, spool, fresh, valve_state, self.active_state, self.floor,
+            self.lag_spread, self.persistence, self.seeded, self.spool_prev, self.above, self.ratio)
         return self.legs_faulty

@@ -110,6 +110,7 @@ class Emulator:
         self.nodes = rig_nodes(rig.n_legs)
         self.valves = {n: ValveDriver(cfg.command_timeout_syncs, cfg.spool_jam_threshold, cfg.spool_jam_syncs)
                        for n in self.legs}
+        self.spool_demand = np.zeros(rig.n_legs)    # each valve's own demand over the last period
         self.nmt = {n: NmtState.BOOTUP for n in self.nodes}
         names = ["NMT", "SYNC", "EMU_CTRL", "EMU_KICK"] + [f"VALVE_CMD_{n}" for n in self.legs]
         self.decoder = FrameDecoder(names)
@@ -423,7 +424,7 @@ class Emulator:
                 continue
             emergency = valve.on_sync()
             if emergency is None:
-                emergency = valve.check_spool(float(self.rig.state[n - 1, hy.S_SPOOL]), float(self.rig.command[n - 1]))
+                emergency = valve.check_spool(float(self.rig.state[n - 1, hy.S_SPOOL]), float(self.spool_demand[n - 1]))
             if emergency is not None:
                 self._emergency(n, emergency)
         nodes = self.clock()
@@ -449,7 +450,8 @@ class Emulator:
         """Spool commands to the rig, and the load-holding valves open only while ACTIVE."""
         blocks = self.cfg.hold_blocks_ports
         for n, valve in self.valves.items():
-            stuck = self._fault(n, EmuFault.SPOOL_STUCK)
+            stuck = self._fault(n, EmuFault.SPOOL_STUCK)        # the spool goes there whatever its demand
+            self.spool_demand[n - 1] = valve.spool_command
             self.rig.command[n - 1] = valve.spool_command if stuck is None else stuck[1] / 100.0
             self.rig.ports_open[n - 1] = 0.0 if blocks and valve.state is not ValveState.ACTIVE else 1.0
 
@@ -524,6 +526,7 @@ class Emulator:
             box.values[box.index["SENSOR_FAULT"]] = 0
             box.values[box.index["POSITION"]] = position
             box.values[box.index["FORCE"]] = force
+            box.values[box.index["SPOOL"]] = rig.state[i, hy.S_SPOOL]
             self._emit(n, box.codec.name)
         self._send_truth(counter)
 

@@ -25,6 +25,9 @@ from .dbc import CONTROLLER_NODE, Schedule, schedules, sync_counter_overflow
 
 MAX_LOAD = 0.80
 MIN_COMPUTE_WINDOW_US = 400.0
+# the controller's cycle compute budget (p99, `controller bench`): the window a sporadic frame
+# blocking the commands leaves must still hold it
+COMPUTE_BUDGET_US = 300.0
 
 
 def frame_bits_nominal(n_bytes: int) -> int:

@@ -33,8 +33,9 @@ def spool_of(k: int, leg: int) -> float:
 def main(spec: str, cycles: int) -> int:
     bus = open_bus(spec)
     legs = range(1, 7)
-    state = {n: (CODECS[f"LEG_STATE_{n}"], can.Message(arbitration_id=CODECS[f"LEG_STATE_{n}"].frame_id,
-                                                        data=bytearray(6), is_extended_id=False)) for n in legs}
+    codecs = {n: CODECS[f"LEG_STATE_{n}"] for n in legs}
+    state = {n: (c, can.Message(arbitration_id=c.frame_id, data=c.new_buffer(), is_extended_id=False))
+             for n, c in codecs.items()}
     values = {n: CODECS[f"LEG_STATE_{n}"].new_values() for n in legs}
     decoder = FrameDecoder([f"VALVE_CMD_{n}" for n in legs] + ["SYNC"])
     ready = can.Message(arbitration_id=READY_ID, data=b"", is_extended_id=False)

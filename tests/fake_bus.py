@@ -3,13 +3,15 @@
 It answers like the emulator's nodes, in plain Python floats (no NumPy, so whatever NumPy
 allocates in a test is the controller's): NMT start -> heartbeats OPERATIONAL; on SYNC k
 every leg applies the command latched in cycle k-1 (CiA 408: DISABLED/HOLD/ACTIVE) and
-sends LEG_STATE_n with its encoder position and load-cell force; each leg is the
-identified actuator of Table A.3 (150 mm, 0 kg) integrated by forward-Euler sub-steps.
+sends LEG_STATE_n with its encoder position, load-cell force and the spool its valve's
+first-order lag reached (the controller's spool check); each leg is the identified actuator
+of Table A.3 (150 mm, 0 kg) integrated by forward-Euler sub-steps.
 """
 
 from __future__ import annotations
 
 import collections
+import math
 import random
 import time
 
@@ -21,9 +23,16 @@ LOAD_CELL_NOISE_N = 0.3        # the emulated hexapod's load cells, as the contr
 HEARTBEAT_S = 0.05             # wall clock, as the nodes' timers (the controller checks on its clock)
 
 
+def emulated_spool_tau_s() -> float:
+    """The emulated valves' spool time constant (their [valve] table)."""
+    from physics.hydraulics import HP_TAU_SPOOL
+    from plant_emulator.params import load_config
+    return float(load_config().hp[HP_TAU_SPOOL])
+
+
 class FakeBus:
     def __init__(self, n_legs: int, strokes_m, period_s: float = 0.002, b0=11425.0, b1=106.0, k01=0.236,
-                 load_kg: float = 1.35, resolution_m: float = 0.125e-3, nodes=None):
+                 load_kg: float = 1.35, resolution_m: float = 0.125e-3, nodes=None, spool_tau_s: float | None = None):
         self.n = n_legs
         self.period = period_s
         self.b0, self.b1, self.k01 = b0, b1, k01                     # k01 in (m/s)/V
@@ -33,6 +42,8 @@ class FakeBus:
         self.v = [0.0] * n_legs
         self.a = [0.0] * n_legs
         self.spool = [0.0] * n_legs
+        self.spool_reached = [0.0] * n_legs                         # the valve's lag toward `spool`
+        self.spool_decay = math.exp(-period_s / (spool_tau_s or emulated_spool_tau_s()))
         self.latched = [None] * n_legs
         self.valve = [1] * n_legs                                   # DISABLED
         self.queue = collections.deque()
@@ -49,9 +60,9 @@ class FakeBus:
                      CODECS["IMU_ATTITUDE"].new_values())
         self.sent = collections.Counter()
         self.last_sent: dict[int, bytes] = {}      # frame id -> the data of its last frame
-        self._state = [(CODECS[f"LEG_STATE_{i}"], can.Message(arbitration_id=CODECS[f"LEG_STATE_{i}"].frame_id,
-                                                               data=bytearray(6), is_extended_id=False),
-                        CODECS[f"LEG_STATE_{i}"].new_values()) for i in range(1, n_legs + 1)]
+        codecs = [CODECS[f"LEG_STATE_{i}"] for i in range(1, n_legs + 1)]
+        self._state = [(c, can.Message(arbitration_id=c.frame_id, data=c.new_buffer(), is_extended_id=False),
+                        c.new_values()) for c in codecs]
         self._hb = {node: can.Message(arbitration_id=0x700 + node, data=bytearray([5]), is_extended_id=False)
                     for node in self.nodes}
         self._cmd_codec = CODECS["VALVE_CMD_1"]
@@ -114,6 +125,7 @@ class FakeBus:
             values[3] = 0.0
             values[4] = self.stuck.get(leg, round(self.y[leg] / self.res) * self.res)
             values[5] = self.force_n(leg)
+            values[6] = self.spool_actual(leg)
             codec.encode_into(values, msg.data)
             if leg in self.corrupt:
                 msg.data[0] ^= 0xFF
@@ -130,7 +142,13 @@ class FakeBus:
         controller's frozen load-cell check is off for it, `rig_loop.make_loop`)."""
         return self.mass * (self.a[leg] + 9.81)
 
+    def spool_actual(self, leg: int) -> float:
+        return self.spool_reached[leg]
+
     def _advance(self) -> None:
+        for leg in range(self.n):
+            target = min(max(self.spool[leg], -1.0), 1.0)
+            self.spool_reached[leg] = target + (self.spool_reached[leg] - target) * self.spool_decay
         steps = 20
         h = self.period / steps
         for leg in range(self.n):
@@ -151,7 +169,9 @@ class EmulatedHexapodBus(FakeBus):
     while it steps; what it frees again leaves no growth for the allocation probe to see."""
 
     def __init__(self, rig, strokes_m, **kwargs):
+        from physics.hydraulics import S_SPOOL
         from plant_emulator.emulator import attitude_rpy
+        self._spool_column = S_SPOOL
         super().__init__(6, strokes_m, **kwargs)
         self.rig = rig
         self._noise = random.Random(7)              # the load cells' noise, the same every run
@@ -161,6 +181,9 @@ class EmulatedHexapodBus(FakeBus):
 
     def force_n(self, leg: int) -> float:
         return float(self.rig.rod_force_n[leg]) + self._noise.gauss(0.0, LOAD_CELL_NOISE_N)    # as the emulator
+
+    def spool_actual(self, leg: int) -> float:
+        return float(self.rig.state[leg, self._spool_column])
 
     def _advance(self) -> None:
         for leg in range(6):

@@ -17,7 +17,7 @@ def test_one_cycle_of_frames_allocates_nothing():
     expected = decoder.expected_mask(decoder.names)
     tx = {c.name: c.new_buffer() for c in sensors + commands}
     values = {c.name: c.new_values() for c in sensors + commands}
-    immutable = bytes(6)                                   # a frame from a log: the scratch path
+    immutable = bytes(sensors[0].dlc)                      # a frame from a log: the scratch path
 
     def cycle(k: int):
         decoder.begin_cycle()

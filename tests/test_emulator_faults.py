@@ -13,7 +13,7 @@ from plant_emulator.emulator import Emulator
 from plant_emulator.params import load_config
 from plant_emulator.rigs import make_rig
 from protocol.dbc import load_database
-from protocol.enums import EmuCommand, EmuFault, NmtCommand
+from protocol.enums import EmuCommand, EmuFault, NmtCommand, ValveState
 from protocol.outbox import Outbox
 
 PERIOD_S = 0.002
@@ -120,17 +120,22 @@ def test_supply_drop_settles_at_its_fraction_and_clearing_restores_it():
 
 
 def test_a_stuck_spool_drives_the_leg_whatever_the_valve_is_told():
-    """The valve ACTIVE and told spool 0: the leg extends at the stuck 20 %. In HOLD the
-    load-holding valves close and keep it where it is, stuck spool or not."""
+    """The valve ACTIVE and told spool 0: the spool goes to the stuck 20 % (LEG_STATE's SPOOL
+    says so at once) and the leg extends, until the valve's own control-deviation monitor
+    (its demand against its spool) holds it. In HOLD the load-holding valves close and keep
+    it where it is, stuck spool or not."""
     bench = Bench()
     bench.syncs(5, valve_active=True)
     y0 = bench.rig.state[0, hy.S_Y]
     bench.inject(EmuFault.SPOOL_STUCK, 20)
-    bench.syncs(50, valve_active=True)
+    frames = bench.syncs(50, valve_active=True)
     assert bench.rig.command[0] == pytest.approx(0.2)
+    assert frames[0]["SPOOL"] == 0 and frames[1]["SPOOL"] >= 14 and frames[3]["SPOOL"] == 20
+    jam = bench.cfg.spool_jam_syncs
+    assert [f["VALVE_STATE"] for f in frames[jam - 1:jam + 1]] == [int(ValveState.ACTIVE), int(ValveState.FAULT_HOLD)]
     y1 = bench.rig.state[0, hy.S_Y]
     assert y1 > y0 + 1e-3                                          # extending, against a spool-0 command
-    bench.syncs(50)                                                # no VALVE_CMD: the valve times out to HOLD
+    bench.syncs(50)
     y2 = bench.rig.state[0, hy.S_Y]
     bench.syncs(50)
     assert abs(bench.rig.state[0, hy.S_Y] - y2) < 1e-4            # held by the load-holding valves

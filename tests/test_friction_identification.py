@@ -181,7 +181,8 @@ def _presliding_in_process(start_cycles: int, force_filter_hz: float | None = No
     from protocol.enums import TestMode, WaypointFlag
 
     period, res, load = 0.002, FINE_SENSOR_MM * MM, 3.0
-    overrides = {"actuator": {"encoder_resolution_mm": FINE_SENSOR_MM}}
+    # this loop applies each command in its own cycle, not at the next SYNC: no spool check
+    overrides = {"actuator": {"encoder_resolution_mm": FINE_SENSOR_MM}, "residuals": {"spool_check": False}}
     if force_filter_hz is not None:
         overrides["identification"] = {"force_filter_hz": force_filter_hz}
     cfg = load_config(overrides=overrides)

@@ -19,7 +19,8 @@ ENCODER_M = 0.125e-3
 def hold_after_kick(factors: dict, seconds: float = 4.0, kick_m: float = 0.005):
     """Hold at home with the [hexapod] gain factors given, leg 0's reference moved by `kick_m`;
     returns (final state, peak |xy| mm)."""
-    cfg = load_config(overrides={"hexapod": factors})
+    # this loop applies each command in its own cycle, not at the next SYNC: no spool check
+    cfg = load_config(overrides={"hexapod": factors, "residuals": {"spool_check": False}})
     rig = HexapodRig(load_emulator_config())
     ctl = Controller(cfg, "hexapod", PERIOD_S, CONTROLLER_NAMES["adaptive"])
     meas, cmd = ctl.new_interfaces()

@@ -86,8 +86,8 @@ def test_the_view_shows_what_the_frames_say():
     assert s.sync_period_us == pytest.approx(2000, abs=1)
     assert s.sync_jitter_max_us == pytest.approx(500, abs=1)          # the one late SYNC
     assert s.rates["LEG_STATE_1"] == pytest.approx(500, rel=0.02)
-    # each cycle: SYNC 1 byte, 6 x LEG_STATE 6 bytes, 6 x VALVE_CMD 4 bytes, at 500 Hz of 1 Mbit/s
-    bits = (8 + 47) + 6 * (48 + 47) + 6 * (32 + 47)
+    # each cycle: SYNC 1 byte, 6 x LEG_STATE 7 bytes, 6 x VALVE_CMD 4 bytes, at 500 Hz of 1 Mbit/s
+    bits = (8 + 47) + 6 * (56 + 47) + 6 * (32 + 47)
     assert s.load == pytest.approx(bits * 500 / 1e6, rel=0.02)
 
 

@@ -13,10 +13,12 @@ import sys
 import time
 from pathlib import Path
 
+from firmware_py.loop import PEAK_KEYS
+
 from ..runner import toml_sections
 
 METRICS_PREFIX = "metric."
-CONTROLLER_SUMMARY_KEYS = ("faults", "residual_peak", "supply_peak", "missing_frames")
+CONTROLLER_SUMMARY_KEYS = ("faults", *PEAK_KEYS, "missing_frames")
 SPOILED_RETRIES = 2                # a lockstep run whose frames missed the window runs again
 
 

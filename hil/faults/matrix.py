@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from firmware_py.loop import PEAK_KEYS
+
 from ..runner import RunOptions, run_scenario
 from .cases import LOCKSTEP_CASES, VALVE_WATCHDOG_PERIODS, realtime_cases
 from .session import Session
@@ -29,7 +31,7 @@ def run_matrix(out: Path, short: bool, bus: str | None = None, start_timeout_s: 
         doc = run_scenario(session, options)
         runs.append({"session": session.name, "passed": doc["passed"], "failure": doc.get("failure"),
                      "e2e_errors": doc["e2e_errors"], "wall_time_s": doc.get("wall_time_s"),
-                     **{key: controllers_peak(doc, key) for key in ("residual_peak", "supply_peak")}})
+                     **{key: controllers_peak(doc, key) for key in PEAK_KEYS}})
         results += doc["metrics"].get("cases", [])
         expected = {c.key for c in session.cases}
         missing = expected - {r["key"] for r in doc["metrics"].get("cases", [])}
@@ -46,7 +48,8 @@ def run_matrix(out: Path, short: bool, bus: str | None = None, start_timeout_s: 
 
 def controllers_peak(doc: dict, key: str) -> float | None:
     """The controllers' largest `key` (`residual_peak`: residual / threshold before their first
-    fault, the false-alarm margin's inverse; `supply_peak` the same for the supply samples),
+    fault, the false-alarm margin's inverse; `supply_peak`, `spool_peak` the same for the supply
+    samples and the spools),
     from their summaries; None when none reported it."""
     peaks = [child.get("summary", {}).get(key) for name, child in doc.get("children", {}).items()
              if name.startswith("controller")]
@@ -64,10 +67,10 @@ def format_matrix(doc: dict) -> str:
     if noted:     # spoiled attempts and repeated recoveries (machine stalls), in the open
         lines += ["", "Notes:"] + [f"- {r['key']} ({r['rig']}): " + " | ".join(r["detail"]["notes"]) for r in noted]
     lines += ["", "| session | passed | wall s | E2E errors | residual / threshold before the first fault "
-                  "| supply / threshold, the same | failure |", "|---|---|---|---|---|---|---|"]
+                  "| supply, the same | spool, the same | failure |", "|---|---|---|---|---|---|---|---|"]
     for s in doc["sessions"]:
         lines.append(f"| {s['session']} | {s['passed']} | {s['wall_time_s']} | {s['e2e_errors']} | "
-                     f"{s.get('residual_peak')} | {s.get('supply_peak')} | "
+                     f"{s.get('residual_peak')} | {s.get('supply_peak')} | {s.get('spool_peak')} | "
                      f"{(s['failure'] or '').splitlines()[0] if s['failure'] else ''} |")
     return "\n".join(lines) + "\n"
 

@@ -50,7 +50,7 @@ class Bench:
         self.meas.fresh[:] = True
         self.meas.valve_state[:] = 3
         # its plant is no hydraulics: the residuals run (their time counts), their verdict never comes
-        c.residuals.persistence = 1 << 62
+        c.residuals.persistence = c.spool_check.persistence = 1 << 62
         c.load_cells.limit = 0                          # ... nor are its constant forces a frozen load cell
         c.update(self.meas, self.cmd)                   # initialises at the measured state
         c.activated(auto_enable=True)
