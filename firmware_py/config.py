@@ -87,7 +87,8 @@ RANGES: dict[str, dict[str, object]] = {
         "waypoint_force_max_n": (1.0, 1e6),
         "waypoint_path_samples": (2, 1000), "plausibility_spool_pct": (1.0, 100.0),
         "plausibility_cycles": (1, 100000), "plausibility_travel_mm": (0.0, 1000.0),
-        "attitude_mismatch_deg": (0.01, 90.0), "attitude_mismatch_samples": (1, 10000),
+        "imu_angle_noise_deg": (0.0, 10.0), "attitude_sigmas": (1.0, 100.0),
+        "attitude_mismatch_samples": (1, 10000),
         "controlled_stop_ms": (0.0, 5000.0),
     },
 }
@@ -216,7 +217,8 @@ class ControllerConfig:
     plausibility_spool: float         # fraction of full input
     plausibility_cycles: int
     plausibility_travel_m: float
-    attitude_mismatch_rad: float      # encoders' DK attitude against the IMU's
+    imu_angle_noise_rad: float        # 1-sigma of each IMU angle: the attitude check's limit
+    attitude_sigmas: float
     attitude_mismatch_samples: int
     controlled_stop_s: float          # hexapod: after a one-leg fault the others move this long (stopping.py)
     stall_fault_periods: float        # realtime: a SYNC this many periods after the previous one -> OVERRUN
@@ -324,8 +326,8 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         residual_gain=rs["correction_gain"], residual_filter_s=rs["filter_ms"] * 1e-3,
         residual_persistence=rs["persistence_cycles"], residual_flow_spread=rs["flow_spread_pct"] / 100.0,
         residual_supply_legs=rs["supply_legs"], load_cell_noise_n=rs["load_cell_noise_n"],
-        spool_check=rs["spool_check"], spool_floor=rs["spool_floor_pct"] / 100.0, spool_lag_spread=rs["spool_lag_spread_pct"] / 100.0,
-        spool_persistence=rs["spool_persistence_cycles"],
+        spool_check=rs["spool_check"], spool_floor=rs["spool_floor_pct"] / 100.0,
+        spool_lag_spread=rs["spool_lag_spread_pct"] / 100.0, spool_persistence=rs["spool_persistence_cycles"],
         stroke_margin_m=lim["stroke_margin_mm"] * MM, velocity_max_m_s=lim["velocity_max_mm_s"] * MM,
         force_max_n=lim["force_max_n"], tracking_error_max_m=lim["tracking_error_max_mm"] * MM,
         spool_max=lim["spool_max_pct"] / 100.0,
@@ -339,7 +341,7 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         waypoint_force_max_n=sv["waypoint_force_max_n"], waypoint_path_samples=sv["waypoint_path_samples"],
         plausibility_spool=sv["plausibility_spool_pct"] / 100.0, plausibility_cycles=sv["plausibility_cycles"],
         plausibility_travel_m=sv["plausibility_travel_mm"] * MM,
-        attitude_mismatch_rad=math.radians(sv["attitude_mismatch_deg"]),
+        imu_angle_noise_rad=math.radians(sv["imu_angle_noise_deg"]), attitude_sigmas=sv["attitude_sigmas"],
         attitude_mismatch_samples=sv["attitude_mismatch_samples"], controlled_stop_s=sv["controlled_stop_ms"] * 1e-3,
         stall_fault_periods=t["stall_fault_periods"],
     )

@@ -95,7 +95,8 @@ class Controller:
         spool, cycles = ((cfg.testbench_plausibility_spool, cfg.testbench_plausibility_cycles) if tight else
                          (cfg.plausibility_spool, cfg.plausibility_cycles))
         self.plausibility = MotionPlausibility(n, spool * cfg.valve_full_scale_v, cycles, cfg.plausibility_travel_m)
-        self.attitude_check = AttitudeCrossCheck(cfg.attitude_mismatch_rad, cfg.attitude_mismatch_samples)
+        self.attitude_check = AttitudeCrossCheck(0.5 * cfg.encoder_resolution_m, cfg.imu_angle_noise_rad,
+                                                 cfg.attitude_sigmas, cfg.attitude_mismatch_samples)
         self.load_cells = FrozenLoadCells(n, cfg.load_cell_noise_n, signal_scale("LEG_STATE_1", "FORCE"))
         # each actuator's chamber model against its load cell, while the valves are ACTIVE; the
         # cylinder's own stroke sets its chamber volumes
@@ -120,8 +121,9 @@ class Controller:
         # less the PEAK_DELAY cycles before it (a fault's own rise)
         self.residual_peak = 0.0
         self.supply_peak = 0.0                   # the same for the supply's samples
-        self.spool_peak = 0.0                    # ... and for the valves' spools
-        self._peaks = np.zeros((PEAK_DELAY, 3))
+        self.spool_peak = 0.0                    # ... for the valves' spools
+        self.attitude_peak = 0.0                 # ... and for the IMU against the encoders
+        self._peaks = np.zeros((PEAK_DELAY, 4))
         self.stop = ControlledStop(n, round(cfg.controlled_stop_s / period_s) if self.hexapod else 0)
         # identification tests (HOST_TEST, test bench only: chapter 6.4)
         self.test = None if self.hexapod else IdentificationSignal(
@@ -431,9 +433,11 @@ class Controller:
             self.residual_peak = max(self.residual_peak, float(self._peaks[slot, 0]))
             self.supply_peak = max(self.supply_peak, float(self._peaks[slot, 1]))
             self.spool_peak = max(self.spool_peak, float(self._peaks[slot, 2]))
+            self.attitude_peak = max(self.attitude_peak, float(self._peaks[slot, 3]))
         self._peaks[slot, 0] = res.peak
         self._peaks[slot, 1] = self.supply.cycle_peak
         self._peaks[slot, 2] = self.spool_check.peak
+        self._peaks[slot, 3] = self.attitude_check.ratio
         if supply_faulty:
             self.sup.fault(Fault.SUPPLY_PRESSURE)
         elif lone_leg >= 0:
@@ -468,7 +472,9 @@ class Controller:
             self.dk_failures = 0
             if self.platform.det_ratio < cfg.singularity_ratio_min:
                 sup.fault(Fault.SINGULARITY)
-            if meas.attitude_fresh and self.attitude_check.update(self.platform.rot, *meas.attitude_rad):
+            # the IMU's sample against the DK of the same SYNC: every leg's frame of this cycle
+            if meas.attitude_fresh and meas.fresh.all() and self.attitude_check.update(
+                    self.platform.rot, self.platform.jacobian, *meas.attitude_rad):
                 sup.fault(Fault.ATTITUDE_MISMATCH)
         else:
             self.dk_failures += 1

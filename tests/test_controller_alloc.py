@@ -57,6 +57,6 @@ def test_steady_cycles_allocate_no_numpy_memory(rig, controller):
     assert loop.stats.e2e_errors == 0 and loop.stats.missing_frames == 0
     # IMU frames were compared (the emulator's IMU reads the true attitude, the encoders' DK
     # is quantised: a few mrad apart)
-    limit = ctl.cfg.attitude_mismatch_rad if emulated else 2e-3
+    limit = ctl.attitude_check.limit_rad if emulated else 2e-3
     assert not ctl.hexapod or ctl.attitude_check.angle_rad < limit
     assert np.max(np.abs(ctl.joint.error_m)) < 2e-3             # tracking within 2 mm
