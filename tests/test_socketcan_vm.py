@@ -69,5 +69,12 @@ def test_sha_step_over_socketcan_vcan0_inside_a_vm(tmp_path):
     assert doc["passed"] and doc["failure"] is None, doc.get("failure")
     assert doc["e2e_errors"] == 0 and doc["log"]["lost_frames"] == 0
     reference = json.loads((work / "host" / "metrics.json").read_text())
-    assert doc["log"]["frames"] >= 0.95 * reference["log"]["frames"]   # the whole experiment went over vcan0
+    # the whole experiment went over vcan0: every host frame and every step of the reference.
+    # Not the frame count: a host's wait for an ack lasts a floor of wall time too, so the
+    # cycles run meanwhile follow the machine's speed (2964 in the VM against 3520 on the host)
+    host_frames = [name for name in reference["log"]["rx_status"] if name.startswith(("HOST_", "EMU_CTRL"))]
+    assert host_frames and all(doc["log"]["rx_status"].get(name) == reference["log"]["rx_status"][name]
+                               for name in host_frames)
+    assert len(doc["metrics"]["steps"]) == len(reference["metrics"]["steps"]) > 0
+    assert all(s["settling_s"] is not None for s in doc["metrics"]["steps"])
     assert doc["figures"] == [] and not list((work / "vm").glob("*.png"))          # --no-plots
