@@ -87,8 +87,7 @@ RANGES: dict[str, dict[str, object]] = {
         "waypoint_force_max_n": (1.0, 1e6),
         "waypoint_path_samples": (2, 1000), "plausibility_spool_pct": (1.0, 100.0),
         "plausibility_cycles": (1, 100000), "plausibility_travel_mm": (0.0, 1000.0),
-        "imu_angle_noise_deg": (0.0, 10.0), "attitude_sigmas": (1.0, 100.0),
-        "attitude_mismatch_samples": (1, 10000),
+        "attitude_mismatch_deg": (0.01, 90.0), "attitude_mismatch_samples": (1, 10000),
         "controlled_stop_ms": (0.0, 5000.0),
     },
 }
@@ -217,8 +216,7 @@ class ControllerConfig:
     plausibility_spool: float         # fraction of full input
     plausibility_cycles: int
     plausibility_travel_m: float
-    imu_angle_noise_rad: float        # 1-sigma of each IMU angle: the attitude check's limit
-    attitude_sigmas: float
+    attitude_mismatch_rad: float      # encoders' DK attitude against the IMU's
     attitude_mismatch_samples: int
     controlled_stop_s: float          # hexapod: after a one-leg fault the others move this long (stopping.py)
     stall_fault_periods: float        # realtime: a SYNC this many periods after the previous one -> OVERRUN
@@ -341,7 +339,7 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         waypoint_force_max_n=sv["waypoint_force_max_n"], waypoint_path_samples=sv["waypoint_path_samples"],
         plausibility_spool=sv["plausibility_spool_pct"] / 100.0, plausibility_cycles=sv["plausibility_cycles"],
         plausibility_travel_m=sv["plausibility_travel_mm"] * MM,
-        imu_angle_noise_rad=math.radians(sv["imu_angle_noise_deg"]), attitude_sigmas=sv["attitude_sigmas"],
+        attitude_mismatch_rad=math.radians(sv["attitude_mismatch_deg"]),
         attitude_mismatch_samples=sv["attitude_mismatch_samples"], controlled_stop_s=sv["controlled_stop_ms"] * 1e-3,
         stall_fault_periods=t["stall_fault_periods"],
     )

@@ -95,8 +95,7 @@ class Controller:
         spool, cycles = ((cfg.testbench_plausibility_spool, cfg.testbench_plausibility_cycles) if tight else
                          (cfg.plausibility_spool, cfg.plausibility_cycles))
         self.plausibility = MotionPlausibility(n, spool * cfg.valve_full_scale_v, cycles, cfg.plausibility_travel_m)
-        self.attitude_check = AttitudeCrossCheck(0.5 * cfg.encoder_resolution_m, cfg.imu_angle_noise_rad,
-                                                 cfg.attitude_sigmas, cfg.attitude_mismatch_samples)
+        self.attitude_check = AttitudeCrossCheck(cfg.attitude_mismatch_rad, cfg.attitude_mismatch_samples)
         self.load_cells = FrozenLoadCells(n, cfg.load_cell_noise_n, signal_scale("LEG_STATE_1", "FORCE"))
         # each actuator's chamber model against its load cell, while the valves are ACTIVE; the
         # cylinder's own stroke sets its chamber volumes
@@ -474,7 +473,7 @@ class Controller:
                 sup.fault(Fault.SINGULARITY)
             # the IMU's sample against the DK of the same SYNC: every leg's frame of this cycle
             if meas.attitude_fresh and meas.fresh.all() and self.attitude_check.update(
-                    self.platform.rot, self.platform.jacobian, *meas.attitude_rad):
+                    self.platform.rot, *meas.attitude_rad):
                 sup.fault(Fault.ATTITUDE_MISMATCH)
         else:
             self.dk_failures += 1

@@ -25,7 +25,6 @@ import math
 import numpy as np
 from numba import njit
 
-from .dynamics import gauss_solve_into
 from .rotation import angle_between_matrices, rpy_to_matrix_into
 
 
@@ -75,59 +74,37 @@ class MotionPlausibility:
                              self.start, self.sign)
 
 
-@njit(cache=True)
-def quantisation_tilt_bound(jacobian, half_count_m, unit, column, lu) -> float:
-    """The largest rotation [rad] the encoders' quantisation can put into the DK attitude at
-    this pose: each leg off by up to half a count, through the rotation rows of J^-1 (the
-    triangle inequality over the legs). Near-vertical legs make it large: ~22 mrad per mm of
-    one leg at home. Infinite where J is singular."""
-    total = 0.0
-    for leg in range(jacobian.shape[0]):
-        unit[:] = 0.0
-        unit[leg] = 1.0
-        if gauss_solve_into(jacobian, unit, lu, column, False) == 0.0:
-            return math.inf
-        total += math.sqrt(column[3] ** 2 + column[4] ** 2 + column[5] ** 2)
-    return half_count_m * total
-
-
 class AttitudeCrossCheck:
     """The platform's attitude from the six encoders (direct kinematics) against the IMU's.
 
-    Two independent sensors of the same rotation: a leg whose encoder freezes, jumps or
-    drifts moves the DK attitude away from the IMU's long before the tracking or motion
-    checks see it (a frozen encoder under the model-based controller drives its leg at 10-20 %
-    input, below the motion window's threshold, and in 0.5 s the platform is 280 mm away).
-    `samples` IMU readings in a row beyond the limit are implausible. The limit is derived at
-    each sample's pose: the encoders' quantisation through the Jacobian (at most
-    `quantisation_tilt_bound`) plus `sigmas` of the IMU's angle noise on its three axes.
+    Two independent sensors of the same rotation: a leg whose encoder freezes or jumps
+    moves the DK attitude away from the IMU's long before the tracking or motion checks
+    see it (a frozen encoder under the model-based controller drives its leg at 10-20 %
+    input, below the motion window's threshold, and in 0.5 s the platform is 280 mm
+    away). `samples` IMU readings in a row beyond `limit_rad` are implausible. Normal
+    disagreement: encoder quantisation (0.125 mm over a ~0.2 m lever ~ 0.6 mrad) plus the
+    IMU's noise, both far below the default 1 degree.
     """
 
-    def __init__(self, half_count_m: float, imu_noise_rad: float, sigmas: float, samples: int):
-        self.half_count_m, self.samples = half_count_m, samples
-        self.imu_rad = sigmas * imu_noise_rad * math.sqrt(3.0)
+    def __init__(self, limit_rad: float, samples: int):
+        self.limit_rad, self.samples = limit_rad, samples
         self.beyond = 0
         self.angle_rad = 0.0          # the last disagreement, for logs and tests
-        self.limit_rad = math.inf     # ... and the limit at its pose
-        self.ratio = 0.0              # their ratio (the false-alarm margin's measure)
+        self.ratio = 0.0              # ... over the limit (the false-alarm margin's measure)
         self._imu_rot = np.empty((3, 3))
-        self._unit, self._column, self._lu = np.empty(6), np.empty(6), np.empty((6, 6))
         # load the kernels now: compiled (or read from numba's cache) inside a realtime cycle
         # they would stall the loop past its OVERRUN limit at the first IMU frame
-        self.update(np.eye(3), np.eye(6), 0.0, 0.0, 0.0)
+        self.update(np.eye(3), 0.0, 0.0, 0.0)
         self.reset()
 
     def reset(self) -> None:
         self.beyond = 0
         self.ratio = 0.0
 
-    def update(self, dk_rot: np.ndarray, jacobian: np.ndarray, roll: float, pitch: float, yaw: float) -> bool:
-        """One IMU sample against the DK rotation (and its Jacobian) of the same cycle; True
-        when implausible."""
+    def update(self, dk_rot: np.ndarray, roll: float, pitch: float, yaw: float) -> bool:
+        """One IMU sample against the DK rotation of the same cycle; True when implausible."""
         rpy_to_matrix_into(roll, pitch, yaw, self._imu_rot)
         self.angle_rad = angle_between_matrices(dk_rot, self._imu_rot)
-        self.limit_rad = self.imu_rad + quantisation_tilt_bound(jacobian, self.half_count_m, self._unit,
-                                                                self._column, self._lu)
         self.ratio = self.angle_rad / self.limit_rad
         self.beyond = self.beyond + 1 if self.ratio > 1.0 else 0
         return self.beyond >= self.samples

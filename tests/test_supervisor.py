@@ -11,8 +11,6 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from firmware_py.config import load_config
-from firmware_py.controller import Controller
 from firmware_py.hostlink import COMMIT_MAX_WAIT_CYCLES
 from firmware_py.kinematics import DirectKinematics, ik_batch
 from firmware_py.rotation import quat_to_rpy
@@ -425,34 +423,16 @@ def test_attitude_kernels_match_scipy(roll, pitch, yaw, axis, angle):
 
 def test_attitude_cross_check_needs_samples_in_a_row():
     from firmware_py.plausibility import AttitudeCrossCheck
-    # no quantisation, the IMU's 4 sigmas on three axes = 1 degree
-    check = AttitudeCrossCheck(half_count_m=0.0, imu_noise_rad=math.radians(1.0) / (4 * math.sqrt(3)), sigmas=4.0,
-                               samples=3)
-    level, jacobian = np.eye(3), np.eye(6)
-    assert not check.update(level, jacobian, 0.0, 0.0, 0.0) and check.angle_rad < 1e-12
-    assert check.limit_rad == pytest.approx(math.radians(1.0))
-    assert not check.update(level, jacobian, 0.02, 0.0, 0.0)      # 1.15 deg: 1 of 3
-    assert not check.update(level, jacobian, 0.0, 0.0, 0.0)       # agreement starts over
-    assert not check.update(level, jacobian, 0.0, -0.02, 0.0)
-    assert not check.update(level, jacobian, 0.0, 0.0, 0.02)
-    assert check.update(level, jacobian, 0.015, 0.015, 0.0)       # the third in a row
+    check = AttitudeCrossCheck(limit_rad=math.radians(1.0), samples=3)
+    level = np.eye(3)
+    assert not check.update(level, 0.0, 0.0, 0.0) and check.angle_rad < 1e-12
+    assert not check.update(level, 0.02, 0.0, 0.0)                # 1.15 deg: 1 of 3
+    assert not check.update(level, 0.0, 0.0, 0.0)                 # agreement starts over
+    assert not check.update(level, 0.0, -0.02, 0.0)
+    assert not check.update(level, 0.0, 0.0, 0.02)
+    assert check.update(level, 0.015, 0.015, 0.0)                 # the third in a row
     assert check.angle_rad == pytest.approx(math.hypot(0.015, 0.015), rel=1e-3)
-    assert check.ratio == pytest.approx(check.angle_rad / check.limit_rad)
-
-
-def test_the_attitude_limit_is_the_quantisations_reach_through_the_jacobian():
-    """At the hexapod's home half an encoder count on every leg reaches ~8 mrad of DK attitude
-    (the near-vertical legs); NumPy's inverse is the oracle. A singular pose has no limit."""
-    from firmware_py.plausibility import quantisation_tilt_bound
-    ctl = Controller(load_config(), "hexapod", 0.002)
-    ctl.platform.estimate(ctl.home_strokes)
-    jacobian = ctl.platform.jacobian
-    half = 0.5 * ctl.cfg.encoder_resolution_m
-    oracle = half * np.linalg.norm(np.linalg.inv(jacobian)[3:6, :], axis=0).sum()
-    scratch = np.empty(6), np.empty(6), np.empty((6, 6))
-    assert quantisation_tilt_bound(jacobian, half, *scratch) == pytest.approx(oracle, rel=1e-9)
-    assert 6e-3 < oracle < 10e-3
-    assert quantisation_tilt_bound(np.zeros((6, 6)), half, *scratch) == math.inf
+    assert check.ratio == pytest.approx(check.angle_rad / math.radians(1.0))
 
 
 def test_a_frozen_hexapod_encoder_is_caught_by_the_imu():
