@@ -27,6 +27,7 @@ import math
 import numpy as np
 from numba import njit
 
+from physics import hydraulics as hy
 from physics import lugre
 from physics.constants import GRAVITY_M_S2
 
@@ -73,16 +74,31 @@ def task_acceleration_into(accel_ref, twist_ref, twist, error, integral, kp, kd,
 
 @njit(cache=True)
 def spool_commands_into(force_map, force_cmd, force_ref, force_ref_prev, force_measured, velocity_ref, joint_error,
-                        period_s, velocity_gain, stiffness, force_gain, forces, velocities, spool, u_max, out) -> bool:
+                        strokes_ref, period_s, velocity_gain, force_bandwidth, rate_floor, forces, velocities, spool,
+                        pressure_a, pressure_b, hp, supply_pa, u_max, stiffness, force_gain, out) -> bool:
     """Each valve's spool (fraction of full input, saturated at u_max) from the map at the
     hydraulic force `force_map` and the force loop on the load cell (`force_cmd` its wanted
-    reading); True when one saturated."""
+    reading); True when one saturated. Scheduled per leg on the reference's operating point
+    (its force, velocity and stroke, the map's steady pressures and spool there): the oil
+    column's stiffness K (`stiffness`, for the compliance flow F_r' / K) and the force loop's
+    gain k_F = w_F / (dF'/dx) (`force_gain`), dF'/dx the force rate per spool there: the
+    same bandwidth w_F wherever the leg stands. dF'/dx is taken no lower than `rate_floor`
+    (the smallest at rest over the design's operating set): where a chamber nears the tank
+    pressure its entrained air makes the rate collapse, and the pressures of a transient
+    are not the map's steady ones."""
     saturated = False
     for i in range(out.shape[0]):
-        compliance = (force_ref[i] - force_ref_prev[i]) / period_s / stiffness
-        velocity = velocity_ref[i] + velocity_gain * joint_error[i] + compliance
+        f_ref, v_ref, y_ref = force_ref[i], velocity_ref[i], strokes_ref[i]
+        pa = valve_map_eval(forces, velocities, pressure_a, f_ref, v_ref)
+        pb = valve_map_eval(forces, velocities, pressure_b, f_ref, v_ref)
+        k = hy.column_stiffness(y_ref, pa, pb, hp)
+        stiffness[i] = k
+        rate = hy.force_rate_per_spool(y_ref, pa, pb, valve_map_eval(forces, velocities, spool, f_ref, v_ref),
+                                       supply_pa, hp)
+        force_gain[i] = force_bandwidth / max(rate, rate_floor)
+        velocity = v_ref + velocity_gain * joint_error[i] + (f_ref - force_ref_prev[i]) / period_s / k
         x = (valve_map_eval(forces, velocities, spool, force_map[i], velocity)
-             + force_gain * (force_cmd[i] - force_measured[i]))
+             + force_gain[i] * (force_cmd[i] - force_measured[i]))
         if abs(x) >= u_max:
             saturated = True
             x = u_max if x > 0.0 else -u_max
@@ -137,26 +153,38 @@ class _Gains:
     """What both forms share: the PID's gains, the valve map and force loop, the velocity
     low-pass (its filter's constants)."""
 
-    def __init__(self, cfg: ControllerConfig, period_s: float, velocity_gain: float):
+    def __init__(self, cfg: ControllerConfig, n_legs: int, period_s: float, velocity_gain: float):
         w = cfg.ct_bandwidth_rad_s
         self.kp, self.kd, self.ki = w * w, 2.0 * cfg.ct_damping * w, cfg.ct_integral_fraction * w ** 3
         self.period_s = period_s
         self.velocity_gain = velocity_gain
-        self.force_gain = cfg.ct_force_gain_per_n
-        self.stiffness = cfg.ct_stiffness_n_m
+        self.force_bandwidth, self.rate_floor = cfg.ct_force_bandwidth_rad_s, cfg.ct_force_rate_floor
         self.forces, self.velocities, self.spool = (cfg.valve_map_force_n, cfg.valve_map_velocity_m_s,
                                                     cfg.valve_map_spool)
+        self.pressure_a, self.pressure_b = cfg.valve_map_pressure_a_pa, cfg.valve_map_pressure_b_pa
+        self.hp, self.supply_pa = cfg.hydraulics, cfg.supply_pressure_pa
         self.u_max = cfg.spool_max
         self.full_scale_v = cfg.valve_full_scale_v
         self.filter_wn, self.filter_zeta = 2 * math.pi * cfg.ct_velocity_filter_hz, FILTER_ZETA
         self.filter_ad, self.filter_bd = second_order_filter(period_s, cfg.ct_velocity_filter_hz, FILTER_ZETA)
+        self.stiffness = np.zeros(n_legs)         # each leg's oil column at its operating point, N/m
+        self.force_gain = np.zeros(n_legs)        # ... and its force loop's gain, spool fraction per N
+
+    def spool_commands(self, force_map, force_cmd, force_ref, force_ref_prev, force_measured, velocity_ref,
+                       joint_error, strokes_ref) -> bool:
+        """`spool_commands_into` with this controller's map, gains and scratch: writes spool_cmd."""
+        return spool_commands_into(force_map, force_cmd, force_ref, force_ref_prev, force_measured, velocity_ref,
+                                   joint_error, strokes_ref, self.period_s, self.velocity_gain, self.force_bandwidth,
+                                   self.rate_floor,
+                                   self.forces, self.velocities, self.spool, self.pressure_a, self.pressure_b,
+                                   self.hp, self.supply_pa, self.u_max, self.stiffness, self.force_gain, self.spool_cmd)
 
 
 class ComputedTorque(_Gains):
     """The controller's state and scratch arrays; `update(...)` writes the valve inputs."""
 
     def __init__(self, cfg: ControllerConfig, geometry: Geometry, period_s: float):
-        super().__init__(cfg, period_s, cfg.ct_velocity_gain_per_s)
+        super().__init__(cfg, N_LEGS, period_s, cfg.ct_velocity_gain_per_s)
         self.dynamics = InverseDynamics(geometry)
         self.error = np.zeros(6)              # pose error: m, rad
         self.integral = np.zeros(6)
@@ -176,7 +204,7 @@ class ComputedTorque(_Gains):
         self._twist_filter[:] = 0.0
         self._fresh = True
 
-    def update(self, platform, velocity_estimate, joint_error, velocity_ref, accel_ref, force_measured,
+    def update(self, platform, strokes_ref, velocity_estimate, joint_error, velocity_ref, accel_ref, force_measured,
                u_out) -> bool:
         """One cycle from the platform model (measured and reference pose, the reference's
         twist, acceleration and forces: the legs' `accel_ref` is not used); writes u_out (V).
@@ -194,11 +222,8 @@ class ComputedTorque(_Gains):
                                self.kd, self.ki, self.accel_cmd)
         if not self.dynamics.forces(pose[0:3], pose[3:7], self.twist, self.accel_cmd):
             return False
-        saturated = spool_commands_into(self.force_cmd, self.force_cmd, platform.force_n, self.force_ref_prev,
-                                        force_measured,
-                                        velocity_ref, joint_error, self.period_s, self.velocity_gain,
-                                        self.stiffness, self.force_gain, self.forces, self.velocities, self.spool,
-                                        self.u_max, self.spool_cmd)
+        saturated = self.spool_commands(self.force_cmd, self.force_cmd, platform.force_n, self.force_ref_prev,
+                                        force_measured, velocity_ref, joint_error, strokes_ref)
         self.force_ref_prev[:] = platform.force_n
         if not saturated:                     # conditional integration (anti-windup)
             integrate_into(self.integral, self.error, self.period_s)
@@ -216,7 +241,7 @@ class LegComputedTorque(_Gains):
     hexapod's horizontal modes), so a stiffer velocity loop stays damped there."""
 
     def __init__(self, cfg: ControllerConfig, n_legs: int, period_s: float):
-        super().__init__(cfg, period_s, cfg.ct_testbench_velocity_gain_per_s)
+        super().__init__(cfg, n_legs, period_s, cfg.ct_testbench_velocity_gain_per_s)
         self.rod_mass = cfg.moving_mass_kg
         self.friction = cfg.friction
         self.load_alpha = first_order_gain(period_s, LOAD_FILTER_HZ)
@@ -237,7 +262,7 @@ class LegComputedTorque(_Gains):
         self._velocity_filter[:] = 0.0
         self._fresh = True
 
-    def update(self, platform, velocity_estimate, joint_error, velocity_ref, accel_ref, force_measured,
+    def update(self, platform, strokes_ref, velocity_estimate, joint_error, velocity_ref, accel_ref, force_measured,
                u_out) -> bool:
         """One cycle, as `ComputedTorque.update` (no platform: `platform` is not used); writes
         u_out (V). Always True: the stroke has no singularity."""
@@ -254,10 +279,8 @@ class LegComputedTorque(_Gains):
         if self._fresh:
             self.force_ref_prev[:] = self.force_ref
             self._fresh = False
-        saturated = spool_commands_into(self.force_map, self.force_cmd, self.force_ref, self.force_ref_prev,
-                                        force_measured, velocity_ref, joint_error, self.period_s,
-                                        self.velocity_gain, self.stiffness, self.force_gain, self.forces,
-                                        self.velocities, self.spool, self.u_max, self.spool_cmd)
+        saturated = self.spool_commands(self.force_map, self.force_cmd, self.force_ref, self.force_ref_prev,
+                                        force_measured, velocity_ref, joint_error, strokes_ref)
         self.force_ref_prev[:] = self.force_ref
         if not saturated:
             integrate_into(self.integral, joint_error, self.period_s)

@@ -64,16 +64,19 @@ RANGES: dict[str, dict[str, object]] = {
     "computed_torque": {
         "bandwidth_hz": (0.1, 50.0), "damping": (0.1, 5.0), "integral_fraction": (0.0, 5.0),
         "velocity_gain_per_s": (0.0, 1000.0),
-        "testbench_velocity_gain_per_s": (0.0, 1000.0), "force_gain_pct_n": (0.0, 10.0), "stiffness_n_mm": (0.1, 1e6),
+        "testbench_velocity_gain_per_s": (0.0, 1000.0), "force_bandwidth_hz": (0.0, 100.0),
+        "force_rate_floor_n_s_pct": (1.0, 1e6),
         "velocity_filter_hz": (0.5, 200.0),
     },
-    "valve_map": {"force_n": None, "velocity_mm_s": None, "spool_pct": TABLE},
+    "valve_map": {"force_n": None, "velocity_mm_s": None, "spool_pct": TABLE, "pressure_a_bar": TABLE,
+                  "pressure_b_bar": TABLE},
     "hydraulic_model": {**hy.VALVE_RANGES, **hy.CHAMBER_RANGES, "supply_pressure_bar": (1.0, 400.0),
                         "tank_pressure_bar": (0.0, 10.0)},
     "residuals": {"enabled": bool, "correction_gain": (0.001, 1.0), "filter_ms": (0.1, 1000.0),
                   "persistence_cycles": (1, 10000), "flow_spread_pct": (0.0, 100.0), "supply_legs": (2, 6),
                   "load_cell_noise_n": (0.0, 100.0), "spool_check": bool, "spool_floor_pct": (0.1, 100.0),
-                  "spool_lag_spread_pct": (0.0, 99.0), "spool_persistence_cycles": (1, 10000)},
+                  "spool_lag_spread_pct": (0.0, 99.0), "spool_persistence_cycles": (1, 10000),
+                  "column_stiffness_n_mm": (0.1, 1e6)},
     "limits": {
         "stroke_margin_mm": (0.0, 100.0), "velocity_max_mm_s": (1.0, 1e4), "force_max_n": (1.0, 1e6),
         "tracking_error_max_mm": (0.1, 1000.0), "spool_max_pct": (1.0, 100.0),
@@ -172,12 +175,14 @@ class ControllerConfig:
     ct_integral_fraction: float       # Ki = fraction x bandwidth^3
     ct_velocity_gain_per_s: float     # joint error -> commanded piston velocity
     ct_testbench_velocity_gain_per_s: float   # ... on the test bench's light leg
-    ct_force_gain_per_n: float        # spool fraction per N of load-cell force error
-    ct_stiffness_n_m: float           # oil-column stiffness of a leg: compliance flow F' / K
+    ct_force_bandwidth_rad_s: float   # each leg's force loop on its load cell, scheduled on its operating point
+    ct_force_rate_floor: float        # N/s per unit spool: the schedule's rate taken no lower
     ct_velocity_filter_hz: float      # low-pass of the measured twist (the D term)
     valve_map_force_n: np.ndarray     # (n_f,)
     valve_map_velocity_m_s: np.ndarray    # (n_v,)
     valve_map_spool: np.ndarray       # (n_f, n_v) steady-state spool, fraction of full input
+    valve_map_pressure_a_pa: np.ndarray   # (n_f, n_v) the chamber pressures there
+    valve_map_pressure_b_pa: np.ndarray
     # the actuators' hydraulic model and its residuals
     hydraulics: np.ndarray            # physics.hydraulics HP_* vector (the [actuator] stroke)
     supply_pressure_pa: float
@@ -186,6 +191,7 @@ class ControllerConfig:
     residual_filter_s: float
     residual_persistence: int
     residual_flow_spread: float       # relative
+    residual_stiffness_n_m: float     # a leg's oil column in the thresholds (the median along the movements)
     residual_supply_legs: int
     load_cell_noise_n: float          # 1-sigma: the frozen load-cell check's limit follows from it
     spool_check: bool                 # the valves report their spool (LEG_STATE's SPOOL): judge it
@@ -243,22 +249,27 @@ def _schedule_tables(a: dict, source: str) -> tuple[np.ndarray, np.ndarray, np.n
     return positions, loads, kp, ki
 
 
-def _valve_map(vm: dict, source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _valve_map(vm: dict, source: str) -> tuple[np.ndarray, ...]:
     where = f"config {source}: [valve_map]"
     forces, velocities = np.array(vm["force_n"], dtype=float), np.array(vm["velocity_mm_s"], dtype=float) * MM
     for name, axis in (("force_n", forces), ("velocity_mm_s", velocities)):
         if axis.ndim != 1 or len(axis) < 2 or np.any(np.diff(axis) <= 0) or not np.all(np.isfinite(axis)):
             raise ConfigError(f"{where}.{name} must hold >= 2 strictly increasing numbers")
-    try:
-        spool = np.array(vm["spool_pct"], dtype=float) / 100.0
-    except ValueError:
-        raise ConfigError(f"{where}.spool_pct must be a table of numbers, one row per force") from None
-    if spool.shape != (len(forces), len(velocities)):
-        raise ConfigError(f"{where}.spool_pct is {'x'.join(map(str, spool.shape))}, force_n x velocity_mm_s "
-                          f"is {len(forces)}x{len(velocities)}")
-    if not np.all(np.abs(spool) <= 1.0):
-        raise ConfigError(f"{where}.spool_pct holds a value outside [-100, 100] (or not a number)")
-    return forces, velocities, np.ascontiguousarray(spool)
+    tables = []
+    for name, scale, low, high in (("spool_pct", 0.01, -1.0, 1.0), ("pressure_a_bar", BAR, -BAR, 1e3 * BAR),
+                                   ("pressure_b_bar", BAR, -BAR, 1e3 * BAR)):
+        try:
+            table = np.array(vm[name], dtype=float) * scale
+        except ValueError:
+            raise ConfigError(f"{where}.{name} must be a table of numbers, one row per force") from None
+        if table.shape != (len(forces), len(velocities)):
+            raise ConfigError(f"{where}.{name} is {'x'.join(map(str, table.shape))}, force_n x velocity_mm_s "
+                              f"is {len(forces)}x{len(velocities)}")
+        if not np.all((table >= low) & (table <= high)):
+            raise ConfigError(f"{where}.{name} holds a value outside [{low / scale:g}, {high / scale:g}] "
+                              f"(or not a number)")
+        tables.append(np.ascontiguousarray(table))
+    return (forces, velocities, *tables)
 
 
 def build(raw: dict, source: str = "config") -> ControllerConfig:
@@ -273,7 +284,7 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
                           f"exceeds covariance_max = {m['covariance_max']}")
     positions, loads, kp, ki = _schedule_tables(ad, source)
     ct = raw["computed_torque"]
-    map_forces, map_velocities, map_spool = _valve_map(raw["valve_map"], source)
+    map_forces, map_velocities, map_spool, map_pa, map_pb = _valve_map(raw["valve_map"], source)
     hm, rs = raw["hydraulic_model"], raw["residuals"]
     if hm["tank_pressure_bar"] >= hm["supply_pressure_bar"]:
         raise ConfigError(f"config {source}: [hydraulic_model].tank_pressure_bar = {hm['tank_pressure_bar']} must "
@@ -316,13 +327,15 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         ct_bandwidth_rad_s=2 * math.pi * ct["bandwidth_hz"], ct_damping=ct["damping"],
         ct_integral_fraction=ct["integral_fraction"], ct_velocity_gain_per_s=ct["velocity_gain_per_s"],
         ct_testbench_velocity_gain_per_s=ct["testbench_velocity_gain_per_s"],
-        ct_force_gain_per_n=ct["force_gain_pct_n"] / 100.0, ct_stiffness_n_m=ct["stiffness_n_mm"] / MM,
-        ct_velocity_filter_hz=ct["velocity_filter_hz"],
+        ct_force_bandwidth_rad_s=2 * math.pi * ct["force_bandwidth_hz"],
+        ct_force_rate_floor=ct["force_rate_floor_n_s_pct"] * 100.0, ct_velocity_filter_hz=ct["velocity_filter_hz"],
 
         valve_map_force_n=map_forces, valve_map_velocity_m_s=map_velocities, valve_map_spool=map_spool,
+        valve_map_pressure_a_pa=map_pa, valve_map_pressure_b_pa=map_pb,
         hydraulics=hydraulics, supply_pressure_pa=hm["supply_pressure_bar"] * BAR, residuals_enabled=rs["enabled"],
         residual_gain=rs["correction_gain"], residual_filter_s=rs["filter_ms"] * 1e-3,
         residual_persistence=rs["persistence_cycles"], residual_flow_spread=rs["flow_spread_pct"] / 100.0,
+        residual_stiffness_n_m=rs["column_stiffness_n_mm"] / MM,
         residual_supply_legs=rs["supply_legs"], load_cell_noise_n=rs["load_cell_noise_n"],
         spool_check=rs["spool_check"], spool_floor=rs["spool_floor_pct"] / 100.0,
         spool_lag_spread=rs["spool_lag_spread_pct"] / 100.0, spool_persistence=rs["spool_persistence_cycles"],

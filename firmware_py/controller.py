@@ -101,7 +101,7 @@ class Controller:
         # cylinder's own stroke sets its chamber volumes
         self.residuals = ActuatorResiduals(
             n, cfg.hydraulics, cfg.friction, cfg.supply_pressure_pa, period_s,
-            self.geometry.rod.mass_kg if self.hexapod else cfg.moving_mass_kg, cfg.ct_stiffness_n_m,
+            self.geometry.rod.mass_kg if self.hexapod else cfg.moving_mass_kg, cfg.residual_stiffness_n_m,
             cfg.encoder_resolution_m, cfg.residual_gain, cfg.residual_filter_s, cfg.residual_persistence,
             cfg.residual_flow_spread)
         self.spool_check = SpoolResidual(n, cfg.hydraulics, period_s, cfg.spool_floor, cfg.spool_lag_spread,
@@ -178,8 +178,8 @@ class Controller:
             self.platform.reset_reference(self.home_strokes)
             self.platform.reference_forces(self.home_strokes, ref.vr)
         # the cycle's own arrays: a view of another layout would compile a new signature
-        self.computed_torque.update(self.platform, self.joint.velocity_estimate, self.joint.error_m, ref.vr, ref.ar,
-                                    meas.force_n, cmd.spool)
+        self.computed_torque.update(self.platform, ref.yr, self.joint.velocity_estimate, self.joint.error_m, ref.vr,
+                                    ref.ar, meas.force_n, cmd.spool)
         self.computed_torque.reset()
         if self.hexapod:
             self.platform.dk.reset()
@@ -393,7 +393,7 @@ class Controller:
         if computed_torque:
             if sup.state not in ACTIVE:
                 self.computed_torque.reset()
-            elif not self.computed_torque.update(self.platform, joint.velocity_estimate, joint.error_m, ref.vr,
+            elif not self.computed_torque.update(self.platform, ref.yr, joint.velocity_estimate, joint.error_m, ref.vr,
                                                  ref.ar, meas.force_n, joint.u_v):
                 sup.fault(Fault.SINGULARITY)
         if testing:

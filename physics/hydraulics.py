@@ -105,6 +105,18 @@ def valve_flows(spool: float, pa: float, pb: float, ps: float, hp: np.ndarray):
 
 
 @numba.njit(cache=True)
+def valve_flow_gains(spool: float, pa: float, pb: float, ps: float, hp: np.ndarray):
+    """d QA / d spool and d QB / d spool of `valve_flows` at fixed pressures: each open
+    metering edge's kv sqrt|dP| (eq. 4.2)."""
+    kv, lam, pt = hp[HP_KV], hp[HP_LAMINAR], hp[HP_TANK]
+    ga = (kv * orifice_root(ps - pa, lam) if spool + hp[HP_LAP_P] > 0.0 else 0.0) + (
+        kv * orifice_root(pa - pt, lam) if hp[HP_LAP_T] - spool > 0.0 else 0.0)
+    gb = (kv * orifice_root(ps - pb, lam) if hp[HP_LAP_P] - spool > 0.0 else 0.0) + (
+        kv * orifice_root(pb - pt, lam) if spool + hp[HP_LAP_T] > 0.0 else 0.0)
+    return ga, -gb
+
+
+@numba.njit(cache=True)
 def bulk_modulus(p: float, hp: np.ndarray) -> float:
     """Effective bulk modulus at gauge pressure p: oil with entrained air, hose wall in series.
 
@@ -125,6 +137,25 @@ def chamber_volumes(y: float, hp: np.ndarray):
     area = hp[HP_AREA_A]
     yc = min(max(y, 0.0), hp[HP_STROKE])
     return hp[HP_VA0] + area * yc, hp[HP_VB0] + hp[HP_ALPHA] * area * (hp[HP_STROKE] - yc)
+
+
+@numba.njit(cache=True)
+def column_stiffness(y: float, pa: float, pb: float, hp: np.ndarray) -> float:
+    """The oil columns' stiffness felt at the piston with the ports blocked [N/m]:
+    d(Ap (PA - alpha PB)) / d(-y) of eq. 4.7-4.8, Ap^2 (beta_A / VA + alpha^2 beta_B / VB)."""
+    va, vb = chamber_volumes(y, hp)
+    area, alpha = hp[HP_AREA_A], hp[HP_ALPHA]
+    return area * area * (bulk_modulus(pa, hp) / va + alpha * alpha * bulk_modulus(pb, hp) / vb)
+
+
+@numba.njit(cache=True)
+def force_rate_per_spool(y: float, pa: float, pb: float, spool: float, ps: float, hp: np.ndarray) -> float:
+    """d(dF/dt) / d spool of the piston force F = Ap (PA - alpha PB) at fixed pressures and
+    piston velocity (eq. 4.2, 4.7-4.8): Ap (beta_A / VA dQA/dx - alpha beta_B / VB dQB/dx),
+    N/s per unit spool: a force loop of gain k (spool per N) on it has the bandwidth k times it."""
+    ga, gb = valve_flow_gains(spool, pa, pb, ps, hp)
+    va, vb = chamber_volumes(y, hp)
+    return hp[HP_AREA_A] * (bulk_modulus(pa, hp) / va * ga - hp[HP_ALPHA] * bulk_modulus(pb, hp) / vb * gb)
 
 
 @numba.njit(cache=True, inline="always")

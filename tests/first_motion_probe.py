@@ -1,5 +1,6 @@
 """Run in a fresh process (`python -m tests.first_motion_probe RIG`): activate a controller on
-the fake bus, then drive every controller through every motion and command once; print
+the fake bus (the hexapod: with the emulator's hexapod behind it), then drive every
+controller through every motion and command once; print
 the numba kernels that gained a compiled or cache-loaded signature after activation (JSON).
 Each gain is a compile (0.3-0.7 s) or a cache load (ms) inside a control cycle."""
 
@@ -54,7 +55,9 @@ def exercise(loop, ctl) -> list[str]:
 
 
 def main(rig: str) -> None:
-    loop, ctl, _ = make_loop(rig, "pi")
+    # the hexapod's computed torque needs a platform to act on (the fake's independent legs
+    # have no inertia: its loops there drift to a DK failure); the emulator's hexapod is it
+    loop, ctl, _ = make_loop(rig, "pi", emulated=rig == "hexapod")
     before = signatures()
     states = exercise(loop, ctl)
     after = signatures()

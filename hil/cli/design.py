@@ -3,10 +3,11 @@
     hydrapod design robustness [--plants SRC] [--nominal MM,KG] [--kp --ki] [--out DIR] [--json]
     hydrapod design schedule [--plants SRC] [--out FILE] [--ki-scale] [--kp-fraction] [--ti-fraction] [--json]
     hydrapod design modes [--pose X,Y,Z,ROLL,PITCH,YAW] [--payload-kg M] [--supply-bar P] [--along] [--sealed]
-                          [--json] [--plot DIR]
-    hydrapod design computed-torque [--out FILE] [--supply-bar P] [--bandwidth-hz] [--damping]
+                          [--closed-loop] [--json] [--plot DIR]
+    hydrapod design computed-torque [--out FILE] [--supply-bar P] [--samples N] [--refine N] [--seed S]
+                                    [--min-damping Z] [--workers N] [--bandwidth-hz] [--damping]
                                     [--integral-fraction] [--velocity-gain] [--testbench-velocity-gain]
-                                    [--force-gain-pct-n] [--velocity-filter-hz] [--json]
+                                    [--force-bandwidth-hz] [--velocity-filter-hz] [--json]
 
 SRC: `table-a3` (the thesis's plants), `emulator` (the emulator's linearisation) or the
 metrics.json of a `hil run sha-identification`.
@@ -103,6 +104,7 @@ def _modes(args) -> int:
     from firmware_py.workspace import check_poses
     from plant_emulator.params import load_config
 
+    from ..design.closed_loop import format_closed
     from ..design.modes import (
         along_movements,
         format_along,
@@ -130,13 +132,18 @@ def _modes(args) -> int:
         doc["along"] = along
     if args.sealed:
         doc["sealed"] = sealed_doc(sealed_modes(cfg, position, rpy, args.payload_kg, supply_pa=supply))
+    if args.closed_loop:
+        from ..design.closed_loop import hexapod_closed_loop
+        loop = hexapod_closed_loop(cfg, position, rpy, args.payload_kg, supply)
+        doc["closed_loop"] = [m.as_dict() for m in loop.modes() if m.frequency_hz > 0.0]
     if out is not None:
         doc["figures"] = [str(out / name) for name in plot_modes(doc, along, out)]
     if args.json:
         print(json.dumps(doc, indent=1))
     else:
         print(format_modes(doc) + ("\n" + format_along(along) if along is not None else "")
-              + ("\n" + format_sealed(doc["sealed"]) if args.sealed else ""))
+              + ("\n" + format_sealed(doc["sealed"]) if args.sealed else "")
+              + ("\n" + format_closed(doc["closed_loop"]) if args.closed_loop else ""))
     return 0 if doc["converged"] else 1
 
 
@@ -144,19 +151,34 @@ def _computed_torque(args) -> int:
     from firmware_py.config import load_config as load_controller_config
     from plant_emulator.params import load_config
 
-    from ..design.computed_torque import computed_torque_toml, leg_stiffness_n_m, valve_map
+    from ..design.computed_torque import computed_torque_toml, force_rate_floor, valve_map
+    from ..design.ct_gains import GAIN_RANGES, design_gains, operating_set
     supply = {} if args.supply_bar is None else {"actuator": {"supply_pressure_bar": args.supply_bar}}
     cfg = load_config(overrides=supply or None)     # the map holds at the supply it was made at
-    spool, unreachable = valve_map(cfg)
-    stiffness = leg_stiffness_n_m(cfg)
+    spool, pressure_a, pressure_b, unreachable = valve_map(cfg)
+    models = operating_set(cfg)
+    floor = force_rate_floor(cfg, spool, pressure_a, pressure_b, models)
     packaged = load_controller_config().raw["computed_torque"]       # an option not given keeps its value
     given = {"bandwidth_hz": args.bandwidth_hz, "damping": args.damping, "integral_fraction": args.integral_fraction,
-             "velocity_gain_per_s": args.velocity_gain,
-             "testbench_velocity_gain_per_s": args.testbench_velocity_gain, "force_gain_pct_n": args.force_gain_pct_n,
+             "velocity_gain_per_s": args.velocity_gain, "force_bandwidth_hz": args.force_bandwidth_hz,
              "velocity_filter_hz": args.velocity_filter_hz}
-    gains = {key: packaged[key] if value is None else value for key, value in given.items()}
+    design = None
+    if any(value is not None for value in given.values()) or args.samples == 0:
+        gains = {key: packaged[key] if value is None else value for key, value in given.items()}
+    else:                                          # derived from the models (ct_gains)
+        def progress(count, candidate):
+            if not args.json:
+                print(f"  {count:3d}: min damping {candidate.damping:6.3f}, score {candidate.score:8.3f}",
+                      flush=True)
+        best, tried = design_gains(cfg, args.samples, args.refine, args.seed, args.min_damping, args.workers,
+                                   progress, models, floor)
+        design = {**best.as_dict(), "candidates": len(tried)}
+        gains = {key: round(best.gains[key], 4) for key in GAIN_RANGES}
+    gains["testbench_velocity_gain_per_s"] = (packaged["testbench_velocity_gain_per_s"]
+                                              if args.testbench_velocity_gain is None else args.testbench_velocity_gain)
+    gains["force_rate_floor_n_s_pct"] = round(floor / 100.0, 3)
     source = f"the emulator's configuration at {cfg.supply_pressure_pa / BAR:g} bar"
-    text = computed_torque_toml(spool, stiffness, gains, source)
+    text = computed_torque_toml(spool, pressure_a, pressure_b, gains, source)
     if supply:                                     # the residuals' model and the supply check at it too
         text += f"\n[hydraulic_model]\nsupply_pressure_bar = {args.supply_bar:g}\n"
     out = Path(args.out)
@@ -164,12 +186,16 @@ def _computed_torque(args) -> int:
         out.write_text(text)
     except OSError as error:
         raise UserInputError(f"--out {out}: cannot write ({error.strerror})") from None
-    doc = {"file": str(out), "stiffness_n_mm": round(stiffness * 1e-3, 3), "map_points": int(spool.size),
-           "map_points_beyond_supply": unreachable, "gains": gains}
-    print(json.dumps(doc, indent=1) if args.json else
-          f"computed-torque config written to {out}: leg stiffness {doc['stiffness_n_mm']:g} N/mm (median along "
-          f"the movements), valve map {spool.shape[0]} forces x {spool.shape[1]} velocities ({unreachable} beyond "
-          f"the supply, held at the nearest reachable spool); load it with --controller-config or --config")
+    doc = {"file": str(out), "map_points": int(spool.size), "map_points_beyond_supply": unreachable,
+           "gains": gains, "design": design}
+    if args.json:
+        print(json.dumps(doc, indent=1))
+    else:
+        how = (f"derived from {design['candidates']} candidates: worst closed-loop damping {design['min_damping']:.3f} "
+               f"({design['worst_point']}), tracking score {design['score']:.3f}" if design else "as given")
+        print(f"computed-torque config written to {out}: valve map {spool.shape[0]} forces x {spool.shape[1]} "
+              f"velocities ({unreachable} beyond the supply, held at the nearest reachable point); gains {how}: "
+              + ", ".join(f"{k} {v:g}" for k, v in gains.items()) + "; load it with --controller-config or --config")
     return 0
 
 
@@ -218,18 +244,20 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--along", action="store_true", help="also at every waypoint of both movements (11.3)")
     p.add_argument("--sealed", action="store_true",
                    help="also with the valves in HOLD (chambers sealed, seals in pre-sliding): what hex-kick measures")
+    p.add_argument("--closed-loop", action="store_true",
+                   help="also the closed loop's modes with the packaged computed-torque controller")
     p.add_argument("--plot", metavar="DIR", default=None, help="write modes.png (and modes_along.png) here")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_modes)
 
     p = design_sub.add_parser("computed-torque", help="the computed-torque controller: its valve map "
-                                                      "and leg stiffness from the emulator's model, and its gains")
+                                                      "from the emulator's model, and its gains")
     p.add_argument("--out", type=output_file, default="hil-out/computed_torque.toml", metavar="FILE",
                    help="the controller config file to write (default: hil-out/computed_torque.toml)")
     p.add_argument("--supply-bar", type=number_in_range(float, 1.0, 40.0), default=None,
                    help="the power unit's pressure to make the map at (default: the emulator's, 25 bar); "
                         "the file then sets [hydraulic_model] supply_pressure_bar to it")
-    # each gain defaults to the packaged controller.toml's [computed_torque]
+    # a gain given is used as given (the others: the packaged controller.toml's); none: the search
     p.add_argument("--bandwidth-hz", type=number_in_range(float, 0.1, 50.0),
                    help="task-space loop: Kp = w^2, Kd = 2 zeta w")
     p.add_argument("--damping", type=number_in_range(float, 0.1, 5.0), help="zeta")
@@ -238,8 +266,17 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="joint error to commanded piston velocity, 1/s")
     p.add_argument("--testbench-velocity-gain", type=number_in_range(float, 0.0, 1000.0),
                    help="the same on the test bench's leg, 1/s")
-    p.add_argument("--force-gain-pct-n", type=number_in_range(float, 0.0, 10.0),
-                   help="spool %% per N of load-cell force error")
+    p.add_argument("--force-bandwidth-hz", type=number_in_range(float, 0.0, 100.0),
+                   help="each leg's force loop on its load cell (its gain scheduled on the leg's operating point)")
+    p.add_argument("--samples", type=number_in_range(int, 0, 10000), default=64,
+                   help="the gain search's random candidates (0: keep the packaged gains; any gain given: "
+                        "no search)")
+    p.add_argument("--refine", type=number_in_range(int, 0, 10000), default=40,
+                   help="Nelder-Mead evaluations from the best candidate")
+    p.add_argument("--seed", type=number_in_range(int, 0, 2**31 - 1), default=1)
+    p.add_argument("--min-damping", type=number_in_range(float, 0.0, 1.0), default=0.15,
+                   help="every closed-loop mode at least this damped over the operating set")
+    p.add_argument("--workers", type=number_in_range(int, 1, 64), default=2, help="processes for the search")
     p.add_argument("--velocity-filter-hz", type=number_in_range(float, 0.5, 200.0),
                    help="low-pass of the measured twist")
     p.add_argument("--json", action="store_true")

@@ -194,7 +194,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="realtime scenarios: seconds of running (default 60; 10 with --short)")
     p.add_argument("--time-scale", type=number_in_range(float, 0.5, 10.0), default=None,
                    help="pm-circle, pm-diagonal: the movement at this many times the thesis's ta and tm "
-                        "(1 = the thesis's timing; default 2)")
+                        "(default 1: the thesis's timing)")
     p.add_argument("--valve-watchdog-periods", type=number_in_range(float, 1.0, 10000.0), default=None,
                    help="realtime: the emulated valves' SYNC watchdog in periods (default 25 on a shared host; "
                         "3 is the valves' own, for an RT kernel)")

@@ -84,7 +84,7 @@ class ModalModel:
     gravity_stiffness_n_m: np.ndarray  # (6, 6) K_g
     stiffness_n_m: np.ndarray          # (6,) hydraulic stiffness of each leg, A^2 (kA + alpha^2 kB)
     flow_gain_m_s: np.ndarray          # (6,) piston velocity per unit spool at no load change
-    friction_slope_ns_m: float
+    friction_slope_ns_m: float         # d friction / d velocity of the seals
     a: np.ndarray                      # (30, 30)
     b: np.ndarray                      # (30, 6)
     modes: list[Mode] = field(default_factory=list)
