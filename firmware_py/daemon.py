@@ -22,11 +22,12 @@ def log(text: str) -> None:
 
 
 def realtime_setup(cfg: ControllerConfig, realtime: bool) -> list[str]:
-    """GC frozen and disabled always; scheduling, memory locking, affinity and the CPUs' wake-up
-    latency for realtime."""
+    """GC frozen and disabled always, and the CPUs' wake-up latency (lockstep too: each cycle
+    waits on the emulator's frames, and a halted CPU's wake-up costs every one of those);
+    scheduling, memory locking and affinity for realtime."""
     freeze_gc(disable=True)
     if not realtime:
-        return []
+        return applied(cpu_latency_measure(cfg.cpu_latency_us), log)
     measures = {f"SCHED_FIFO priority {cfg.realtime_priority}": set_fifo(cfg.realtime_priority),
                 "mlockall": lock_memory()}
     if cfg.cpu >= 0:

@@ -37,7 +37,11 @@ def realtime_setup(cfg) -> list[str]:
     measures = {"mlockall": lock_memory(),
                 f"SCHED_FIFO priority {cfg.realtime_priority}": set_fifo(cfg.realtime_priority),
                 **cpu_latency_measure(cfg.cpu_latency_us)}
-    return applied(measures, lambda text: print(f"emulator: {text}", file=sys.stderr, flush=True))
+    return applied(measures, _log)
+
+
+def _log(text: str) -> None:
+    print(f"emulator: {text}", file=sys.stderr, flush=True)
 
 
 def run_emulator(args) -> int:
@@ -57,6 +61,8 @@ def run_emulator(args) -> int:
     freeze_gc(disable=False)
     if args.realtime:
         realtime_setup(cfg)
+    else:                                   # lockstep: its SYNC handling waits on the controller's frames
+        applied(cpu_latency_measure(cfg.cpu_latency_us), _log)
     try:
         emulator.run(stop)
     finally:

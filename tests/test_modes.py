@@ -84,6 +84,56 @@ def test_the_sealed_modes_combine_both_bristle_sides_half_a_period_each():
     assert by_axis["x"]["damping_ratio"] == pytest.approx(by_axis["y"]["damping_ratio"], rel=1e-3)
 
 
+def test_deflected_bristles_are_soft_toward_their_side_and_stiff_away_from_it():
+    """LuGre's path law about a rest force F_b = sigma0 z0: dz/dx = 1 - F_b sign(dx) / |g(0)|
+    (`bristle_terms`) against finite steps of the emulator's own law (`lugre.bristle_relax`)."""
+    from hil.design.modes import bristle_terms
+    from physics import lugre
+    fp = load_config().friction
+    step = 1e-9
+    for force in (-12.0, -3.0, 0.0, 5.0, 15.0):
+        sigma0 = fp[lugre.S0_POS] if force >= 0.0 else fp[lugre.S0_NEG]
+        z0 = force / sigma0
+        for direction, g in ((1.0, abs(fp[lugre.A0_POS] + fp[lugre.A1_POS])),
+                             (-1.0, abs(fp[lugre.A0_NEG] + fp[lugre.A1_NEG]))):
+            z = lugre.bristle_relax(z0, direction * step, g, sigma0)
+            oracle = sigma0 * (z - z0) / (direction * step)
+            stiffness, _ = bristle_terms(fp, force, direction)
+            if force == 0.0 and direction < 0.0:
+                oracle = fp[lugre.S0_NEG] * (z - z0) / (direction * step)   # deflected to the - side
+            assert stiffness == pytest.approx(oracle, rel=1e-4)
+
+
+def test_the_seals_hysteresis_damping_is_the_emulators_loop_energy():
+    """`hysteresis_damping` against a cycle of the emulator's time-stepped law (`lugre.z_step`
+    at a sine's velocity): the same energy per cycle; none at zero amplitude; growing with
+    the amplitude (a pre-sliding loop dissipates ~X^3, so E / X^2 grows)."""
+    from hil.design.modes import hysteresis_damping
+    from physics import lugre
+    fp = load_config().friction
+    frequency, amplitude = 4.5, 0.02e-3
+    for force in (0.0, 6.0, -4.0):
+        sigma0 = fp[lugre.S0_POS] if force >= 0.0 else fp[lugre.S0_NEG]
+        z = force / sigma0
+        h, omega = 1e-5, 2 * math.pi * frequency
+        x_prev, energy = 0.0, 0.0
+        for k in range(1, 4 * int(round(1.0 / frequency / h)) + 1):
+            if k == 3 * int(round(1.0 / frequency / h)) + 1:
+                energy = 0.0                       # the last cycle, once the loop has settled
+            x = amplitude * math.sin(omega * k * h)
+            velocity = (x - x_prev) / h
+            s0 = fp[lugre.S0_POS] if z >= 0 else fp[lugre.S0_NEG]
+            before = s0 * z
+            z = lugre.z_step(z, velocity, h, fp)
+            s0 = fp[lugre.S0_POS] if z >= 0 else fp[lugre.S0_NEG]
+            energy += 0.5 * (before + s0 * z) * (x - x_prev)
+            x_prev = x
+        oracle = energy / (math.pi * omega * amplitude ** 2)
+        assert hysteresis_damping(fp, force, amplitude, frequency) == pytest.approx(oracle, rel=0.05)
+    assert hysteresis_damping(fp, 0.0, 0.0, frequency) == 0.0
+    assert hysteresis_damping(fp, 0.0, 0.04e-3, frequency) > hysteresis_damping(fp, 0.0, 0.01e-3, frequency)
+
+
 def test_the_linear_model_predicts_the_emulators_response_to_a_valve_step():
     """From the operating point at the circle's start, 0.5 % more spool on leg 1 for 30 ms:
     the linear model's leg strokes and pressures against the emulator's own integration."""

@@ -57,6 +57,18 @@ def test_the_controller_daemon_applies_each_measure_or_logs_why_not():
     assert "CPU wake-up latency <= 0 us" in notes or "CPU wake-up latency not requested" in log, (notes, log)
 
 
+def test_a_lockstep_controller_asks_for_the_cpu_latency_alone():
+    """Lockstep: no realtime scheduling or memory locking, but the wake-up latency request
+    (each cycle waits on the other process's frames), applied or logged."""
+    code = ("from firmware_py.config import load_config; from firmware_py.daemon import realtime_setup; "
+            "print(realtime_setup(load_config(), False))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    notes, log = proc.stdout, proc.stderr
+    assert "SCHED_FIFO" not in notes + log and "mlockall" not in notes + log, (notes, log)
+    assert "CPU wake-up latency <= 0 us" in notes or "CPU wake-up latency not requested" in log, (notes, log)
+
+
 def test_the_cpu_latency_request_is_written_and_held_or_says_why(tmp_path):
     """The PM QoS request is the value written to the device, kept open for the process's
     life; a device that cannot be opened is a reason, not an exception."""

@@ -7,9 +7,11 @@ through the bus, as a modal hammer test would on the rig: at each pose the contr
 valves HOLD with the load-holding valves closed: the legs are sealed oil columns), the host
 pushes the platform for 20 ms (EMU_KICK), and the free response the recorder sees
 (EMU_TRUTH) is fitted with a damped oscillation. Its frequency and damping ratio stand beside
-the model's for the same state (`hil.design.modes.sealed_modes`: chambers sealed, the seals
-in pre-sliding, which is what a push of a few newtons meets). The comparison is reported, not
-asserted: the response depends on the state the sealing leaves the seals in.
+the model's for the same state (`hil.design.modes.sealed_modes`): the chambers at the
+pressures the valves' transducers read before the push (LEG_PRESSURE), the seals'
+bristles linearised about the force they hold there (what the chambers push beyond the
+mechanism's static load), each seal's hysteresis at the fitted amplitude added. The
+frequency is asserted within 20 %, the damping reported.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ HOLD_S = 1.5                   # held by the controller on the pose before seali
 SETTLE_S = 0.6                 # after IDLE, before the push
 OBSERVE_S = 1.5                # the free response fitted
 FIT_SKIP_S = 0.01              # after the push ends
+FIT_AMPLITUDE_SHARE = 2.0 / 3.0    # the amplitude a fit of a decay weighs most, of its start
 MOVE_S, MOVE_ACCEL_S = 2.0, 0.5
 TOLERANCE = 0.20               # measured vs model, frequency and damping ratio (reported against it)
 ONE_MODE_R2 = 0.97             # below: a second mode in the response (off centre, y moves with yaw)
@@ -44,6 +47,38 @@ FIT_R2_MIN = 0.95              # a push's response is a clean free oscillation (
 CREEP_DAMPING = 0.9            # a fitted component this damped is the platform's creep, not a mode
 AXES = (KickAxis.X, KickAxis.Y)
 TRUTH_SIGNALS = {KickAxis.X: "X", KickAxis.Y: "Y", KickAxis.Z: "Z"}
+
+
+def pushed_mode(modes: list[dict], axis: int) -> dict | None:
+    """The model's mode a push along `axis` moves most (its unit-peak shape's largest share)."""
+    return max(modes, key=lambda m: abs(float(m["shape"][axis])), default=None)
+
+
+def sealed_pressures(log: LogData, cycle: int, period_s: float) -> np.ndarray | None:
+    """(2, 6) PA, PB of every leg's last LEG_PRESSURE before `cycle` within the settle (the
+    sealed chambers the push meets), or None when a leg has none."""
+    window = slice(max(cycle - int(SETTLE_S / period_s), 0), cycle)
+    out = np.empty((2, 6))
+    for i in range(6):
+        series = log.get(f"LEG_PRESSURE_{i + 1}")
+        for row, signal in enumerate(("PA", "PB")):
+            values = series.per_cycle(log.n_cycles, signal)[window]
+            values = values[~np.isnan(values)]
+            if not len(values):
+                return None
+            out[row, i] = values[-1]
+    return out
+
+
+def bristle_forces(cfg, position_m, payload_kg: float, pressures: np.ndarray) -> np.ndarray:
+    """What the seals' bristles hold at rest: the chambers' force less the static load."""
+    from plant_emulator.rigs import HexapodRig
+
+    from ..design.modes import joint_space, pose_quaternion
+    rig = HexapodRig(cfg)
+    rig.set_load(payload_kg)
+    static = joint_space(rig, position_m, pose_quaternion((0.0, 0.0, 0.0)))[1]
+    return cfg.area_a_m2 * (pressures[0] - cfg.alpha * pressures[1]) - static
 
 
 def kick_poses(short: bool) -> dict[str, tuple[float, float, float]]:
@@ -105,10 +140,14 @@ class HexapodKick(Scenario):
             main = oscillating[0] if oscillating else {"frequency_hz": math.nan, "damping_ratio": math.nan,
                                                        "amplitude": math.nan}
             load = load_at(log, k0) or 0.0
-            key = (pose, load)
-            if key not in models:
-                models[key] = sealed_modes(cfg, np.array(pose), payload_kg=load)
-            mode = next((m for m in models[key] if m["axis"] == axis.name.lower()), None)
+            pressures = sealed_pressures(log, k0, period)
+            # the seals' hysteresis at the amplitude the fit weighs most: a decay's
+            # amplitude-squared-weighted mean is 2/3 of its start
+            amplitude = FIT_AMPLITUDE_SHARE * abs(main["amplitude"]) if math.isfinite(main["amplitude"]) else 0.0
+            modes = sealed_modes(cfg, np.array(pose), payload_kg=load, pressures_pa=pressures, amplitude_m=amplitude)
+            if (pose, load) not in models:
+                models[(pose, load)] = sealed_modes(cfg, np.array(pose), payload_kg=load)
+            mode, undeflected = (pushed_mode(m, int(axis)) for m in (modes, models[(pose, load)]))
             rows.append({"pose_mm": [round(v * 1e3, 1) for v in pose], "load_kg": load, "axis": axis.name,
                          "push_n": round(float(event.values["FORCE"]), 2), **{k: round(v, 4) for k, v in main.items()},
                          "r2": round(fit["r2"], 4), "modes_fitted": len(fit["modes"]),
@@ -116,6 +155,9 @@ class HexapodKick(Scenario):
                                          if m is not main],
                          "model_frequency_hz": round(mode["frequency_hz"], 4) if mode else None,
                          "model_damping_ratio": round(mode["damping_ratio"], 4) if mode else None,
+                         "undeflected_model_hz": round(undeflected["frequency_hz"], 4) if undeflected else None,
+                         "bristle_force_n": None if pressures is None else [
+                             round(float(f), 2) for f in bristle_forces(cfg, np.array(pose), load, pressures)],
                          "_t": np.arange(len(y)) * period, "_y": y})
         checks = []
         if not rows:
@@ -130,13 +172,16 @@ class HexapodKick(Scenario):
             if r["model_frequency_hz"] is None:
                 checks.append(Check(f"{where}: a model mode along it", False, "none", "one"))
                 continue
-            for name, measured, model in (("frequency", r["frequency_hz"], r["model_frequency_hz"]),
-                                          ("damping ratio", r["damping_ratio"], r["model_damping_ratio"])):
+            # the frequency is asserted; the damping reported (at home it came out 1.3x the
+            # model's, not explained: docs/MEASUREMENTS.md "Hexapod modes")
+            for name, measured, model, required in (
+                    ("frequency", r["frequency_hz"], r["model_frequency_hz"], True),
+                    ("damping ratio", r["damping_ratio"], r["model_damping_ratio"], False)):
                 ratio = measured / model if model else math.nan
                 checks.append(Check(f"{where}: {name}", bool(abs(ratio - 1.0) <= TOLERANCE),
                                     f"{measured:.3g} (model {model:.3g}, x{ratio:.2f}; {r['modes_fitted']}-mode fit "
                                     f"r2 {r['r2']:.3f})",
-                                    f"within {TOLERANCE:.0%} of the model", required=False))
+                                    f"within {TOLERANCE:.0%} of the model", required=required))
         table = ["| pose mm | axis | push N | f Hz | model f Hz | zeta | model zeta | amplitude mm | fit r2 |",
                  "|---|---|---|---|---|---|---|---|---|"]
         table += [f"| {', '.join(f'{v:g}' for v in r['pose_mm'])} | {r['axis']} | {r['push_n']:g} | "
