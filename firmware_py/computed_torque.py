@@ -31,7 +31,7 @@ from physics import hydraulics as hy
 from physics import lugre
 from physics.constants import GRAVITY_M_S2
 
-from .config import ControllerConfig
+from .config import ComputedTorqueGains, ControllerConfig
 from .dynamics import InverseDynamics, gauss_solve_into
 from .estimation import filter_step, first_order_gain, second_order_filter
 from .geometry import N_LEGS, Geometry
@@ -153,20 +153,20 @@ class _Gains:
     """What both forms share: the PID's gains, the valve map and force loop, the velocity
     low-pass (its filter's constants)."""
 
-    def __init__(self, cfg: ControllerConfig, n_legs: int, period_s: float, velocity_gain: float):
-        w = cfg.ct_bandwidth_rad_s
-        self.kp, self.kd, self.ki = w * w, 2.0 * cfg.ct_damping * w, cfg.ct_integral_fraction * w ** 3
+    def __init__(self, cfg: ControllerConfig, gains: ComputedTorqueGains, n_legs: int, period_s: float):
+        w = gains.bandwidth_rad_s
+        self.kp, self.kd, self.ki = w * w, 2.0 * gains.damping * w, gains.integral_fraction * w ** 3
         self.period_s = period_s
-        self.velocity_gain = velocity_gain
-        self.force_bandwidth, self.rate_floor = cfg.ct_force_bandwidth_rad_s, cfg.ct_force_rate_floor
+        self.velocity_gain = gains.velocity_gain_per_s
+        self.force_bandwidth, self.rate_floor = gains.force_bandwidth_rad_s, cfg.ct_force_rate_floor
         self.forces, self.velocities, self.spool = (cfg.valve_map_force_n, cfg.valve_map_velocity_m_s,
                                                     cfg.valve_map_spool)
         self.pressure_a, self.pressure_b = cfg.valve_map_pressure_a_pa, cfg.valve_map_pressure_b_pa
         self.hp, self.supply_pa = cfg.hydraulics, cfg.supply_pressure_pa
         self.u_max = cfg.spool_max
         self.full_scale_v = cfg.valve_full_scale_v
-        self.filter_wn, self.filter_zeta = 2 * math.pi * cfg.ct_velocity_filter_hz, FILTER_ZETA
-        self.filter_ad, self.filter_bd = second_order_filter(period_s, cfg.ct_velocity_filter_hz, FILTER_ZETA)
+        self.filter_wn, self.filter_zeta = 2 * math.pi * gains.velocity_filter_hz, FILTER_ZETA
+        self.filter_ad, self.filter_bd = second_order_filter(period_s, gains.velocity_filter_hz, FILTER_ZETA)
         self.stiffness = np.zeros(n_legs)         # each leg's oil column at its operating point, N/m
         self.force_gain = np.zeros(n_legs)        # ... and its force loop's gain, spool fraction per N
 
@@ -184,7 +184,7 @@ class ComputedTorque(_Gains):
     """The controller's state and scratch arrays; `update(...)` writes the valve inputs."""
 
     def __init__(self, cfg: ControllerConfig, geometry: Geometry, period_s: float):
-        super().__init__(cfg, N_LEGS, period_s, cfg.ct_velocity_gain_per_s)
+        super().__init__(cfg, cfg.ct_hexapod, N_LEGS, period_s)
         self.dynamics = InverseDynamics(geometry)
         self.error = np.zeros(6)              # pose error: m, rad
         self.integral = np.zeros(6)
@@ -241,7 +241,7 @@ class LegComputedTorque(_Gains):
     hexapod's horizontal modes), so a stiffer velocity loop stays damped there."""
 
     def __init__(self, cfg: ControllerConfig, n_legs: int, period_s: float):
-        super().__init__(cfg, n_legs, period_s, cfg.ct_testbench_velocity_gain_per_s)
+        super().__init__(cfg, cfg.ct_testbench, n_legs, period_s)
         self.rod_mass = cfg.moving_mass_kg
         self.friction = cfg.friction
         self.load_alpha = first_order_gain(period_s, LOAD_FILTER_HZ)

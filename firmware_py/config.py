@@ -64,8 +64,10 @@ RANGES: dict[str, dict[str, object]] = {
     "computed_torque": {
         "bandwidth_hz": (0.1, 50.0), "damping": (0.1, 5.0), "integral_fraction": (0.0, 5.0),
         "velocity_gain_per_s": (0.0, 1000.0),
-        "testbench_velocity_gain_per_s": (0.0, 1000.0), "force_bandwidth_hz": (0.0, 100.0),
-        "force_rate_floor_n_s_pct": (1.0, 1e6),
+        "force_bandwidth_hz": (0.0, 100.0), "force_rate_floor_n_s_pct": (1.0, 1e6),
+        "testbench_bandwidth_hz": (0.1, 50.0), "testbench_damping": (0.1, 5.0),
+        "testbench_integral_fraction": (0.0, 5.0), "testbench_velocity_gain_per_s": (0.0, 1000.0),
+        "testbench_force_bandwidth_hz": (0.0, 100.0), "testbench_velocity_filter_hz": (0.5, 200.0),
         "velocity_filter_hz": (0.5, 200.0),
     },
     "valve_map": {"force_n": None, "velocity_mm_s": None, "spool_pct": TABLE, "pressure_a_bar": TABLE,
@@ -103,6 +105,23 @@ class ConfigError(UserInputError):
 
 def default_config_path() -> Path:
     return Path(str(resources.files("firmware_py").joinpath("data/controller.toml")))
+
+
+@dataclass(frozen=True)
+class ComputedTorqueGains:
+    """One rig's computed-torque gains (docs/EQUATIONS.md "Computed torque")."""
+    bandwidth_rad_s: float            # task-space loop: Kp = w^2, Kd = 2 zeta w, Ki = f w^3
+    damping: float
+    integral_fraction: float
+    velocity_gain_per_s: float        # joint error -> commanded piston velocity
+    force_bandwidth_rad_s: float      # each leg's force loop on its load cell, scheduled on its operating point
+    velocity_filter_hz: float         # low-pass of the measured twist / velocity (the D term)
+
+    @classmethod
+    def of(cls, section: dict, prefix: str = "") -> ComputedTorqueGains:
+        return cls(2 * math.pi * section[prefix + "bandwidth_hz"], section[prefix + "damping"],
+                   section[prefix + "integral_fraction"], section[prefix + "velocity_gain_per_s"],
+                   2 * math.pi * section[prefix + "force_bandwidth_hz"], section[prefix + "velocity_filter_hz"])
 
 
 @dataclass(frozen=True)
@@ -170,14 +189,9 @@ class ControllerConfig:
     table_ki: np.ndarray              # (3, n_pos) V/(m s), as printed (ki_scale applied by the schedule)
     feedforward_scale: float
     # computed torque (hexapod): task-space PID through the inverse dynamics, a valve map
-    ct_bandwidth_rad_s: float
-    ct_damping: float
-    ct_integral_fraction: float       # Ki = fraction x bandwidth^3
-    ct_velocity_gain_per_s: float     # joint error -> commanded piston velocity
-    ct_testbench_velocity_gain_per_s: float   # ... on the test bench's light leg
-    ct_force_bandwidth_rad_s: float   # each leg's force loop on its load cell, scheduled on its operating point
-    ct_force_rate_floor: float        # N/s per unit spool: the schedule's rate taken no lower
-    ct_velocity_filter_hz: float      # low-pass of the measured twist (the D term)
+    ct_hexapod: ComputedTorqueGains
+    ct_testbench: ComputedTorqueGains
+    ct_force_rate_floor: float        # N/s per unit spool: the force loops' schedule takes it no lower
     valve_map_force_n: np.ndarray     # (n_f,)
     valve_map_velocity_m_s: np.ndarray    # (n_v,)
     valve_map_spool: np.ndarray       # (n_f, n_v) steady-state spool, fraction of full input
@@ -324,11 +338,8 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         pi_kp=pi["kp_v_mm"] / MM, pi_ki=pi["ki_v_mm_s"] / MM, saturation_v=pi["saturation_v"],
         kpl_v_pa=ad["kpl_v_bar"] / BAR, ki_scale=ad["ki_scale"], table_position_m=positions, table_load_kg=loads,
         table_kp=kp, table_ki=ki, feedforward_scale=raw["model_based"]["feedforward_scale"],
-        ct_bandwidth_rad_s=2 * math.pi * ct["bandwidth_hz"], ct_damping=ct["damping"],
-        ct_integral_fraction=ct["integral_fraction"], ct_velocity_gain_per_s=ct["velocity_gain_per_s"],
-        ct_testbench_velocity_gain_per_s=ct["testbench_velocity_gain_per_s"],
-        ct_force_bandwidth_rad_s=2 * math.pi * ct["force_bandwidth_hz"],
-        ct_force_rate_floor=ct["force_rate_floor_n_s_pct"] * 100.0, ct_velocity_filter_hz=ct["velocity_filter_hz"],
+        ct_hexapod=ComputedTorqueGains.of(ct), ct_testbench=ComputedTorqueGains.of(ct, "testbench_"),
+        ct_force_rate_floor=ct["force_rate_floor_n_s_pct"] * 100.0,
 
         valve_map_force_n=map_forces, valve_map_velocity_m_s=map_velocities, valve_map_spool=map_spool,
         valve_map_pressure_a_pa=map_pa, valve_map_pressure_b_pa=map_pb,

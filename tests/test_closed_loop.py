@@ -14,7 +14,7 @@ from firmware_py.config import load_config as load_controller_config
 from hil.cli import main
 from hil.design.closed_loop import hexapod_closed_loop
 from hil.design.ct_gains import MIN_DAMPING, design_gains, operating_set, worst_damping
-from hil.design.simulate import HexapodLoop, run_movement, thesis_motions
+from hil.design.simulate import RigLoop, run_movement, thesis_motions
 from hil.metrics import damped_oscillation
 from hil.scenarios.pm import PlatformMovement
 from physics import hydraulics as hy
@@ -36,7 +36,7 @@ def test_the_linear_closed_loop_predicts_the_emulators_response_to_a_push():
     counts the platform's horizontal position is seen in ~1 mm steps through the near-vertical
     legs: without the seals' stiction it then wanders by mm, which no linear model holds.)"""
     emulator = load_config(overrides=LOW_FRICTION)
-    loop = HexapodLoop(load_controller_config(), emulator, "computed-torque", ideal=True)
+    loop = RigLoop(load_controller_config(), emulator, "computed-torque", ideal=True)
     loop.activate()
     loop.waypoint(CIRCLE_START_M, 2.0, 0.5, int(WaypointFlag.START | WaypointFlag.LAST))
     for _ in range(1500):
@@ -77,6 +77,19 @@ def test_the_gain_search_is_seeded_and_keeps_its_best_candidate():
     assert best.gains == again.gains and len(tried) == 2
     feasible = [c for c in tried if c.damping >= MIN_DAMPING]
     assert best is (min(feasible, key=lambda c: c.score) if feasible else min(tried, key=lambda c: -c.damping))
+
+
+def test_the_test_benchs_search_scores_sines_only_where_the_steps_hold():
+    """One candidate: its steps judged against 14 % and 1 s, its sines scored only if they hold
+    (in process, `hil.design.simulate`), the packaged bench gains among them."""
+    from hil.design.ct_gains import TESTBENCH_RANGES, _evaluate_bench
+    emulator = load_config()
+    packaged = {k: v for k, v in load_controller_config().raw["computed_torque"].items() if k in TESTBENCH_RANGES}
+    candidate = _evaluate_bench((emulator, packaged))
+    steps = [v for k, v in candidate.movements.items() if k.startswith("step")]
+    sines = [v for k, v in candidate.movements.items() if k.startswith("sine")]
+    assert len(steps) == 9 and all(s["overshoot_pct"] < 14.0 and s["settling_s"] <= 1.0 for s in steps)
+    assert len(sines) == 7 and candidate.score == pytest.approx(max(s["max_error_mm"] for s in sines), abs=1e-3)
 
 
 def test_the_force_rate_per_spool_is_the_chamber_laws_derivative():

@@ -54,7 +54,7 @@ def test_the_packaged_plant_data_is_what_the_design_command_derives(cfg, tmp_pat
     path = tmp_path / "ct.toml"
     assert main(["design", "computed-torque", "--out", str(path), "--bandwidth-hz", "2.5", "--json"]) == 0
     derived = load_config(path)
-    assert derived.ct_bandwidth_rad_s == pytest.approx(2 * np.pi * 2.5)
+    assert derived.ct_hexapod.bandwidth_rad_s == pytest.approx(2 * np.pi * 2.5)
     np.testing.assert_allclose(cfg.valve_map_spool, derived.valve_map_spool, atol=5e-7)
     for ours, theirs in ((cfg.valve_map_pressure_a_pa, derived.valve_map_pressure_a_pa),
                          (cfg.valve_map_pressure_b_pa, derived.valve_map_pressure_b_pa)):
@@ -91,7 +91,7 @@ def test_the_force_loop_has_the_same_bandwidth_wherever_the_leg_stands(cfg):
                           model.static_force_n, zeros, zeros, model.strokes_m)
         np.testing.assert_allclose(ct.stiffness, model.stiffness_n_m, rtol=0.05)
         bandwidth = ct.stiffness * model.flow_gain_m_s * ct.force_gain
-        np.testing.assert_allclose(bandwidth, cfg.ct_force_bandwidth_rad_s, rtol=0.05)
+        np.testing.assert_allclose(bandwidth, cfg.ct_hexapod.force_bandwidth_rad_s, rtol=0.05)
 
 
 def test_a_map_made_at_another_supply_says_so_and_opens_less(cfg, tmp_path):

@@ -4,8 +4,8 @@
     hydrapod design schedule [--plants SRC] [--out FILE] [--ki-scale] [--kp-fraction] [--ti-fraction] [--json]
     hydrapod design modes [--pose X,Y,Z,ROLL,PITCH,YAW] [--payload-kg M] [--supply-bar P] [--along] [--sealed]
                           [--closed-loop] [--json] [--plot DIR]
-    hydrapod design computed-torque [--out FILE] [--supply-bar P] [--samples N] [--refine N] [--seed S]
-                                    [--min-damping Z] [--workers N] [--bandwidth-hz] [--damping]
+    hydrapod design computed-torque [--out FILE] [--supply-bar P] [--rigs LIST] [--samples N] [--refine N]
+                                    [--seed S] [--min-damping Z] [--workers N] [--bandwidth-hz] [--damping]
                                     [--integral-fraction] [--velocity-gain] [--testbench-velocity-gain]
                                     [--force-bandwidth-hz] [--velocity-filter-hz] [--json]
 
@@ -35,6 +35,15 @@ def _plants(text: str) -> str:
     if text in SOURCES or Path(text).is_file():
         return text
     raise argparse.ArgumentTypeError(f"{text!r} is neither {' nor '.join(SOURCES)} nor an existing file")
+
+
+def _rigs(text: str) -> tuple[str, ...]:
+    """argparse `type=`: a comma-separated subset of hexapod, testbench."""
+    rigs = tuple(r.strip() for r in text.split(",") if r.strip())
+    unknown = [r for r in rigs if r not in ("hexapod", "testbench")]
+    if unknown or not rigs:
+        raise argparse.ArgumentTypeError(f"{text!r}: rigs are hexapod and testbench")
+    return rigs
 
 
 def _nominal(text: str) -> tuple[float, float]:
@@ -152,7 +161,15 @@ def _computed_torque(args) -> int:
     from plant_emulator.params import load_config
 
     from ..design.computed_torque import computed_torque_toml, force_rate_floor, valve_map
-    from ..design.ct_gains import GAIN_RANGES, design_gains, operating_set
+    from ..design.ct_gains import (
+        GAIN_RANGES,
+        HEXAPOD_SEARCH,
+        TESTBENCH_RANGES,
+        TESTBENCH_SEARCH,
+        design_gains,
+        design_testbench_gains,
+        operating_set,
+    )
     supply = {} if args.supply_bar is None else {"actuator": {"supply_pressure_bar": args.supply_bar}}
     cfg = load_config(overrides=supply or None)     # the map holds at the supply it was made at
     spool, pressure_a, pressure_b, unreachable = valve_map(cfg)
@@ -162,21 +179,30 @@ def _computed_torque(args) -> int:
     given = {"bandwidth_hz": args.bandwidth_hz, "damping": args.damping, "integral_fraction": args.integral_fraction,
              "velocity_gain_per_s": args.velocity_gain, "force_bandwidth_hz": args.force_bandwidth_hz,
              "velocity_filter_hz": args.velocity_filter_hz}
-    design = None
-    if any(value is not None for value in given.values()) or args.samples == 0:
-        gains = {key: packaged[key] if value is None else value for key, value in given.items()}
-    else:                                          # derived from the models (ct_gains)
-        def progress(count, candidate):
-            if not args.json:
-                print(f"  {count:3d}: min damping {candidate.damping:6.3f}, score {candidate.score:8.3f}",
-                      flush=True)
-        best, tried = design_gains(cfg, args.samples, args.refine, args.seed, args.min_damping, args.workers,
-                                   progress, models, floor)
-        design = {**best.as_dict(), "candidates": len(tried)}
-        gains = {key: round(best.gains[key], 4) for key in GAIN_RANGES}
-    gains["testbench_velocity_gain_per_s"] = (packaged["testbench_velocity_gain_per_s"]
-                                              if args.testbench_velocity_gain is None else args.testbench_velocity_gain)
+    gains = {key: packaged[key] if value is None else value for key, value in given.items()}
+    gains |= {key: packaged[key] for key in TESTBENCH_RANGES}
+    if args.testbench_velocity_gain is not None:
+        gains["testbench_velocity_gain_per_s"] = args.testbench_velocity_gain
     gains["force_rate_floor_n_s_pct"] = round(floor / 100.0, 3)
+
+    def progress(count, candidate):
+        if not args.json:
+            print(f"  {count:3d}: worst damping {candidate.damping:6.3f}, score {candidate.score:8.3f}", flush=True)
+    design = {}
+    def search(defaults):                          # an option given overrides the rig's default
+        return tuple(default if value is None else value
+                     for value, default in zip((args.samples, args.refine, args.seed), defaults))
+    searching = args.samples != 0 and not any(value is not None for value in given.values())
+    if searching and "hexapod" in args.rigs:       # derived from the models (ct_gains)
+        samples, refine, seed = search(HEXAPOD_SEARCH)
+        best, tried = design_gains(cfg, samples, refine, seed, args.min_damping, args.workers, progress, models,
+                                   floor)
+        design["hexapod"] = {**best.as_dict(), "candidates": len(tried)}
+        gains |= {key: round(best.gains[key], 4) for key in GAIN_RANGES}
+    if searching and "testbench" in args.rigs and args.testbench_velocity_gain is None:
+        best, tried = design_testbench_gains(cfg, *search(TESTBENCH_SEARCH), args.workers, progress)
+        design["testbench"] = {**best.as_dict(), "candidates": len(tried)}
+        gains |= {key: round(best.gains[key], 4) for key in TESTBENCH_RANGES}
     source = f"the emulator's configuration at {cfg.supply_pressure_pa / BAR:g} bar"
     text = computed_torque_toml(spool, pressure_a, pressure_b, gains, source)
     if supply:                                     # the residuals' model and the supply check at it too
@@ -191,8 +217,8 @@ def _computed_torque(args) -> int:
     if args.json:
         print(json.dumps(doc, indent=1))
     else:
-        how = (f"derived from {design['candidates']} candidates: worst closed-loop damping {design['min_damping']:.3f} "
-               f"({design['worst_point']}), tracking score {design['score']:.3f}" if design else "as given")
+        how = "; ".join(f"{rig} derived from {d['candidates']} candidates (score {d['score']:.3f})"
+                        for rig, d in design.items()) or "as given"
         print(f"computed-torque config written to {out}: valve map {spool.shape[0]} forces x {spool.shape[1]} "
               f"velocities ({unreachable} beyond the supply, held at the nearest reachable point); gains {how}: "
               + ", ".join(f"{k} {v:g}" for k, v in gains.items()) + "; load it with --controller-config or --config")
@@ -265,18 +291,21 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--velocity-gain", type=number_in_range(float, 0.0, 1000.0),
                    help="joint error to commanded piston velocity, 1/s")
     p.add_argument("--testbench-velocity-gain", type=number_in_range(float, 0.0, 1000.0),
-                   help="the same on the test bench's leg, 1/s")
+                   help="the same on the test bench's leg, 1/s (given: no search for the test bench)")
     p.add_argument("--force-bandwidth-hz", type=number_in_range(float, 0.0, 100.0),
                    help="each leg's force loop on its load cell (its gain scheduled on the leg's operating point)")
-    p.add_argument("--samples", type=number_in_range(int, 0, 10000), default=64,
-                   help="the gain search's random candidates (0: keep the packaged gains; any gain given: "
-                        "no search)")
-    p.add_argument("--refine", type=number_in_range(int, 0, 10000), default=40,
-                   help="Nelder-Mead evaluations from the best candidate")
-    p.add_argument("--seed", type=number_in_range(int, 0, 2**31 - 1), default=1)
+    p.add_argument("--samples", type=number_in_range(int, 0, 10000), default=None,
+                   help="the gain search's random candidates (default: 64 hexapod, 256 test bench; 0: keep the "
+                        "packaged gains; any gain given: no search)")
+    p.add_argument("--refine", type=number_in_range(int, 0, 10000), default=None,
+                   help="Nelder-Mead evaluations from the best candidate (default: 40 hexapod, 60 test bench)")
+    p.add_argument("--seed", type=number_in_range(int, 0, 2**31 - 1), default=None,
+                   help="the searches' seed (default: 1 hexapod, 3 test bench)")
     p.add_argument("--min-damping", type=number_in_range(float, 0.0, 1.0), default=0.15,
                    help="every closed-loop mode at least this damped over the operating set")
     p.add_argument("--workers", type=number_in_range(int, 1, 64), default=2, help="processes for the search")
+    p.add_argument("--rigs", type=_rigs, default=("hexapod", "testbench"),
+                   help="whose gains to derive: hexapod,testbench (default both; the other keeps the packaged)")
     p.add_argument("--velocity-filter-hz", type=number_in_range(float, 0.5, 200.0),
                    help="low-pass of the measured twist")
     p.add_argument("--json", action="store_true")

@@ -1,6 +1,6 @@
-"""The computed-torque gains, derived from the emulated hexapod's models (not hand-tuned).
+"""The computed-torque gains, derived from the emulated rigs' models (not hand-tuned).
 
-Two requirements, each judged on a model of item 1 (`hydrapod design modes`):
+The hexapod's, two requirements, each judged on a model of item 1 (`hydrapod design modes`):
 
 - robust stability: every mode of the closed loop (`closed_loop.hexapod_closed_loop`: the
   plant linearised at a pose under the controller's own code) damped at least `min_damping`
@@ -11,8 +11,13 @@ Two requirements, each judged on a model of item 1 (`hydrapod design modes`):
   / 10 mm and the IAE / (2 x the thesis's model-based IAE) over both movements and every
   axis (<= 1: both bounds met).
 
-The search: a seeded random sample of the gain ranges; the stability check first (cheap), the
-movements only for the candidates it passes; then Nelder-Mead from the best on the same
+The test bench's one leg, on its own experiments in process: sha-step's steps (overshoot
+< 14 %, settling <= 1 s: the thesis's claim for its adaptive controller) as the constraint,
+the largest error of sha-tracking's sines at w 0.5 and 1 rad/s with 0, 3 and 6 kg and at
+0.1 rad/s with 3 kg / 1 mm (its claim at low w) as the score.
+
+The search: a seeded random sample of the gain ranges; the cheap requirement first, the
+rest only for the candidates it passes; then Nelder-Mead from the best on the same
 penalised score. Deterministic for a seed.
 """
 
@@ -44,6 +49,9 @@ DESIGN_PAYLOADS_KG = (0.0, 6.0)
 DESIGN_SUPPLIES_BAR = (20.0, 40.0)
 MIN_DAMPING = 0.15
 INFEASIBLE = 100.0                   # a candidate's score when a movement faults
+# the searches' defaults (samples, Nelder-Mead evaluations, seed): what made the packaged gains
+HEXAPOD_SEARCH = (64, 40, 1)
+TESTBENCH_SEARCH = (256, 60, 3)
 
 
 @dataclass
@@ -55,7 +63,7 @@ class Candidate:
     movements: dict = field(default_factory=dict)
 
     def as_dict(self) -> dict:
-        return {"gains": {k: round(v, 4) for k, v in self.gains.items() if k in GAIN_RANGES},
+        return {"gains": {k: round(v, 4) for k, v in self.gains.items() if k in GAIN_RANGES or k in TESTBENCH_RANGES},
                 "min_damping": round(self.damping, 4),
                 "worst_point": self.worst_point, "score": round(self.score, 4), "movements": self.movements}
 
@@ -121,10 +129,10 @@ def _evaluate(args) -> Candidate:
     return candidate
 
 
-def _gains_of(unit: np.ndarray) -> dict:
+def _gains_of(unit: np.ndarray, ranges: dict) -> dict:
     """Gains from a point of the unit box (clipped into it)."""
     unit = np.clip(unit, 0.0, 1.0)
-    return {name: float(low + u * (high - low)) for u, (name, (low, high)) in zip(unit, GAIN_RANGES.items())}
+    return {name: float(low + u * (high - low)) for u, (name, (low, high)) in zip(unit, ranges.items())}
 
 
 def _penalised(candidate: Candidate, min_damping: float) -> float:
@@ -133,32 +141,98 @@ def _penalised(candidate: Candidate, min_damping: float) -> float:
     return candidate.score
 
 
-def design_gains(cfg: EmulatorConfig, samples: int = 64, refine: int = 40, seed: int = 1,
-                 min_damping: float = MIN_DAMPING, workers: int = 2, progress=None, models=None,
-                 rate_floor: float | None = None) -> tuple[Candidate, list]:
-    """The best candidate and every one evaluated (see the module docstring); `models`: the
-    operating set (default `operating_set`), `rate_floor` the force loop's (N/s per unit
-    spool; default the packaged one)."""
+def _search(evaluate, argument_of, ranges: dict, samples: int, refine: int, seed: int, workers: int, progress,
+            penalised) -> tuple[Candidate, list]:
+    """A seeded random sample of `ranges`, then Nelder-Mead from the best on `penalised`."""
     from scipy.optimize import minimize
-    models = operating_set(cfg) if models is None else models
-    fixed = {} if rate_floor is None else {"force_rate_floor_n_s_pct": rate_floor / 100.0}
     rng = np.random.default_rng(seed)
-    units = [rng.random(len(GAIN_RANGES)) for _ in range(samples)]
+    units = [rng.random(len(ranges)) for _ in range(samples)]
     tried: list[Candidate] = []
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        for candidate in pool.map(_evaluate, [(cfg, models, _gains_of(u) | fixed, min_damping) for u in units]):
+        for candidate in pool.map(evaluate, [argument_of(_gains_of(u, ranges)) for u in units]):
             tried.append(candidate)
             if progress:
                 progress(len(tried), candidate)
-    best_index = int(np.argmin([_penalised(c, min_damping) for c in tried]))
-    if refine > 0:
+    if refine > 0 and tried:
+        start = units[int(np.argmin([penalised(c) for c in tried]))]
+
         def cost(unit):
-            candidate = _evaluate((cfg, models, _gains_of(unit) | fixed, min_damping))
+            candidate = evaluate(argument_of(_gains_of(unit, ranges)))
             tried.append(candidate)
             if progress:
                 progress(len(tried), candidate)
-            return _penalised(candidate, min_damping)
-        minimize(cost, np.clip(units[best_index], 0.0, 1.0), method="Nelder-Mead",
-                 options={"maxfev": refine, "initial_simplex": None, "xatol": 1e-3, "fatol": 1e-3})
-    best = min(tried, key=lambda c: _penalised(c, min_damping))
-    return best, tried
+            return penalised(candidate)
+        minimize(cost, np.clip(start, 0.0, 1.0), method="Nelder-Mead",
+                 options={"maxfev": refine, "xatol": 1e-3, "fatol": 1e-3})
+    return min(tried, key=penalised), tried
+
+
+def design_gains(cfg: EmulatorConfig, samples: int = HEXAPOD_SEARCH[0], refine: int = HEXAPOD_SEARCH[1],
+                 seed: int = HEXAPOD_SEARCH[2],
+                 min_damping: float = MIN_DAMPING, workers: int = 2, progress=None, models=None,
+                 rate_floor: float | None = None) -> tuple[Candidate, list]:
+    """The hexapod's: the best candidate and every one evaluated (see the module docstring);
+    `models`: the operating set (default `operating_set`), `rate_floor` the force loop's (N/s
+    per unit spool; default the packaged one)."""
+    models = operating_set(cfg) if models is None else models
+    fixed = {} if rate_floor is None else {"force_rate_floor_n_s_pct": rate_floor / 100.0}
+    return _search(_evaluate, lambda gains: (cfg, models, gains | fixed, min_damping), GAIN_RANGES, samples, refine,
+                   seed, workers, progress, lambda c: _penalised(c, min_damping))
+
+
+# -- the test bench's one leg ---------------------------------------------------------------------
+
+TESTBENCH_RANGES = {
+    "testbench_bandwidth_hz": (1.0, 6.0),
+    "testbench_damping": (0.4, 1.2),
+    "testbench_force_bandwidth_hz": (3.0, 40.0),
+    "testbench_velocity_gain_per_s": (10.0, 120.0),
+    "testbench_velocity_filter_hz": (10.0, 150.0),
+    "testbench_integral_fraction": (0.1, 1.0),
+}
+# (kg, rad/s): w 0.5 and 1 at every load, and the slowest, 0.1, where the seals' stick-slip at
+# the reversals is largest (3 kg: 1.00 mm through the bus with gains that gave 0.93 at 0.5-1)
+BENCH_SINES = ((0.0, 0.5), (3.0, 0.5), (6.0, 0.5), (0.0, 1.0), (3.0, 1.0), (6.0, 1.0), (3.0, 0.1))
+BENCH_STEPS = tuple((load, position) for load in (0.0, 3.0, 6.0) for position in (0.05, 0.15, 0.25))  # sha-step's
+MAX_ERROR_M = 1e-3                   # the thesis's claim at low w (7.6.2)
+# its claim for the adaptive controller (7.6.1): overshoot < 14 %, settling <= 1 s. The
+# overshoot is read in encoder counts, 1.25 % of the 10 mm step: the design keeps one count
+# below the claim (in process a step came out 13.75 % where the bus's run gave 15.0 %)
+OVERSHOOT_MAX_PCT, SETTLING_MAX_S = 14.0 - 1.25, 1.0
+
+
+def _evaluate_bench(args) -> Candidate:
+    """The bench's score: the largest sine error / 1 mm over BENCH_SINES; infeasible (the
+    damping field -1) when a step overshoots 14 % or settles later than 1 s."""
+    from firmware_py.config import load_config
+
+    from ..scenarios.sha_tracking import TRACKING_OVERRIDES
+    from .simulate import bench_sine, bench_step
+    cfg, gains = args
+    plain = load_config(overrides={"computed_torque": gains})
+    tracking_cfg = load_config(overrides={**{k: dict(v) for k, v in TRACKING_OVERRIDES.items()},
+                                          "computed_torque": gains})
+    figures, feasible = {}, True
+    for load, position in BENCH_STEPS:
+        step = bench_step(plain, cfg, load, position)
+        feasible &= "fault" not in step and step["overshoot_pct"] < OVERSHOOT_MAX_PCT and (
+            step["settling_s"] <= SETTLING_MAX_S)
+        figures[f"step {load:g} kg at {position * 1e3:g} mm"] = {k: round(v, 3) if isinstance(v, float) else v
+                                                                for k, v in step.items()}
+    score = 0.0
+    if feasible:
+        for load, w in BENCH_SINES:
+            error, fault = bench_sine(tracking_cfg, cfg, load, w)
+            score = max(score, error / MAX_ERROR_M if fault == "NONE" else INFEASIBLE)
+            figures[f"sine {load:g} kg at {w:g} rad/s"] = {"max_error_mm": round(error * 1e3, 3), "fault": fault}
+    return Candidate(gains, 1.0 if feasible else -1.0, "", score if feasible else math.inf, figures)
+
+
+def design_testbench_gains(cfg: EmulatorConfig, samples: int = TESTBENCH_SEARCH[0], refine: int = TESTBENCH_SEARCH[1],
+                           seed: int = TESTBENCH_SEARCH[2], workers: int = 2, progress=None
+                           ) -> tuple[Candidate, list]:
+    """The test bench's gains: sha-step's claim (overshoot < 14 % less one count, settling
+    <= 1 s, at its 50, 150 and 250 mm with 0, 3 and 6 kg) as the constraint, the largest error
+    of sha-tracking's sines (BENCH_SINES) as the score (in process)."""
+    return _search(_evaluate_bench, lambda gains: (cfg, gains), TESTBENCH_RANGES, samples, refine, seed, workers,
+                   progress, lambda c: _penalised(c, 0.0))

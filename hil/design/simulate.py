@@ -20,7 +20,7 @@ from firmware_py.controller import Controller
 from firmware_py.geometry import default_geometry
 from physics import hydraulics as hy
 from plant_emulator.params import EmulatorConfig
-from plant_emulator.rigs import HexapodRig
+from plant_emulator.rigs import make_rig
 from protocol.dbc import signal_scale
 from protocol.enums import Ack, State, ValveState, WaypointFlag
 
@@ -67,18 +67,19 @@ class Movement:
         return self.fault == "NONE"
 
 
-class HexapodLoop:
-    """A controller (`controller` by name) and the emulator's hexapod carrying `payload_kg`,
-    the controller told of it; `seed` makes the load cells' noise repeatable. `ideal`: the
-    sensors exact (no counts, no noise), as a linear model sees them."""
+class RigLoop:
+    """A controller (`controller` by name) and the emulator's `rig` ("hexapod": carrying
+    `load_kg` on the platform, the controller told of it; "testbench": the load on the
+    slide, which the controller weighs itself); `seed` makes the load cells' noise repeatable.
+    `ideal`: the sensors exact (no counts, no noise), as a linear model sees them."""
 
     def __init__(self, controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig, controller: str,
-                 payload_kg: float = 0.0, seed: int = 7, ideal: bool = False):
-        self.rig = HexapodRig(emulator_cfg)
-        self.rig.set_load(payload_kg)
-        self.ctl = Controller(controller_cfg, "hexapod", PERIOD_S, CONTROLLER_NAMES[controller])
+                 load_kg: float = 0.0, seed: int = 7, ideal: bool = False, rig: str = "hexapod"):
+        self.rig = make_rig(rig, emulator_cfg, load_kg)
+        self.ctl = Controller(controller_cfg, rig, PERIOD_S, CONTROLLER_NAMES[controller])
+        n = self.ctl.n
         self.meas, self.cmd = self.ctl.new_interfaces()
-        self.applied, self.open = np.zeros(6), np.zeros(6)
+        self.applied, self.open = np.zeros(n), np.zeros(n)
         self.ideal = ideal
         self.encoder_m = emulator_cfg.encoder_resolution_m
         self.noise_n = 0.0 if ideal else emulator_cfg.load_cell_noise_n
@@ -92,7 +93,7 @@ class HexapodLoop:
             meas.force_n[:] = rig.rod_force_n
         else:
             meas.position_m[:] = np.round(rig.stroke_m / self.encoder_m) * self.encoder_m
-            force = rig.rod_force_n + self.noise_n * self.rng.standard_normal(6)
+            force = rig.rod_force_n + self.noise_n * self.rng.standard_normal(rig.n_legs)
             meas.force_n[:] = np.round(force / FORCE_STEP_N) * FORCE_STEP_N
         meas.spool[:] = np.round(rig.state[:, hy.S_SPOOL] / SPOOL_STEP) * SPOOL_STEP
         meas.fresh[:] = True
@@ -146,7 +147,7 @@ def run_movement(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig,
                  controller: str = "computed-torque", payload_kg: float = 0.0, time_scale: float = 1.0,
                  seed: int = 7) -> Movement:
     """One of the thesis's movements from home, `time_scale` x its ta and tm."""
-    loop = HexapodLoop(controller_cfg, emulator_cfg, controller, payload_kg, seed)
+    loop = RigLoop(controller_cfg, emulator_cfg, controller, payload_kg, seed)
     loop.activate()
     return loop.movement(replace(motion, ta_s=motion.ta_s * time_scale, tm_s=motion.tm_s * time_scale))
 
@@ -155,3 +156,60 @@ def thesis_motions() -> dict[str, Motion]:
     from ..motions import MOTIONS
     geometry = default_geometry()
     return {name: motion(geometry) for name, motion in MOTIONS.items()}
+
+
+def bench_sine(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig, load_kg: float, w_rad_s: float,
+               seed: int = 7) -> tuple[float, str]:
+    """sha-tracking's experiment on the test bench, in process: from the sine's bottom, one
+    period of 150 - 125 cos(w t) mm as its waypoints; (the largest |y_r - y| over it [m],
+    the fault that cut it or "NONE")."""
+    import math
+
+    from ..scenarios.sha_tracking import AMPLITUDE_MM, CENTRE_MM, POINTS_PER_PERIOD
+    loop = RigLoop(controller_cfg, emulator_cfg, "computed-torque", load_kg, seed, rig="testbench")
+    loop.activate(100)
+    start = WaypointFlag.START | WaypointFlag.LAST
+    loop.waypoint((0.0, 0.0, (CENTRE_MM - AMPLITUDE_MM) * 1e-3), 1.35, 0.1, int(start))
+    for _ in range(int(round(1.9 / PERIOD_S))):
+        loop.cycle()
+    if loop.ctl.state is State.FAULT:
+        return 0.0, loop.ctl.sup.fault_code.name
+    tm = 2e-3 * round(2 * math.pi / w_rad_s / POINTS_PER_PERIOD / 2e-3)
+    for k in range(1, POINTS_PER_PERIOD + 1):
+        y = CENTRE_MM - AMPLITUDE_MM * math.cos(2 * math.pi * k / POINTS_PER_PERIOD)
+        loop.waypoint((0.0, 0.0, y * 1e-3), tm, round(tm / 2, 3), int(start) if k == POINTS_PER_PERIOD else 0)
+    worst = 0.0
+    for _ in range(int(round((tm * POINTS_PER_PERIOD + 0.3) / PERIOD_S))):
+        loop.cycle()
+        if loop.ctl.state is State.FAULT:
+            return worst, loop.ctl.sup.fault_code.name
+        if loop.ctl.reference.moving:
+            worst = max(worst, abs(float(loop.ctl.reference.yr[0] - loop.meas.position_m[0])))
+    return worst, "NONE"
+
+
+def bench_step(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig, load_kg: float, position_m: float,
+               step_m: float = 0.01, hold_s: float = 1.2, seed: int = 7) -> dict:
+    """sha-step's experiment at one position, in process: there, then a `step_m` square wave
+    up, down, up; the last up-step's `hil.metrics.step_response` (or {"fault": ...})."""
+    from ..metrics import step_response
+    loop = RigLoop(controller_cfg, emulator_cfg, "computed-torque", load_kg, seed, rig="testbench")
+    loop.activate(100)
+    flags = WaypointFlag.START | WaypointFlag.LAST
+    loop.waypoint((0.0, 0.0, position_m), 2.0, 0.1, int(flags))
+    cycles = int(round(hold_s / PERIOD_S))
+    for _ in range(int(round(3.0 / PERIOD_S))):
+        loop.cycle()
+    y = []
+    for target in (position_m + step_m, position_m, position_m + step_m):
+        if loop.ctl.state is State.FAULT:
+            return {"fault": loop.ctl.sup.fault_code.name}
+        y0 = float(np.mean(loop.meas.position_m))
+        loop.waypoint((0.0, 0.0, target), hold_s, hold_s / 2, int(flags | WaypointFlag.STEP))
+        y = []
+        for _ in range(cycles):
+            loop.cycle()
+            y.append(float(loop.meas.position_m[0]))
+    if loop.ctl.state is State.FAULT:
+        return {"fault": loop.ctl.sup.fault_code.name}
+    return step_response(np.arange(len(y)) * PERIOD_S, np.array(y), y0, step_m)

@@ -103,6 +103,7 @@ def sine_runs(log: LogData, period_s: float) -> list[dict]:
 
 
 NEW_MAX_ERROR_UP_TO_W = 1.0    # rad/s: computed torque reported against the 1 mm up to here
+CLAIM_LOADS_KG = {0.0, 3.0, 6.0}
 
 
 class ShaTracking(Scenario):
@@ -170,19 +171,21 @@ class ShaTracking(Scenario):
                                 worst <= self.thesis["max_error_low_w_mm"], f"{worst:.2f} mm",
                                 f"thesis <= {self.thesis['max_error_low_w_mm']:g} mm", required=False))
             grows = [summary[controller][str(w)] for w in ws]
-            # Fig. 7.19's shape is its controllers'; computed torque's error is nearly flat up to
-            # w = 5 (1.1-1.6 mm with 6 kg: the load through the valve's null), reported
+            # Fig. 7.19's shape is its controllers'; computed torque's is flatter (0.7-1.4 mm with
+            # 6 kg from w 1 to 5), reported
             checks.append(Check(f"{controller}: error grows with w", grows[-1] >= grows[0],
                                 " -> ".join(f"{g:.2f}" for g in grows) + " mm", "Fig. 7.19: increasing",
                                 required=controller != NEW_CONTROLLER))
         slow = [r for r in runs if r["controller"] == NEW_CONTROLLER and r["w_rad_s"] <= NEW_MAX_ERROR_UP_TO_W]
         if slow:
             worst = max(slow, key=lambda r: r["max_error_mm"])
+            # the claim (7.6.2, issue 22 item 4) is for 0, 3 and 6 kg: required where the sweep has them
+            claim = CLAIM_LOADS_KG <= {r["load_kg"] or 0.0 for r in slow}
             checks.append(Check(f"{NEW_CONTROLLER}: max |error| at w <= {NEW_MAX_ERROR_UP_TO_W:g} rad/s, every load",
                                 worst["max_error_mm"] <= self.thesis["max_error_low_w_mm"],
                                 f"{worst['max_error_mm']:.2f} mm ({worst['load_kg'] or 0.0:g} kg, w "
                                 f"{worst['w_rad_s']:g})", f"<= {self.thesis['max_error_low_w_mm']:g} mm",
-                                required=False))
+                                required=claim))
         if "pi" in summary and "adaptive" in summary:
             common = [w for w in summary["pi"] if w in summary["adaptive"]]
             pi_mean = float(np.mean([summary["pi"][w] for w in common]))
