@@ -11,7 +11,7 @@ the model's for the same state (`hil.design.modes.sealed_modes`): the chambers a
 pressures the valves' transducers read before the push (LEG_PRESSURE), the seals'
 bristles linearised about the force they hold there (what the chambers push beyond the
 mechanism's static load), each seal's hysteresis at the fitted amplitude added. The
-frequency is asserted within 20 %, the damping reported.
+frequency and the damping ratio are asserted within 20 %.
 """
 
 from __future__ import annotations
@@ -33,8 +33,11 @@ from ..plotting import plt, save
 from ..scenario import Analysis, Check, Figure, Scenario
 from .common import load_at
 
-KICK_N = 2.0                   # the push: small, so the seals stay in pre-sliding (a 10 N push slides
-KICK_S = 0.02                  # them: damping ratio 40 % above the model's, in-process)
+# the push: in pre-sliding (10 N slides the seals: damping 40 % above the model's), and not so
+# small that a deflected bristle's relaxation over the first swings outweighs the oscillation
+# (in process, 8 N on two legs' bristles: damping 1.4x the model's at 1 N, 1.3x at 2, 1.1x at 3)
+KICK_N = 3.0
+KICK_S = 0.02
 HOLD_S = 1.5                   # held by the controller on the pose before sealing
 SETTLE_S = 0.6                 # after IDLE, before the push
 OBSERVE_S = 1.5                # the free response fitted
@@ -166,22 +169,17 @@ class HexapodKick(Scenario):
             where = f"{r['axis']} at ({', '.join(f'{v:g}' for v in r['pose_mm'])}) mm"
             checks.append(Check(f"{where}: the response fitted as a free oscillation", r["r2"] >= FIT_R2_MIN,
                                 f"r2 {r['r2']:.3f} ({r['modes_fitted']} mode(s))", f">= {FIT_R2_MIN}"))
-            # the model beside it, reported: the seals' bristles are left in a different state
-            # by each sealing, and the sealed platform's response with them (at home 3.4-5.0 Hz
-            # against the model's 4.26; docs/MEASUREMENTS.md "Hexapod modes")
+            # the model of the state each sealing leaves (docs/MEASUREMENTS.md "Hexapod modes")
             if r["model_frequency_hz"] is None:
                 checks.append(Check(f"{where}: a model mode along it", False, "none", "one"))
                 continue
-            # the frequency is asserted; the damping reported (at home it came out 1.3x the
-            # model's, not explained: docs/MEASUREMENTS.md "Hexapod modes")
-            for name, measured, model, required in (
-                    ("frequency", r["frequency_hz"], r["model_frequency_hz"], True),
-                    ("damping ratio", r["damping_ratio"], r["model_damping_ratio"], False)):
+            for name, measured, model in (("frequency", r["frequency_hz"], r["model_frequency_hz"]),
+                                          ("damping ratio", r["damping_ratio"], r["model_damping_ratio"])):
                 ratio = measured / model if model else math.nan
                 checks.append(Check(f"{where}: {name}", bool(abs(ratio - 1.0) <= TOLERANCE),
                                     f"{measured:.3g} (model {model:.3g}, x{ratio:.2f}; {r['modes_fitted']}-mode fit "
                                     f"r2 {r['r2']:.3f})",
-                                    f"within {TOLERANCE:.0%} of the model", required=required))
+                                    f"within {TOLERANCE:.0%} of the model"))
         table = ["| pose mm | axis | push N | f Hz | model f Hz | zeta | model zeta | amplitude mm | fit r2 |",
                  "|---|---|---|---|---|---|---|---|---|"]
         table += [f"| {', '.join(f'{v:g}' for v in r['pose_mm'])} | {r['axis']} | {r['push_n']:g} | "
