@@ -86,13 +86,23 @@ def testbench_advance(st: np.ndarray, command: float, jammed: bool, seized: bool
 
 
 @numba.njit(cache=True)
-def legs_drive_into(st: np.ndarray, velocity: np.ndarray, hp: np.ndarray, fp: np.ndarray,
-                    force: np.ndarray, damping: np.ndarray) -> None:
-    """Per leg: hydraulic force minus the bristle force (explicit) and the friction's slope."""
+def legs_drive_mujoco(st: np.ndarray, velocity: np.ndarray, hp: np.ndarray, fp: np.ndarray, slide_dof: np.ndarray,
+                      ctrl: np.ndarray, dof_damping: np.ndarray) -> None:
+    """Per leg: hydraulic force minus the bristle force (explicit) into the slide's motor, the
+    friction's velocity slope into its joint damping."""
     for i in range(st.shape[0]):
         z_force, slope = force_split(st[i, hy.S_Z], velocity[i], fp)
-        force[i] = hy.piston_force(st[i, hy.S_PA], st[i, hy.S_PB], hp) - z_force
-        damping[i] = slope
+        ctrl[i] = hy.piston_force(st[i, hy.S_PA], st[i, hy.S_PB], hp) - z_force
+        dof_damping[slide_dof[i]] = slope
+
+
+@numba.njit(cache=True)
+def legs_read_mujoco(qpos: np.ndarray, qvel: np.ndarray, slide_qpos: np.ndarray, slide_dof: np.ndarray,
+                     stroke_offset: np.ndarray, stroke: np.ndarray, velocity: np.ndarray) -> None:
+    """Each leg's stroke and velocity from MuJoCo's slide joints."""
+    for i in range(stroke.shape[0]):
+        stroke[i] = qpos[slide_qpos[i]] + stroke_offset[i]
+        velocity[i] = qvel[slide_dof[i]]
 
 
 @numba.njit(cache=True)
@@ -108,6 +118,26 @@ def legs_hydraulics(st: np.ndarray, stroke: np.ndarray, velocity: np.ndarray, co
                 st[i, hy.S_SPOOL] = hy.spool_step(st[i, hy.S_SPOOL], command[i], h, hp)
             st[i, hy.S_Z] = z_step(st[i, hy.S_Z], velocity[i], h, fp)
             hy.chamber_step(st[i], stroke[i], velocity[i], ps, h, hp, ports[i], seal_leak[i])
+
+
+@numba.njit(cache=True)
+def connect_axial_forces(efc_type: np.ndarray, efc_force: np.ndarray, equality: int, site_xpos: np.ndarray,
+                         platform_site: np.ndarray, xpos: np.ndarray, cylinder_body: np.ndarray,
+                         out: np.ndarray) -> None:
+    """Each leg's connect constraint (its three equality rows, in leg order) along the leg's axis,
+    cylinder -> rod end: -f . u, the rod's push on the platform."""
+    leg, row = 0, 0
+    for k in range(efc_type.shape[0]):
+        if efc_type[k] != equality:
+            continue
+        if row == 0:
+            axis = site_xpos[platform_site[leg]] - xpos[cylinder_body[leg]]
+            length = math.sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2])
+            out[leg] = 0.0
+        out[leg] -= efc_force[k] * (axis[row] / length)
+        row += 1
+        if row == 3:
+            leg, row = leg + 1, 0
 
 
 class _RigBase:
@@ -224,10 +254,10 @@ class HexapodRig(_RigBase):
         self._solref_default = model.dof_solref[mech.slide_dof].copy()
         self._solimp_default = model.dof_solimp[mech.slide_dof].copy()
         self.set_load(cfg.payload_kg)
-        self._force = np.zeros(6)
         self._wrench = np.zeros(6)                # an external push on the platform (EMU_KICK)
+        self._wrench_applied = False              # MuJoCo holds a push until it is cleared
         self._kick_left_s = 0.0
-        self._damping = np.zeros(6)
+        self._stroke_offset = self.home_length_m - self.geometry.leg_min_m
         self._velocity = np.zeros(6)
         self._stroke = np.zeros(6)
         self._read_legs()
@@ -264,8 +294,8 @@ class HexapodRig(_RigBase):
 
     def _read_legs(self) -> None:
         mech = self.mechanism
-        np.add(mech.data.qpos[mech.slide_qpos], self.home_length_m - self.geometry.leg_min_m, out=self._stroke)
-        self._velocity[:] = mech.data.qvel[mech.slide_dof]
+        legs_read_mujoco(mech.data.qpos, mech.data.qvel, mech.slide_qpos, mech.slide_dof, self._stroke_offset,
+                         self._stroke, self._velocity)
 
     def advance(self, period_s: float) -> None:
         mech, cfg = self.mechanism, self.cfg
@@ -275,18 +305,18 @@ class HexapodRig(_RigBase):
         sub = cfg.hydraulic_substeps
         h = model.opt.timestep / sub
         for _ in range(steps):
-            if self._kick_left_s > 0.0:
+            if self._kick_left_s > 0.0 or self._wrench_applied:
                 data.xfrc_applied[mech.platform_body] = self._wrench
+                self._wrench_applied = self._kick_left_s > 0.0
                 self._kick_left_s -= model.opt.timestep
                 if self._kick_left_s <= 0.0:
                     self._wrench[:] = 0.0         # the next step runs without it
-            else:
-                data.xfrc_applied[mech.platform_body] = self._wrench
-            legs_drive_into(self.state, self._velocity, cfg.hp, cfg.friction, self._force, self._damping)
-            model.dof_damping[mech.slide_dof] = self._damping
-            data.ctrl[:] = self._force
+            # one kernel call each side of the step (the Python between them cost as much as MuJoCo)
+            legs_drive_mujoco(self.state, self._velocity, cfg.hp, cfg.friction, mech.slide_dof, data.ctrl,
+                              model.dof_damping)
             mujoco.mj_step(model, data)
-            self._read_legs()
+            legs_read_mujoco(data.qpos, data.qvel, mech.slide_qpos, mech.slide_dof, self._stroke_offset,
+                             self._stroke, self._velocity)
             legs_hydraulics(self.state, self._stroke, self._velocity, self.command, self.jammed, self.ports_open,
                             self.seal_leak, sub, h, ps,
                             cfg.hp, cfg.friction)
@@ -296,7 +326,11 @@ class HexapodRig(_RigBase):
     def warm_up(self) -> None:
         """As TestbenchRig.warm_up: the kernels loaded on scratch copies, the rig untouched."""
         cfg, state = self.cfg, self.state.copy()
-        legs_drive_into(state, self._velocity, cfg.hp, cfg.friction, np.zeros(6), np.zeros(6))
+        mech = self.mechanism
+        legs_drive_mujoco(state, self._velocity, cfg.hp, cfg.friction, mech.slide_dof, np.zeros(6),
+                          np.zeros(mech.model.nv))
+        legs_read_mujoco(mech.data.qpos, mech.data.qvel, mech.slide_qpos, mech.slide_dof, self._stroke_offset,
+                         np.zeros(6), np.zeros(6))
         legs_hydraulics(state, self._stroke.copy(), self._velocity.copy(), np.zeros(6), self.jammed,
                         self.ports_open, self.seal_leak, 1,
                         cfg.substep_s, cfg.supply_pressure_pa, cfg.hp, cfg.friction)
@@ -308,12 +342,8 @@ class HexapodRig(_RigBase):
         gets -f); the rod pushes the platform along the leg axis u by -f . u.
         """
         mech, data = self.mechanism, self.mechanism.data
-        rows = np.flatnonzero(data.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
-        force_on_rod = data.efc_force[rows].reshape(6, 3)
-        axis = data.site_xpos[mech.platform_site] - data.xpos[self._cylinder_body]
-        axis /= np.linalg.norm(axis, axis=1)[:, None]
-        np.einsum("ij,ij->i", force_on_rod, axis, out=self.rod_force_n)
-        np.negative(self.rod_force_n, out=self.rod_force_n)
+        connect_axial_forces(data.efc_type, data.efc_force, int(mujoco.mjtConstraint.mjCNSTR_EQUALITY),
+                             data.site_xpos, mech.platform_site, data.xpos, self._cylinder_body, self.rod_force_n)
 
     def platform_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """Ground truth: platform position [m] and quaternion (w, x, y, z)."""
