@@ -24,7 +24,9 @@ import math
 from dataclasses import dataclass, field
 
 import mujoco
+import numba
 import numpy as np
+from scipy.linalg import expm
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial.transform import Rotation
 
@@ -283,20 +285,12 @@ def modal_models(cfg: EmulatorConfig, position_m, rpy_rad, payload_kg: float, su
 
 
 def sealed_modes(cfg: EmulatorConfig, position_m, rpy_rad=(0.0, 0.0, 0.0), payload_kg: float = 0.0,
-                 count: int = 6, supply_pa: float | None = None, pressures_pa=None,
-                 amplitude_m: float = 0.0) -> list[dict]:
+                 count: int = 6, supply_pa: float | None = None) -> list[dict]:
     """The platform's modes with the valves in HOLD (chambers sealed), for a small push: the
     seals' bristles swing from one side to the other every half period, so each mode is the
     model's with either side's bristles, each for half a period: frequency 2 / (1/f+ + 1/f-),
-    damping ratio the mean. Paired one to one by the legs' mode shapes.
-
-    `pressures_pa` (PA, PB per leg, as the valves' transducers read the sealed chambers):
-    the bristles then carry F_b = A (PA - alpha PB) minus the mechanism's static load at rest,
-    and the model linearises them about it (`bristle_modes`); with `amplitude_m`, the
-    platform's amplitude along a mode, each seal's hysteresis at its leg's share of it adds
-    its equivalent damping."""
-    if pressures_pa is not None:
-        return bristle_modes(cfg, position_m, rpy_rad, payload_kg, count, pressures_pa, amplitude_m)
+    damping ratio the mean. Paired one to one by the legs' mode shapes. (A push on a
+    platform whose bristles hold a force: `sealed_response`.)"""
     plus, minus = (model.platform_modes(count, 0.45)
                    for model in modal_models(cfg, position_m, rpy_rad, payload_kg, supply_pa, (1, -1)))
     similarity = np.array([[abs(float(np.dot(p.leg_shape, m.leg_shape))) for m in minus] for p in plus])
@@ -312,89 +306,65 @@ def sealed_modes(cfg: EmulatorConfig, position_m, rpy_rad=(0.0, 0.0, 0.0), paylo
     return out
 
 
-def bristle_terms(fp: np.ndarray, force_n: float, direction: float, swing_n: float = 0.0) -> tuple[float, float]:
-    """(stiffness N/m, damping N s/m) of one seal's bristles at rest with force `force_n`
-    (sigma0 z) for a small motion in `direction` (+1 extending, -1 retracting): LuGre's
-    sigma0 dz/dx and sigma1 dz/dx + sigma2, dz/dx = 1 - sigma0 z sign(dx) / |g(0)|; sigma0,
-    sigma1 of the side the deflection is on, which is the motion's when the bristles' force
-    swings (`swing_n`, its amplitude) across zero."""
-    g = abs(fp[lugre.A0_POS] + fp[lugre.A1_POS]) if direction > 0 else abs(fp[lugre.A0_NEG] + fp[lugre.A1_NEG])
-    deflected_positive = force_n > 0.0 if abs(force_n) > swing_n else direction > 0
-    sigma0, sigma1 = ((fp[lugre.S0_POS], fp[lugre.S1_POS]) if deflected_positive else
-                      (fp[lugre.S0_NEG], fp[lugre.S1_NEG]))
-    slope = max(0.0, 1.0 - direction * force_n / g)
-    sigma2 = fp[lugre.S2_POS] if direction > 0 else fp[lugre.S2_NEG]
-    return sigma0 * slope, sigma1 * slope + sigma2
+@numba.njit(cache=True)
+def _sealed_steps(phi, gamma, friction, rest_force_n, z, push_forces, push_steps, steps, step_s, every,
+                  stroke_of_pose, q_start, qd_start, out):
+    """The sealed linear plant (x+ = phi x + gamma u, u the legs' forces) with each seal's
+    bristles integrated by the emulator's LuGre law (`lugre.force_split`, `lugre.z_step`):
+    every `every` steps the platform's coordinate `stroke_of_pose` . q into `out`."""
+    n_legs = z.shape[0]
+    x = np.zeros(phi.shape[0])
+    u = np.zeros(n_legs)
+    sample = 0
+    for k in range(steps):
+        for i in range(n_legs):
+            v = x[qd_start + i]
+            z_force, slope = lugre.force_split(z[i], v, friction)
+            u[i] = rest_force_n[i] - z_force - slope * v + (push_forces[i] if k < push_steps else 0.0)
+        x = phi @ x + gamma @ u
+        for i in range(n_legs):
+            z[i] = lugre.z_step(z[i], x[qd_start + i], step_s, friction)
+        if (k + 1) % every == 0 and sample < out.shape[0]:
+            y = 0.0
+            for i in range(n_legs):
+                y += stroke_of_pose[i] * x[q_start + i]
+            out[sample] = y
+            sample += 1
 
 
-def hysteresis_damping(fp: np.ndarray, force_n: float, amplitude_m: float, frequency_hz: float,
-                       steps: int = 400, cycles: int = 4) -> float:
-    """One seal's bristles oscillating +-`amplitude_m` about rest with force `force_n`: the
-    energy LuGre's path law (`lugre.bristle_relax`, the emulator's) loses per cycle, as an
-    equivalent viscous damping E / (pi omega X^2), N s/m (the describing function: a
-    pre-sliding loop dissipates ~X^3)."""
-    if amplitude_m <= 0.0:
-        return 0.0
-    g_pos, g_neg = abs(fp[lugre.A0_POS] + fp[lugre.A1_POS]), abs(fp[lugre.A0_NEG] + fp[lugre.A1_NEG])
-
-    def sigma0(z):
-        return fp[lugre.S0_POS] if z >= 0.0 else fp[lugre.S0_NEG]
-    z = force_n / (fp[lugre.S0_POS] if force_n >= 0.0 else fp[lugre.S0_NEG])
-    x_prev, energy = 0.0, 0.0
-    for _ in range(cycles):                     # the last cycle, once the loop has settled
-        energy = 0.0
-        for k in range(1, steps + 1):
-            x = amplitude_m * math.sin(2.0 * math.pi * k / steps)
-            dx = x - x_prev
-            before = sigma0(z) * z
-            z = lugre.bristle_relax(z, dx, g_pos if dx > 0.0 else g_neg, sigma0(z))
-            energy += 0.5 * (before + sigma0(z) * z) * dx
-            x_prev = x
-    return max(energy, 0.0) / (math.pi * 2.0 * math.pi * frequency_hz * amplitude_m ** 2)
-
-
-def bristle_modes(cfg: EmulatorConfig, position_m, rpy_rad, payload_kg: float, count: int, pressures_pa,
-                  amplitude_m: float = 0.0) -> list[dict]:
-    """`sealed_modes` about the bristles' forces at rest (LuGre's dz/dx = 1 - sigma0 z sign(dx)
-    / |g(0)|: a leg moving toward its deflection's side meets sigma0 (1 - F_b / |g|), moving
-    back sigma0 (1 + F_b / |g|)): for each mode of the model, its two half periods with every
-    leg's bristles linearised for the direction it moves in that half (the sign of its share
-    in the mode), the chambers at `pressures_pa`; with `amplitude_m` (the platform's along the
-    mode) each seal's hysteresis at its leg's amplitude (`hysteresis_damping`) as well."""
+def sealed_response(cfg: EmulatorConfig, position_m, pressures_pa, axis: int, push: float, push_s: float,
+                    observe_s: float, payload_kg: float = 0.0, rpy_rad=(0.0, 0.0, 0.0), period_s: float = 0.002,
+                    step_s: float = 5e-5) -> np.ndarray:
+    """The sealed platform's response to a push (`push` N, or N m about axes 3-5, for `push_s`),
+    sampled every `period_s` for `push_s + observe_s`: the pose coordinate `axis` from rest [m
+    or rad]. The mechanism and oil columns linearised at the pose and at `pressures_pa` (PA, PB
+    per leg, the sealed chambers), each seal's bristles nonlinear: LuGre's law as the emulator
+    integrates it, starting from the force they hold there (the chambers' force less the
+    mechanism's static load). A deflected bristle relaxes with every swing, a loss linear in
+    the amplitude that no linearised seal holds (docs/MEASUREMENTS.md "Hexapod modes")."""
     rig = HexapodRig(cfg)
     rig.set_load(payload_kg)
     strokes, static, jacobian, inertia, gravity_stiffness = joint_space(rig, position_m, pose_quaternion(rpy_rad))
     pa, pb = (np.asarray(p, dtype=float) for p in pressures_pa)
-    forces = cfg.area_a_m2 * (pa - cfg.alpha * pb) - static      # what the bristles hold
-    radius = float(np.linalg.norm(rig.geometry.platform_anchor_m[0]))
-
-    def half(directions, extra_damping, swing):
-        terms = [bristle_terms(cfg.friction, float(forces[i]), float(directions[i]), float(swing[i]))
-                 for i in range(N_LEGS)]
-        a, _, stiffness, _ = state_matrices(cfg, inertia, gravity_stiffness, strokes, pa, pb, np.zeros(N_LEGS),
-                                            cfg.supply_pressure_pa, np.array([t[1] for t in terms]) + extra_damping,
-                                            0.0, np.array([t[0] for t in terms]))
-        return modes_of(a, jacobian, radius, cfg.area_a_m2, cfg.alpha, stiffness)
-
-    reference = half(np.ones(N_LEGS), 0.0, np.zeros(N_LEGS))
-    out = []
-    for mode in [m for m in reference if m.oscillating and m.platform_share >= 0.45][:count]:
-        signs = np.where(mode.leg_shape >= 0.0, 1.0, -1.0)
-        # each leg's amplitude: its share of the mode's platform motion scaled to `amplitude_m`
-        legs = np.abs(jacobian @ mode.shape) * amplitude_m / np.max(np.abs(mode.shape))
-        extra = np.array([hysteresis_damping(cfg.friction, float(forces[i]), float(legs[i]), mode.frequency_hz)
-                          for i in range(N_LEGS)])
-        swing = 0.5 * (cfg.friction[lugre.S0_POS] + cfg.friction[lugre.S0_NEG]) * legs
-        sides = []
-        for directions in (signs, -signs):
-            candidates = [m for m in half(directions, extra, swing) if m.oscillating]
-            sides.append(max(candidates, key=lambda m: abs(float(np.dot(m.leg_shape, mode.leg_shape)))))
-        f_plus, f_minus = sides[0].frequency_hz, sides[1].frequency_hz
-        out.append({"axis": mode.axis, "frequency_hz": 2.0 / (1.0 / f_plus + 1.0 / f_minus),
-                    "damping_ratio": 0.5 * (sides[0].damping_ratio + sides[1].damping_ratio),
-                    "frequency_hz_sides": (f_plus, f_minus),
-                    "damping_ratio_sides": (sides[0].damping_ratio, sides[1].damping_ratio),
-                    "shape": mode.shape})
+    rest = cfg.area_a_m2 * (pa - cfg.alpha * pb) - static         # what the bristles hold
+    a, _, _, _ = state_matrices(cfg, inertia, gravity_stiffness, strokes, pa, pb, np.zeros(N_LEGS),
+                                cfg.supply_pressure_pa, 0.0, 0.0)   # the seals' force comes from the law below
+    n = a.shape[0]
+    q, qd = blocks(N_LEGS)[:2]
+    b = np.zeros((n, N_LEGS))
+    b[qd, :] = np.linalg.inv(inertia)
+    augmented = np.zeros((n + N_LEGS, n + N_LEGS))                 # zero-order hold of the legs' forces
+    augmented[:n, :n], augmented[:n, n:] = a * step_s, b * step_s
+    discrete = expm(augmented)
+    fp = cfg.friction
+    z = np.array([f / (fp[lugre.S0_POS] if f >= 0.0 else fp[lugre.S0_NEG]) for f in rest])
+    wrench = np.zeros(6)
+    wrench[axis] = push
+    out = np.full(int(round((push_s + observe_s) / period_s)), np.nan)
+    _sealed_steps(np.ascontiguousarray(discrete[:n, :n]), np.ascontiguousarray(discrete[:n, n:]), fp, rest, z,
+                  np.linalg.solve(jacobian.T, wrench), int(round(push_s / step_s)),
+                  int(round((push_s + observe_s) / step_s)), step_s, int(round(period_s / step_s)),
+                  np.ascontiguousarray(np.linalg.inv(jacobian)[axis]), q.start, qd.start, out)
     return out
 
 
