@@ -315,8 +315,7 @@ class HexapodRig(_RigBase):
             legs_drive_mujoco(self.state, self._velocity, cfg.hp, cfg.friction, mech.slide_dof, data.ctrl,
                               model.dof_damping)
             mujoco.mj_step(model, data)
-            legs_read_mujoco(data.qpos, data.qvel, mech.slide_qpos, mech.slide_dof, self._stroke_offset,
-                             self._stroke, self._velocity)
+            self._read_legs()
             legs_hydraulics(self.state, self._stroke, self._velocity, self.command, self.jammed, self.ports_open,
                             self.seal_leak, sub, h, ps,
                             cfg.hp, cfg.friction)

@@ -7,6 +7,7 @@ from firmware_py.config import load_config
 from firmware_py.control import CONTROLLER_NAMES
 from firmware_py.controller import Controller
 from firmware_py.loop import ControllerLoop
+from hil.design.simulate import send_waypoint  # noqa: F401  (the tests' one way to send a waypoint)
 from protocol.enums import State
 from protocol.nodes import rig_nodes
 from tests.fake_bus import EmulatedHexapodBus, FakeBus
@@ -42,13 +43,6 @@ def cycles_until_fault(loop, limit: int) -> int:
         if loop.controller.state is State.FAULT:
             return k
     return limit
-
-
-def send_waypoint(ctl, seq, x, y, z, rpy=(0.0, 0.0, 0.0), segment=1.0, accel=0.2, flags=0):
-    """A waypoint's three frames carried out at once (as the host link does), its ack."""
-    ctl.waypoints.stage_position(seq & 0x0F, x, y, z)
-    ctl.waypoints.stage_rotation(seq & 0x0F, *rpy)
-    return ctl.waypoint_commit(seq & 0x0F, seq, segment, accel, flags)
 
 
 def valve_words(loop):

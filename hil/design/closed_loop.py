@@ -23,7 +23,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm
+from scipy.signal import cont2discrete
 
 from firmware_py.config import ControllerConfig, load_config
 from firmware_py.control import CONTROLLER_NAMES
@@ -82,13 +82,9 @@ def plant_of(cfg: EmulatorConfig, model: ModalModel, rod_mass_kg: float, period_
     c[n:, PB] = -cfg.area_a_m2 * cfg.alpha * np.eye(n)
     c[n:, QD] -= model.friction_slope_ns_m * np.eye(n)
     c[n:] -= rod_mass_kg * a[QD]
-    nx, nu = a.shape[0], model.b.shape[1] + 6
-    big = np.zeros((nx + nu, nx + nu))
-    big[:nx, :nx] = a
-    big[:nx, nx:nx + n] = model.b
-    big[:nx, nx + n:] = bw
-    phi = expm(big * period_s)
-    return Plant(model, phi[:nx, :nx], phi[:nx, nx:nx + n], phi[:nx, nx + n:], c)
+    inputs = np.hstack([model.b, bw])              # the valve commands and the wrench, held
+    ad, bd, *_ = cont2discrete((a, inputs, c, np.zeros((c.shape[0], inputs.shape[1]))), period_s, method="zoh")
+    return Plant(model, ad, bd[:, :n], bd[:, n:], c)
 
 
 def _state_views(ctl: Controller) -> list[np.ndarray]:

@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 import mujoco
 import numba
 import numpy as np
-from scipy.linalg import expm
 from scipy.optimize import linear_sum_assignment
+from scipy.signal import cont2discrete
 from scipy.spatial.transform import Rotation
 
 from physics import hydraulics as hy
@@ -353,15 +353,13 @@ def sealed_response(cfg: EmulatorConfig, position_m, pressures_pa, axis: int, pu
     q, qd = blocks(N_LEGS)[:2]
     b = np.zeros((n, N_LEGS))
     b[qd, :] = np.linalg.inv(inertia)
-    augmented = np.zeros((n + N_LEGS, n + N_LEGS))                 # zero-order hold of the legs' forces
-    augmented[:n, :n], augmented[:n, n:] = a * step_s, b * step_s
-    discrete = expm(augmented)
+    phi, gamma, *_ = cont2discrete((a, b, np.eye(n), np.zeros((n, N_LEGS))), step_s, method="zoh")
     fp = cfg.friction
     z = np.array([f / (fp[lugre.S0_POS] if f >= 0.0 else fp[lugre.S0_NEG]) for f in rest])
     wrench = np.zeros(6)
     wrench[axis] = push
     out = np.full(int(round((push_s + observe_s) / period_s)), np.nan)
-    _sealed_steps(np.ascontiguousarray(discrete[:n, :n]), np.ascontiguousarray(discrete[:n, n:]), fp, rest, z,
+    _sealed_steps(np.ascontiguousarray(phi), np.ascontiguousarray(gamma), fp, rest, z,
                   np.linalg.solve(jacobian.T, wrench), int(round(push_s / step_s)),
                   int(round((push_s + observe_s) / step_s)), step_s, int(round(period_s / step_s)),
                   np.ascontiguousarray(np.linalg.inv(jacobian)[axis]), q.start, qd.start, out)

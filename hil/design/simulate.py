@@ -10,6 +10,7 @@ the load-holding valves closed outside ACTIVE.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -163,8 +164,6 @@ def bench_sine(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig, l
     """sha-tracking's experiment on the test bench, in process: from the sine's bottom, one
     period of 150 - 125 cos(w t) mm as its waypoints; (the largest |y_r - y| over it [m],
     the fault that cut it or "NONE")."""
-    import math
-
     from ..scenarios.sha_tracking import AMPLITUDE_MM, CENTRE_MM, POINTS_PER_PERIOD
     loop = RigLoop(controller_cfg, emulator_cfg, "computed-torque", load_kg, seed, rig="testbench")
     loop.activate(100)
@@ -200,7 +199,6 @@ def bench_step(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig, l
     cycles = int(round(hold_s / PERIOD_S))
     for _ in range(int(round(3.0 / PERIOD_S))):
         loop.cycle()
-    y = []
     for target in (position_m + step_m, position_m, position_m + step_m):
         if loop.ctl.state is State.FAULT:
             return {"fault": loop.ctl.sup.fault_code.name}
