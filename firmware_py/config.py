@@ -78,7 +78,9 @@ RANGES: dict[str, dict[str, object]] = {
                   "persistence_cycles": (1, 10000), "flow_spread_pct": (0.0, 100.0), "supply_legs": (2, 6),
                   "load_cell_noise_n": (0.0, 100.0), "spool_check": bool, "spool_floor_pct": (0.1, 100.0),
                   "spool_lag_spread_pct": (0.0, 99.0), "spool_persistence_cycles": (1, 10000),
-                  "column_stiffness_n_mm": (0.1, 1e6)},
+                  "column_stiffness_n_mm": (0.1, 1e6), "leakage_spread_pct": (0.0, 100.0),
+                  "stiffness_spread_pct": (0.0, 99.0), "pressure_noise_bar": (0.0, 10.0),
+                  "pressure_persistence_samples": (1, 100)},
     "limits": {
         "stroke_margin_mm": (0.0, 100.0), "velocity_max_mm_s": (1.0, 1e4), "force_max_n": (1.0, 1e6),
         "tracking_error_max_mm": (0.1, 1000.0), "spool_max_pct": (1.0, 100.0),
@@ -212,6 +214,10 @@ class ControllerConfig:
     spool_floor: float                # the spool residual's floor, fraction of full input
     spool_lag_spread: float           # the spool's time constant known to within this, relative
     spool_persistence: int
+    residual_leakage_spread: float    # relative: the leakage's and the stiffness's known spread
+    residual_stiffness_spread: float
+    pressure_noise_pa: float          # 1-sigma of the chamber transducers (LEG_PRESSURE's PA, PB)
+    pressure_persistence: int         # samples beyond the prediction's threshold in a row: the leg is faulty
     # limits and supervisor
     stroke_margin_m: float
     velocity_max_m_s: float
@@ -350,6 +356,9 @@ def build(raw: dict, source: str = "config") -> ControllerConfig:
         residual_supply_legs=rs["supply_legs"], load_cell_noise_n=rs["load_cell_noise_n"],
         spool_check=rs["spool_check"], spool_floor=rs["spool_floor_pct"] / 100.0,
         spool_lag_spread=rs["spool_lag_spread_pct"] / 100.0, spool_persistence=rs["spool_persistence_cycles"],
+        residual_leakage_spread=rs["leakage_spread_pct"] / 100.0,
+        residual_stiffness_spread=rs["stiffness_spread_pct"] / 100.0, pressure_noise_pa=rs["pressure_noise_bar"] * BAR,
+        pressure_persistence=rs["pressure_persistence_samples"],
         stroke_margin_m=lim["stroke_margin_mm"] * MM, velocity_max_m_s=lim["velocity_max_mm_s"] * MM,
         force_max_n=lim["force_max_n"], tracking_error_max_m=lim["tracking_error_max_mm"] * MM,
         spool_max=lim["spool_max_pct"] / 100.0,

@@ -18,7 +18,7 @@ from numba import njit
 
 from physics import hydraulics as hy
 from physics.actuator import piston_force
-from physics.constants import GRAVITY_M_S2
+from physics.constants import BAR, GRAVITY_M_S2
 from protocol.dbc import signal_scale
 from protocol.enums import Ack, Command, Fault, State, TestMode, ValveState, WaypointFlag
 
@@ -32,7 +32,7 @@ from .interfaces import Measurements, ValveCommands
 from .monitors import FrameMonitor, LimitMonitor, LoopMonitor, NodeMonitor
 from .plausibility import AttitudeCrossCheck, FrozenLoadCells, MotionPlausibility, SupplyPressure
 from .reference import Reference
-from .residuals import ActuatorResiduals, SpoolResidual
+from .residuals import ActuatorResiduals, ChamberPrediction, SpoolResidual, sample_floor_pa
 from .stopping import ControlledStop
 from .supervisor import ACTIVE, LATCHED, Action, Supervisor
 from .trajectory import through_points
@@ -106,6 +106,12 @@ class Controller:
             cfg.residual_flow_spread)
         self.spool_check = SpoolResidual(n, cfg.hydraulics, period_s, cfg.spool_floor, cfg.spool_lag_spread,
                                          cfg.spool_persistence, int(ValveState.ACTIVE))
+        # each leg's chambers from one LEG_PRESSURE sample to the next
+        floor_pa = sample_floor_pa(cfg.pressure_noise_pa, signal_scale("LEG_PRESSURE_1", "PA") * BAR)
+        self.chambers = ChamberPrediction(n, cfg.hydraulics, cfg.supply_pressure_pa, period_s,
+                                          cfg.encoder_resolution_m, cfg.residual_flow_spread,
+                                          cfg.residual_leakage_spread, cfg.residual_stiffness_spread, floor_pa,
+                                          cfg.pressure_persistence, int(ValveState.ACTIVE))
         self.residuals_running = False
         # the valves' P-port transducers against the supply the model assumes
         self.supply = SupplyPressure(n, cfg.supply_pressure_pa, cfg.hydraulics[hy.HP_TANK], cfg.residual_flow_spread,
@@ -121,8 +127,9 @@ class Controller:
         self.residual_peak = 0.0
         self.supply_peak = 0.0                   # the same for the supply's samples
         self.spool_peak = 0.0                    # ... for the valves' spools
+        self.pressure_peak = 0.0                 # ... for the chambers' samples
         self.attitude_peak = 0.0                 # ... and for the IMU against the encoders
-        self._peaks = np.zeros((PEAK_DELAY, 4))
+        self._peaks = np.zeros((PEAK_DELAY, 5))
         self.stop = ControlledStop(n, round(cfg.controlled_stop_s / period_s) if self.hexapod else 0)
         # identification tests (HOST_TEST, test bench only: chapter 6.4)
         self.test = None if self.hexapod else IdentificationSignal(
@@ -166,6 +173,9 @@ class Controller:
                               self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
         self.supply.update(meas.ps_pa, meas.pressure_fresh)
         self.spool_check.update(self.spool_applied, self.spool_late, meas.spool, meas.fresh, meas.valve_state)
+        self.chambers.start(meas.position_m)
+        self.chambers.update(self.spool_applied, meas.fresh, meas.position_m, meas.valve_state, meas.pressure_fresh,
+                             meas.pa_pa, meas.pb_pa)
         valve_commands(VALVES_HOLD, self.joint.u_v, 1.0, False, -1, cmd.enable, cmd.hold, cmd.active, cmd.reset,
                        cmd.spool)
         ref.play(through_points(np.array([self.home_strokes, self.home_strokes + 1e-3]), 0.1, 0.2), [0], 0)
@@ -419,6 +429,7 @@ class Controller:
         if not self.residuals_running:
             res.start(meas.position_m, meas.force_n, self.gravity_axial, meas.pressure_valid, meas.pa_pa, meas.pb_pa)
             self.spool_check.start()
+            self.chambers.start(meas.position_m)
             self.supply.reset()
             self.residuals_running = True
             return
@@ -427,26 +438,32 @@ class Controller:
                             self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
         spools = self.spool_check.update(self.spool_applied, self.spool_late, meas.spool, meas.fresh,
                                          meas.valve_state) if self.cfg.spool_check else 0
+        chambers = self.chambers.update(self.spool_applied, meas.fresh, meas.position_m, meas.valve_state,
+                                        meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
         slot = self.cycles % PEAK_DELAY
         if self.sup.faults == 0:
             self.residual_peak = max(self.residual_peak, float(self._peaks[slot, 0]))
             self.supply_peak = max(self.supply_peak, float(self._peaks[slot, 1]))
             self.spool_peak = max(self.spool_peak, float(self._peaks[slot, 2]))
             self.attitude_peak = max(self.attitude_peak, float(self._peaks[slot, 3]))
+            self.pressure_peak = max(self.pressure_peak, float(self._peaks[slot, 4]))
         self._peaks[slot, 0] = res.peak
         self._peaks[slot, 1] = self.supply.cycle_peak
         self._peaks[slot, 2] = self.spool_check.peak
         self._peaks[slot, 3] = self.attitude_check.ratio
+        self._peaks[slot, 4] = self.chambers.peak
         if supply_faulty:
             self.sup.fault(Fault.SUPPLY_PRESSURE)
         elif lone_leg >= 0:
             self.sup.fault(Fault.SENSOR_FAULT, lone_leg + 1)
         elif spools:
             self._leg_fault(Fault.SPOOL_MISMATCH, self.spool_check.worst_leg)
-        elif faulty >= self.cfg.residual_supply_legs:
+        elif faulty >= self.cfg.residual_supply_legs or chambers >= self.cfg.residual_supply_legs:
             self.sup.fault(Fault.SUPPLY_PRESSURE)
         elif faulty:
             self._leg_fault(Fault.ACTUATOR_RESIDUAL, res.worst_leg)
+        elif chambers and self.chambers.worst_leg >= 0:
+            self._leg_fault(Fault.CHAMBER_PRESSURE, self.chambers.worst_leg)
 
     def _leg_fault(self, fault: Fault, leg: int) -> None:
         """A fault isolated to one leg: that leg holds while the others stop (the hexapod's

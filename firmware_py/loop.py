@@ -46,7 +46,7 @@ from .supervisor import LATCHED, emergency_code
 
 PACINGS = ("realtime", "lockstep")
 # the summary's false-alarm measures: each monitor's largest ratio to its threshold before the first fault
-PEAK_KEYS = ("residual_peak", "supply_peak", "spool_peak", "attitude_peak")
+PEAK_KEYS = ("residual_peak", "supply_peak", "spool_peak", "attitude_peak", "pressure_peak")
 HISTORY = 1 << 16                       # cycles kept for the timing percentiles
 # the cycle's phases, in order (seconds each, per cycle, in `phase_s`): SYNC sent; the sensor
 # window less the frames' handling; the frames' handling (decode, dispatch); read; update;

@@ -32,6 +32,19 @@ A command that reached the valve after its SYNC is applied a period late, so the
 is the smaller of the two candidates (this period's command and the one before). A jammed
 spool is off by its jam at the first report; the force residual sees it only through the
 flow it causes.
+
+Per leg, its chambers predicted from one LEG_PRESSURE sample to the next (every 16th cycle):
+the same continuity laws from the sampled p_A, p_B, driven by the applied spool and the
+encoder's swept volume only (no force enters them, so the seals' friction does not either),
+run nominal, and with each uncertain parameter at the edge of its spread over Table A.3
+(the flow gain k01 both ways, the leakage as b1's, the stiffness as b0's):
+    d_X        = p_X,sample - p_X,predicted                              X = A, B
+    threshold  = sum over the parameters of |p_X,j - p_X,nominal| + beta_X / V_X A_X q + floor
+with A_X the area on chamber X (A, alpha A), q the encoder's count and `floor` the two
+samples' noise and wire steps: a count of swept volume through the chamber's stiffness, as the
+reading's error swings by q when the count steps. What it sees: flow between the chambers the
+model has no path for (a leaking piston seal pulls p_A and p_B together), a chamber
+transducer gone wrong.
 """
 
 from __future__ import annotations
@@ -242,3 +255,144 @@ class SpoolResidual:
             self.hp, self.period_s, applied, applied_late, spool, fresh, valve_state, self.active_state, self.floor,
             self.lag_spread, self.persistence, self.seeded, self.spool_prev, self.above, self.ratio)
         return self.legs_faulty
+
+
+PRESSURE_SIGMAS = 6.0      # a pair of samples' noise beyond this many of its sigmas: p < 2e-9
+# the chamber prediction's models: the prediction, and in coarse steps the nominal reference and
+# one model per uncertain parameter (flow gain both ways, leakage, stiffness)
+PRED_NOMINAL, PRED_REFERENCE, PRED_FLOW_LOW, PRED_FLOW_HIGH, PRED_LEAKAGE, PRED_STIFFNESS = range(6)
+# 16 steps of 125 us resolve the chambers with the spool open: computed torque's force loop
+# ringing at rest (36 Hz, spool +-17 to +-75 %) gave ratios 1.38 with 2 steps, 0.79 with 8
+PRED_FINE_STEPS = 16
+PRED_COARSE_STEPS = 4       # constants, not arguments: called with 20, numba's dispatcher kept ~200 B a call
+
+
+def sample_floor_pa(noise_pa: float, wire_step_pa: float) -> float:
+    """The prediction's floor: the start and end samples' noise (sqrt 2 of one) to
+    PRESSURE_SIGMAS, and half the wire's step at each end."""
+    return PRESSURE_SIGMAS * math.sqrt(2.0) * noise_pa + wire_step_pa
+
+
+@njit(cache=True)
+def predict_chambers(row, hp, spool, y_start, dy, ps, period_s, steps):
+    """One period of one leg's chambers in `steps` steps, the piston swept by `dy`."""
+    h = period_s / steps
+    for j in range(steps):
+        row[hy.S_SPOOL] = hy.spool_step(row[hy.S_SPOOL], spool, h, hp)
+        hy.chamber_step(row, y_start + dy * (j + 1) / steps, dy / period_s, ps, h, hp, 1.0, hp[hy.HP_SEAL_LEAK])
+
+
+@njit(cache=True)
+def pressure_prediction_step(models, ps, period_s, spool_applied, fresh, position, valve_state,
+                             active_state, pressure_fresh, pa_meas, pb_meas, floor_pa, encoder_m, state, y_prev,
+                             seeded, ratio, supply_like):
+    """One cycle of every leg's sample-to-sample chamber prediction: `models` the parameter
+    vectors (PRED_* rows), `state[m, i]` leg i under model m; the prediction in
+    PRED_FINE_STEPS per cycle, the parameters' spreads as differences of models all in
+    PRED_COARSE_STEPS (their integration error cancels in the difference). At a leg's
+    LEG_PRESSURE sample writes `ratio[i]` (largest |d_X| / threshold; 0 between samples) and
+    `supply_like[i]` (both chambers beyond on one side), and starts again from the sample. A
+    leg without a fresh frame, or whose valve is not ACTIVE (its load-holding valves shut), is
+    not judged at its next sample. Returns the largest ratio of the cycle."""
+    n_models = models.shape[0]
+    peak = 0.0
+    for i in range(position.shape[0]):
+        ratio[i] = 0.0
+        dy = position[i] - y_prev[i] if fresh[i] else 0.0
+        predict_chambers(state[PRED_NOMINAL, i], models[PRED_NOMINAL], spool_applied[i], y_prev[i], dy, ps, period_s,
+                         PRED_FINE_STEPS)
+        for m in range(PRED_REFERENCE, n_models):
+            predict_chambers(state[m, i], models[m], spool_applied[i], y_prev[i], dy, ps, period_s, PRED_COARSE_STEPS)
+        if fresh[i]:
+            y_prev[i] = position[i]
+        if not (fresh[i] and valve_state[i] == active_state):
+            seeded[i] = False
+            continue
+        if not pressure_fresh[i]:
+            continue
+        if seeded[i]:
+            hp = models[0]
+            va, vb = hy.chamber_volumes(position[i], hp)
+            swept = encoder_m * hp[hy.HP_AREA_A]          # a count: the reading's error swings by q at a step
+            worst, low, high = 0.0, 0, 0
+            for s_col, meas, volume, area_ratio in ((hy.S_PA, pa_meas[i], va, 1.0),
+                                                   (hy.S_PB, pb_meas[i], vb, hp[hy.HP_ALPHA])):
+                predicted = state[PRED_NOMINAL, i, s_col]
+                reference = state[PRED_REFERENCE, i, s_col]
+                spread = (max(abs(state[PRED_FLOW_LOW, i, s_col] - reference),
+                              abs(state[PRED_FLOW_HIGH, i, s_col] - reference))
+                          + abs(state[PRED_LEAKAGE, i, s_col] - reference)
+                          + abs(state[PRED_STIFFNESS, i, s_col] - reference))
+                threshold = spread + hy.bulk_modulus(meas, hp) / volume * area_ratio * swept + floor_pa
+                r = (meas - predicted) / threshold
+                worst = max(worst, abs(r))
+                low += r < -1.0
+                high += r > 1.0
+            ratio[i] = worst
+            # both chambers beyond on the same side: the valve's inflow changed, the supply's kind;
+            # flow from one chamber into the other (a seal) or one transducer is the leg's own
+            supply_like[i] = low == 2 or high == 2
+            peak = max(peak, worst)
+        for m in range(n_models):
+            state[m, i, hy.S_PA], state[m, i, hy.S_PB] = pa_meas[i], pb_meas[i]
+        seeded[i] = True
+    return peak
+
+
+class ChamberPrediction:
+    """Every leg's chambers predicted from one LEG_PRESSURE sample to the next. `start()` when
+    the valves go ACTIVE, `update(...)` every cycle after; `legs_faulty`, `worst_leg` (-1:
+    none), `ratio` (at the leg's sample) and `peak` (the cycle's largest) as for the others.
+    A leg is faulty after `persistence` samples beyond in a row."""
+
+    def __init__(self, n_legs: int, hp: np.ndarray, supply_pa: float, period_s: float, encoder_m: float,
+                 flow_spread: float, leakage_spread: float, stiffness_spread: float, floor_pa: float,
+                 persistence: int, active_state: int):
+        self.supply_pa, self.period_s, self.encoder_m = supply_pa, period_s, encoder_m
+        self.active_state = active_state
+        self.floor_pa, self.persistence = floor_pa, persistence
+        self.models = np.tile(hp, (PRED_STIFFNESS + 1, 1))
+        self.models[PRED_FLOW_LOW, hy.HP_KV] *= 1.0 - flow_spread
+        self.models[PRED_FLOW_HIGH, hy.HP_KV] *= 1.0 + flow_spread
+        self.models[PRED_LEAKAGE, [hy.HP_LEAK, hy.HP_SEAL_LEAK]] *= 1.0 + leakage_spread
+        self.models[PRED_STIFFNESS, [hy.HP_BETA_OIL, hy.HP_BETA_WALL]] *= 1.0 - stiffness_spread
+        self.state = np.zeros((PRED_STIFFNESS + 1, n_legs, hy.S_SIZE))
+        self.y_prev = np.zeros(n_legs)
+        self.seeded = np.zeros(n_legs, dtype=np.bool_)
+        self.ratio = np.zeros(n_legs)
+        self.supply_like = np.zeros(n_legs, dtype=np.bool_)
+        self.above = np.zeros(n_legs, dtype=np.int64)
+        self.legs_faulty, self.worst_leg, self.peak = 0, -1, 0.0
+
+    def start(self, position_m: np.ndarray) -> None:
+        self.state[:, :, hy.S_SPOOL] = 0.0
+        self.y_prev[:] = position_m
+        self.seeded[:] = False
+        self.above[:] = 0
+        self.legs_faulty, self.worst_leg = 0, -1
+
+    def update(self, spool_applied, fresh, position_m, valve_state, pressure_fresh, pa_pa, pb_pa) -> int:
+        """`spool_applied` as for `ActuatorResiduals.update`. Returns the legs faulty."""
+        self.peak = pressure_prediction_step(self.models, self.supply_pa, self.period_s, spool_applied, fresh,
+                                             position_m, valve_state, self.active_state, pressure_fresh, pa_pa, pb_pa,
+                                             self.floor_pa, self.encoder_m, self.state, self.y_prev, self.seeded,
+                                             self.ratio, self.supply_like)
+        self.legs_faulty, self.worst_leg = sample_verdict(self.ratio, self.supply_like, pressure_fresh,
+                                                          self.persistence, self.above)
+        return self.legs_faulty
+
+
+@njit(cache=True)
+def sample_verdict(ratio, supply_like, sampled, persistence, above):
+    """Persistence per leg over its samples; returns (legs faulty, the worst of them whose
+    last sample was the leg's own kind, or -1: legs of the supply's kind count only toward
+    the supply)."""
+    persisted, worst, worst_ratio = 0, -1, -1.0
+    for i in range(ratio.shape[0]):
+        if sampled[i]:
+            above[i] = above[i] + 1 if ratio[i] > 1.0 else 0
+        if above[i] >= persistence:
+            persisted += 1
+            if not supply_like[i] and ratio[i] > worst_ratio:
+                worst, worst_ratio = i, ratio[i]
+    return persisted, worst

@@ -47,7 +47,7 @@ EMCY_OF_FAULT = {Fault.SENSOR_TIMEOUT: EmcyCode.RPDO_TIMEOUT, Fault.E2E_ERROR: E
                  Fault.MOTION_PLAUSIBILITY: EmcyCode.CONTROL_DEVIATION,
                  Fault.ATTITUDE_MISMATCH: EmcyCode.CONTROL_DEVIATION,
                  Fault.ACTUATOR_RESIDUAL: EmcyCode.CONTROL_DEVIATION, Fault.LOAD_CELL: EmcyCode.GENERIC,
-                 Fault.SPOOL_MISMATCH: EmcyCode.CONTROL_DEVIATION}
+                 Fault.SPOOL_MISMATCH: EmcyCode.CONTROL_DEVIATION, Fault.CHAMBER_PRESSURE: EmcyCode.CONTROL_DEVIATION}
 
 
 def emergency_code(fault: Fault) -> EmcyCode:

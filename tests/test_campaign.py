@@ -152,6 +152,19 @@ def test_a_supply_in_the_grid_is_the_controllers_model_supply_too(tmp_path):
     assert told.controller_sections(told.runs()[0].params)["hydraulic_model"]["supply_pressure_bar"] == 25.0
 
 
+def test_how_well_the_plant_is_known_is_the_monitors_too(tmp_path):
+    """A flow gain drawn wider than the monitors' spread, and the sensors' noise, are
+    declared to the controller's residuals; a narrower draw leaves Table A.3's spread."""
+    wide = load_campaign(_spec(tmp_path, GOOD + "noise = [2.0]\n[montecarlo]\ndraws = 1\nseed = 1\n"
+                                             "[montecarlo.scale]\nflow_gain = 0.2\n"))
+    residuals = wide.controller_sections(wide.runs()[0].params)["residuals"]
+    assert residuals == {"flow_spread_pct": pytest.approx(20.0), "pressure_noise_bar": pytest.approx(0.04),
+                         "load_cell_noise_n": pytest.approx(0.6)}
+    narrow = load_campaign(_spec(tmp_path, GOOD + "[montecarlo]\ndraws = 1\nseed = 1\n"
+                                               "[montecarlo.scale]\nflow_gain = 0.05\n"))
+    assert "residuals" not in narrow.controller_sections(narrow.runs()[0].params)
+
+
 def _table(out: Path) -> list[dict]:
     rows = pq.read_table(out / "results.parquet").to_pylist()
     assert pcsv.read_csv(out / "results.csv").num_rows == len(rows)

@@ -25,7 +25,7 @@ FALSE_ALARM_MARGIN = 1.5        # the actuators' residuals stay below 1 / 1.5 of
 def assert_false_alarm_margin(doc: dict) -> None:
     """Every controller of a no-fault run kept its residuals and its supply samples below
     1 / FALSE_ALARM_MARGIN of their thresholds (its summary's `residual_peak`, `supply_peak`,
-    `spool_peak`, `attitude_peak`)."""
+    `spool_peak`, `attitude_peak`, `pressure_peak`)."""
     peaks = {(name, key): child["summary"][key] for name, child in doc["children"].items()
              if name.startswith("controller") for key in PEAK_KEYS}
     assert peaks and all(p * FALSE_ALARM_MARGIN <= 1.0 for p in peaks.values()), peaks

@@ -12,7 +12,7 @@ import pytest
 from firmware_py.config import load_config
 from firmware_py.control import CONTROLLER_NAMES
 from firmware_py.controller import Controller
-from firmware_py.residuals import SpoolResidual, breakaway_force_n, lag_uncertainty
+from firmware_py.residuals import PRESSURE_SIGMAS, SpoolResidual, breakaway_force_n, lag_uncertainty, sample_floor_pa
 from physics import hydraulics as hy
 from plant_emulator.params import load_config as load_emulator_config
 from plant_emulator.rigs import HexapodRig
@@ -56,7 +56,7 @@ def run_move(fault: str | None, cycles: int = 700, residuals: bool = True, super
                                      meas.pb_pa)
             supply = rig.supply_pressure_pa + 2e3 * sample_noise.standard_normal(6)
             meas.ps_pa[:] = np.where(meas.pressure_fresh, supply, meas.ps_pa)
-        meas.valve_state[:] = ValveState.ACTIVE if applied.any() or ctl.state in (State.READY,) else ValveState.HOLD
+        meas.valve_state[:] = np.where(rig.ports_open > 0, ValveState.ACTIVE, ValveState.HOLD)   # as the valves report
         ctl.update(meas, cmd)
         if forced_hold and forced_hold.get("on"):      # the loop's shutdown overrides the commands
             cmd.hold_all()
@@ -190,9 +190,32 @@ def test_chamber_pressure_samples_keep_the_margin_and_the_detection():
     25 cycles."""
     quiet, detected, ctl, _ = run_move(None, pressures=True)
     assert quiet < 1.0 / 1.5 and detected is None
+    assert 0.0 < ctl.pressure_peak < 1.0 / 1.5              # the chambers' sample-to-sample prediction
     _, detected, ctl, _ = run_move("seized", pressures=True)
     assert detected is not None and detected <= DETECT_WITHIN
     assert ctl.sup.fault_code is Fault.ACTUATOR_RESIDUAL and ctl.sup.fault_leg == 1
+
+
+@pytest.mark.parametrize("cycles_after_sample", [0, 13])
+def test_a_leaking_seal_is_named_at_the_legs_next_pressure_sample(cycles_after_sample):
+    """10x the calibrated leakage across leg 1's piston pulls p_A and p_B together: the
+    chambers' prediction from the last LEG_PRESSURE sample misses at the next one. Onset right
+    after leg 1's sample is the longest wait (16 cycles to the next)."""
+    onset = []
+
+    def leak(k, ctl, rig):
+        if not onset and k >= FAULT_AT and ctl.cycles % 16 == (PRESSURE_PHASES[0] + cycles_after_sample) % 16:
+            rig.set_seal_leak(0, 10.0)
+            onset.append(k)
+
+    _, detected, ctl, _ = run_move(None, pressures=True, hook=leak)
+    assert onset and ctl.sup.fault_code is Fault.CHAMBER_PRESSURE and ctl.sup.fault_leg == 1
+    assert detected + FAULT_AT - onset[0] <= DETECT_WITHIN, (detected, onset)
+
+
+def test_the_prediction_floor_is_two_samples_noise_and_the_wire_step():
+    assert sample_floor_pa(2e3, 1e3) == pytest.approx(PRESSURE_SIGMAS * math.sqrt(2.0) * 2e3 + 1e3)
+    assert PRESSURE_SIGMAS == 6.0
 
 
 def test_the_supply_band_is_the_flow_gains_spread_through_the_orifice_law():

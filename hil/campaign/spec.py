@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from firmware_py.config import load_config as controller_config_load
+from physics.constants import BAR
 from plant_emulator.params import load_raw as emulator_raw_load
 from protocol.errors import UserInputError
 from protocol.tomlconfig import read_toml
@@ -130,11 +131,27 @@ class Campaign:
     def controller_sections(self, params: dict) -> dict:
         """The run's controller config sections: the campaign's, then its grid's keys; a
         `supply_bar` or `payload_kg` is the controller's too unless one of those sets it (as a
-        rig's operator sets `supply_pressure_bar` to the power unit's and declares the payload)."""
+        rig's operator sets `supply_pressure_bar` to the power unit's and declares the payload).
+        So are how well the plant is known, for the fault monitors' thresholds: a flow gain,
+        leakage or stiffness drawn wider than its `[residuals]` spread, and the sensors' noise
+        x `noise`."""
         sections = _with_keys(self.controller_config, params, "controller_config.")
         for name, (section, key) in TOLD.items():
             if name in params and key not in sections.get(section, {}):
                 sections.setdefault(section, {})[key] = float(params[name])
+        known = controller_config_load()
+        told = {}
+        for name, key, spread in (("flow_gain", "flow_spread_pct", known.residual_flow_spread),
+                                  ("leakage", "leakage_spread_pct", known.residual_leakage_spread),
+                                  ("stiffness", "stiffness_spread_pct", known.residual_stiffness_spread)):
+            if self.spreads.get(name, 0.0) > spread:
+                told[key] = 100.0 * self.spreads[name]
+        if "noise" in params:
+            told["pressure_noise_bar"] = known.pressure_noise_pa / BAR * float(params["noise"])
+            told["load_cell_noise_n"] = known.load_cell_noise_n * float(params["noise"])
+        residuals = sections.setdefault("residuals", {}) if told else {}
+        for key, value in told.items():
+            residuals.setdefault(key, round(value, 9))
         return sections
 
     def emulator_sections(self, params: dict, nominal: dict) -> dict:

@@ -48,8 +48,8 @@ def run_matrix(out: Path, short: bool, bus: str | None = None, start_timeout_s: 
 
 def controllers_peak(doc: dict, key: str) -> float | None:
     """The controllers' largest `key` (`residual_peak`: residual / threshold before their first
-    fault, the false-alarm margin's inverse; `supply_peak`, `spool_peak`, `attitude_peak` the
-    same for the supply samples, the spools and the IMU),
+    fault, the false-alarm margin's inverse; `supply_peak`, `spool_peak`, `attitude_peak`,
+    `pressure_peak` the same for the supply samples, the spools, the IMU and the chambers),
     from their summaries; None when none reported it."""
     peaks = [child.get("summary", {}).get(key) for name, child in doc.get("children", {}).items()
              if name.startswith("controller")]
@@ -67,8 +67,8 @@ def format_matrix(doc: dict) -> str:
     if noted:     # spoiled attempts and repeated recoveries (machine stalls), in the open
         lines += ["", "Notes:"] + [f"- {r['key']} ({r['rig']}): " + " | ".join(r["detail"]["notes"]) for r in noted]
     lines += ["", "| session | passed | wall s | E2E errors | residual / threshold before the first fault "
-                  "| supply, the same | spool, the same | attitude, the same | failure |",
-              "|---|---|---|---|---|---|---|---|---|"]
+                  "| supply, the same | spool, the same | attitude, the same | chamber pressures, the same | failure |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
     for s in doc["sessions"]:
         peaks = " | ".join(str(s.get(key)) for key in PEAK_KEYS)
         lines.append(f"| {s['session']} | {s['passed']} | {s['wall_time_s']} | {s['e2e_errors']} | {peaks} | "
