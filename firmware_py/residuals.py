@@ -283,28 +283,34 @@ def predict_chambers(row, hp, spool, y_start, dy, ps, period_s, steps):
 
 
 @njit(cache=True)
-def pressure_prediction_step(models, ps, period_s, spool_applied, fresh, position, valve_state,
+def pressure_prediction_step(models, ps, period_s, spool_applied, fresh, position, velocity, valve_state,
                              active_state, pressure_fresh, pa_meas, pb_meas, floor_pa, encoder_m, state, y_prev,
                              seeded, ratio, supply_like):
     """One cycle of every leg's sample-to-sample chamber prediction: `models` the parameter
     vectors (PRED_* rows), `state[m, i]` leg i under model m; the prediction in
     PRED_FINE_STEPS per cycle, the parameters' spreads as differences of models all in
-    PRED_COARSE_STEPS (their integration error cancels in the difference). At a leg's
-    LEG_PRESSURE sample writes `ratio[i]` (largest |d_X| / threshold; 0 between samples) and
-    `supply_like[i]` (both chambers beyond on one side), and starts again from the sample. A
-    leg without a fresh frame, or whose valve is not ACTIVE (its load-holding valves shut), is
-    not judged at its next sample. Returns the largest ratio of the cycle."""
+    PRED_COARSE_STEPS (their integration error cancels in the difference); `velocity` the
+    estimated piston velocities. At a leg's LEG_PRESSURE sample writes `ratio[i]` (largest
+    |d_X| / threshold; 0 between samples) and `supply_like[i]` (both chambers beyond on one
+    side), and starts again from the sample. A leg without a fresh frame, or whose valve is
+    not ACTIVE (its load-holding valves shut), is not judged at its next sample. Returns the
+    largest ratio of the cycle."""
     n_models = models.shape[0]
     peak = 0.0
     for i in range(position.shape[0]):
         ratio[i] = 0.0
-        dy = position[i] - y_prev[i] if fresh[i] else 0.0
+        # the piston at the estimated velocity, kept within half a count of the reading (where the
+        # true position is): a reading dithering between two counts sweeps nothing, and a steady
+        # motion sweeps between the count's steps as the piston does
+        dy = 0.0
+        if fresh[i]:
+            half = 0.5 * encoder_m
+            dy = min(max(y_prev[i] + velocity[i] * period_s, position[i] - half), position[i] + half) - y_prev[i]
         predict_chambers(state[PRED_NOMINAL, i], models[PRED_NOMINAL], spool_applied[i], y_prev[i], dy, ps, period_s,
                          PRED_FINE_STEPS)
         for m in range(PRED_REFERENCE, n_models):
             predict_chambers(state[m, i], models[m], spool_applied[i], y_prev[i], dy, ps, period_s, PRED_COARSE_STEPS)
-        if fresh[i]:
-            y_prev[i] = position[i]
+        y_prev[i] += dy
         if not (fresh[i] and valve_state[i] == active_state):
             seeded[i] = False
             continue
@@ -371,12 +377,14 @@ class ChamberPrediction:
         self.above[:] = 0
         self.legs_faulty, self.worst_leg = 0, -1
 
-    def update(self, spool_applied, fresh, position_m, valve_state, pressure_fresh, pa_pa, pb_pa) -> int:
-        """`spool_applied` as for `ActuatorResiduals.update`. Returns the legs faulty."""
+    def update(self, spool_applied, fresh, position_m, velocity_m_s, valve_state, pressure_fresh, pa_pa,
+               pb_pa) -> int:
+        """`spool_applied` as for `ActuatorResiduals.update`, `velocity_m_s` the estimated
+        piston velocities. Returns the legs faulty."""
         self.peak = pressure_prediction_step(self.models, self.supply_pa, self.period_s, spool_applied, fresh,
-                                             position_m, valve_state, self.active_state, pressure_fresh, pa_pa, pb_pa,
-                                             self.floor_pa, self.encoder_m, self.state, self.y_prev, self.seeded,
-                                             self.ratio, self.supply_like)
+                                             position_m, velocity_m_s, valve_state, self.active_state,
+                                             pressure_fresh, pa_pa, pb_pa, self.floor_pa, self.encoder_m,
+                                             self.state, self.y_prev, self.seeded, self.ratio, self.supply_like)
         self.legs_faulty, self.worst_leg = sample_verdict(self.ratio, self.supply_like, pressure_fresh,
                                                           self.persistence, self.above)
         return self.legs_faulty
