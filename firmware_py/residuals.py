@@ -265,6 +265,9 @@ PRED_NOMINAL, PRED_REFERENCE, PRED_FLOW_LOW, PRED_FLOW_HIGH, PRED_LEAKAGE, PRED_
 # ringing at rest (36 Hz, spool +-17 to +-75 %) gave ratios 1.38 with 2 steps, 0.79 with 8
 PRED_FINE_STEPS = 16
 PRED_COARSE_STEPS = 4       # constants, not arguments: called with 20, numba's dispatcher kept ~200 B a call
+# a prediction spans at least the hexapod's LEG_PRESSURE period: where samples come every cycle
+# (the test bench) a one-cycle prediction is all quantisation, up to the count's whole term
+PRED_INTERVAL_CYCLES = 16
 
 
 def sample_floor_pa(noise_pa: float, wire_step_pa: float) -> float:
@@ -283,40 +286,42 @@ def predict_chambers(row, hp, spool, y_start, dy, ps, period_s, steps):
 
 
 @njit(cache=True)
-def pressure_prediction_step(models, ps, period_s, spool_applied, fresh, position, velocity, valve_state,
+def pressure_prediction_step(models, ps, period_s, spool_applied, fresh, position, valve_state,
                              active_state, pressure_fresh, pa_meas, pb_meas, floor_pa, encoder_m, state, y_prev,
-                             seeded, ratio, supply_like):
+                             age, ratio, supply_like):
     """One cycle of every leg's sample-to-sample chamber prediction: `models` the parameter
     vectors (PRED_* rows), `state[m, i]` leg i under model m; the prediction in
     PRED_FINE_STEPS per cycle, the parameters' spreads as differences of models all in
-    PRED_COARSE_STEPS (their integration error cancels in the difference); `velocity` the
-    estimated piston velocities. At a leg's LEG_PRESSURE sample writes `ratio[i]` (largest
+    PRED_COARSE_STEPS (their integration error cancels in the difference). At a leg's
+    LEG_PRESSURE sample writes `ratio[i]` (largest
     |d_X| / threshold; 0 between samples) and `supply_like[i]` (both chambers beyond on one
-    side), and starts again from the sample. A leg without a fresh frame, or whose valve is
-    not ACTIVE (its load-holding valves shut), is not judged at its next sample. Returns the
-    largest ratio of the cycle."""
+    side), and starts again from the sample; `age[i]` counts the cycles since (-1: not
+    started), and samples before PRED_INTERVAL_CYCLES are passed over. A leg without a fresh
+    frame, or whose valve is not ACTIVE (its load-holding valves shut), starts again from its
+    next sample. Returns the largest ratio of the cycle."""
     n_models = models.shape[0]
     peak = 0.0
     for i in range(position.shape[0]):
         ratio[i] = 0.0
-        # the piston at the estimated velocity, kept within half a count of the reading (where the
-        # true position is): a reading dithering between two counts sweeps nothing, and a steady
-        # motion sweeps between the count's steps as the piston does
+        # the piston moves only as far as the reading demands: the true position is within half
+        # a count of it, so a reading dithering between two counts sweeps nothing
         dy = 0.0
         if fresh[i]:
             half = 0.5 * encoder_m
-            dy = min(max(y_prev[i] + velocity[i] * period_s, position[i] - half), position[i] + half) - y_prev[i]
+            dy = min(max(y_prev[i], position[i] - half), position[i] + half) - y_prev[i]
         predict_chambers(state[PRED_NOMINAL, i], models[PRED_NOMINAL], spool_applied[i], y_prev[i], dy, ps, period_s,
                          PRED_FINE_STEPS)
         for m in range(PRED_REFERENCE, n_models):
             predict_chambers(state[m, i], models[m], spool_applied[i], y_prev[i], dy, ps, period_s, PRED_COARSE_STEPS)
         y_prev[i] += dy
         if not (fresh[i] and valve_state[i] == active_state):
-            seeded[i] = False
+            age[i] = -1
             continue
-        if not pressure_fresh[i]:
+        if age[i] >= 0:
+            age[i] += 1
+        if not pressure_fresh[i] or 0 <= age[i] < PRED_INTERVAL_CYCLES:
             continue
-        if seeded[i]:
+        if age[i] >= 0:
             hp = models[0]
             va, vb = hy.chamber_volumes(position[i], hp)
             swept = encoder_m * hp[hy.HP_AREA_A]          # a count: the reading's error swings by q at a step
@@ -341,7 +346,7 @@ def pressure_prediction_step(models, ps, period_s, spool_applied, fresh, positio
             peak = max(peak, worst)
         for m in range(n_models):
             state[m, i, hy.S_PA], state[m, i, hy.S_PB] = pa_meas[i], pb_meas[i]
-        seeded[i] = True
+        age[i] = 0
     return peak
 
 
@@ -364,7 +369,7 @@ class ChamberPrediction:
         self.models[PRED_STIFFNESS, [hy.HP_BETA_OIL, hy.HP_BETA_WALL]] *= 1.0 - stiffness_spread
         self.state = np.zeros((PRED_STIFFNESS + 1, n_legs, hy.S_SIZE))
         self.y_prev = np.zeros(n_legs)
-        self.seeded = np.zeros(n_legs, dtype=np.bool_)
+        self.age = np.full(n_legs, -1, dtype=np.int64)     # cycles since the prediction's sample
         self.ratio = np.zeros(n_legs)
         self.supply_like = np.zeros(n_legs, dtype=np.bool_)
         self.above = np.zeros(n_legs, dtype=np.int64)
@@ -373,18 +378,16 @@ class ChamberPrediction:
     def start(self, position_m: np.ndarray) -> None:
         self.state[:, :, hy.S_SPOOL] = 0.0
         self.y_prev[:] = position_m
-        self.seeded[:] = False
+        self.age[:] = -1
         self.above[:] = 0
         self.legs_faulty, self.worst_leg = 0, -1
 
-    def update(self, spool_applied, fresh, position_m, velocity_m_s, valve_state, pressure_fresh, pa_pa,
-               pb_pa) -> int:
-        """`spool_applied` as for `ActuatorResiduals.update`, `velocity_m_s` the estimated
-        piston velocities. Returns the legs faulty."""
+    def update(self, spool_applied, fresh, position_m, valve_state, pressure_fresh, pa_pa, pb_pa) -> int:
+        """`spool_applied` as for `ActuatorResiduals.update`. Returns the legs faulty."""
         self.peak = pressure_prediction_step(self.models, self.supply_pa, self.period_s, spool_applied, fresh,
-                                             position_m, velocity_m_s, valve_state, self.active_state,
+                                             position_m, valve_state, self.active_state,
                                              pressure_fresh, pa_pa, pb_pa, self.floor_pa, self.encoder_m,
-                                             self.state, self.y_prev, self.seeded, self.ratio, self.supply_like)
+                                             self.state, self.y_prev, self.age, self.ratio, self.supply_like)
         self.legs_faulty, self.worst_leg = sample_verdict(self.ratio, self.supply_like, pressure_fresh,
                                                           self.persistence, self.above)
         return self.legs_faulty
