@@ -261,10 +261,11 @@ PRESSURE_SIGMAS = 6.0      # a pair of samples' noise beyond this many of its si
 # the chamber prediction's models: the prediction, and in coarse steps the nominal reference and
 # one model per uncertain parameter (flow gain both ways, leakage, stiffness)
 PRED_NOMINAL, PRED_REFERENCE, PRED_FLOW_LOW, PRED_FLOW_HIGH, PRED_LEAKAGE, PRED_STIFFNESS = range(6)
-# 16 steps of 125 us resolve the chambers with the spool open: computed torque's force loop
-# ringing at rest (36 Hz, spool +-17 to +-75 %) gave ratios 1.38 with 2 steps, 0.79 with 8
+# 16 steps of 125 us resolve the chambers with the spool open: under computed torque's force
+# loop ringing at rest (36 Hz, spool +-17 to +-75 %) 8 steps reached 0.60 of the threshold, 16
+# 0.42 (log replays); the spreads are differences of models stepped alike, 2 steps suffice
 PRED_FINE_STEPS = 16
-PRED_COARSE_STEPS = 4       # constants, not arguments: called with 20, numba's dispatcher kept ~200 B a call
+PRED_COARSE_STEPS = 2       # constants, not arguments: called with 20, numba's dispatcher kept ~200 B a call
 # a prediction spans at least the hexapod's LEG_PRESSURE period: where samples come every cycle
 # (the test bench) a one-cycle prediction is all quantisation, up to the count's whole term
 PRED_INTERVAL_CYCLES = 16
