@@ -69,7 +69,7 @@ def test_a_bad_spec_is_one_line_and_exit_2_before_anything_runs(text, culprit, t
 
 def test_the_shipped_specs_check_and_count_their_runs(capsys):
     assert main(["campaign", "check", str(SMOKE)]) == 0
-    assert "4 runs" in capsys.readouterr().out
+    assert "2 runs" in capsys.readouterr().out
     robustness = load_campaign(ROBUSTNESS)
     runs = robustness.runs()
     assert len(runs) == 11 * 3 * 2 * 2                       # Table A.3's 33 points x 2 controllers x 2 draws
@@ -177,20 +177,20 @@ def test_the_smoke_campaign_on_a_local_cluster_of_two_workers_and_resume(tmp_pat
     proc = hydrapod("campaign", "run", SMOKE, "--workers", "2", "--out", out, "--json")
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
     summary = json.loads(proc.stdout)
-    assert summary["runs"] == summary["ok"] == 4 and summary["workers"] == 2
+    assert summary["runs"] == summary["ok"] == 2 and summary["workers"] == 2
     rows = _table(out)
-    assert len(rows) == 4 and all(r["status"] == "ok" and r["passed"] for r in rows)
+    assert len(rows) == 2 and all(r["status"] == "ok" and r["passed"] for r in rows)
     assert {r["param.controller"] for r in rows} == {"pi", "adaptive"}
     assert all(r["metric.overshoot_pct_max"] > 0 and Path(r["out_dir"], "run", "metrics.json").is_file()
                for r in rows)
     # each run on its own plant: the emulator config it was given
-    assert len({Path(r["out_dir"], "emulator-overrides.toml").read_text() for r in rows}) == 4
+    assert len({Path(r["out_dir"], "emulator-overrides.toml").read_text() for r in rows}) == 2
     report = (out / "report.md").read_text()
     assert "the linear loop on Table A.3's plants" in report and list(out.glob("dist_*.png"))
     again = hydrapod("campaign", "run", SMOKE, "--out", out, "--resume", "--json")
     assert again.returncode == 0, again.stderr[-2000:]
     resumed = json.loads(again.stdout)
-    assert resumed["ran"] == 0 and resumed["skipped"] == 4 and len(_table(out)) == 4
+    assert resumed["ran"] == 0 and resumed["skipped"] == 2 and len(_table(out)) == 2
     refused = hydrapod("campaign", "run", SMOKE, "--out", out)
     assert refused.returncode == 2 and "--resume" in refused.stderr
 
@@ -227,7 +227,7 @@ def test_the_smoke_campaign_on_a_dask_scheduler_survives_a_killed_worker(tmp_pat
         stdout, stderr = campaign.communicate(timeout=600)
         assert campaign.returncode == 0, stdout[-2000:] + stderr[-3000:]
         rows = _table(out)
-        assert len(rows) == 4 and all(r["status"] == "ok" for r in rows), [(r["status"], r["reason"]) for r in rows]
+        assert len(rows) == 2 and all(r["status"] == "ok" for r in rows), [(r["status"], r["reason"]) for r in rows]
         assert any(r["attempt"] >= 1 for r in rows)          # the killed worker's run ran again
     finally:
         for proc in procs:

@@ -1,4 +1,4 @@
-"""The controller's cycle allocates nothing: 5,000 steady cycles per controller and rig
+"""The controller's cycle allocates nothing: 2,000 steady cycles per controller and rig
 through the real loop (SYNC, collect, read, update, write) with the bus replaced by an
 in-process fake; zero growth of NumPy-domain traces and of traced memory."""
 
@@ -11,7 +11,8 @@ from protocol.enums import State
 from tests.alloc_probe import allocations
 from tests.rig_loop import make_loop
 
-CYCLES = 5_000                 # a leak of 2 bytes per cycle would exceed the 8 kB bound
+CYCLES = 2_000                 # a leak of 4 bytes per cycle would reach the 8 kB bound (one
+                               # Python object a cycle is 16 bytes or more)
 
 
 def moving_trajectory(ctl):

@@ -24,9 +24,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
-# one controller, one load, one position: the bus path is what is under test, and emulated, it
-# is ~20x slower
-SCENARIO = ["hil", "run", "sha-step", "--short", "--controllers", "pi", "--loads", "0", "--positions", "50",
+# one controller, one load, one position 10 mm from the start (the shortest move there): the bus
+# path is what is under test, and emulated, it is ~20x slower
+SCENARIO = ["hil", "run", "sha-step", "--short", "--controllers", "pi", "--loads", "0", "--positions", "140",
             "--no-plots"]
 VM_TIMEOUT_S = 1500
 
