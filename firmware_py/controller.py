@@ -174,8 +174,8 @@ class Controller:
         self.supply.update(meas.ps_pa, meas.pressure_fresh)
         self.spool_check.update(self.spool_applied, self.spool_late, meas.spool, meas.fresh, meas.valve_state)
         self.chambers.start(meas.position_m)
-        self.chambers.update(self.spool_applied, meas.fresh, meas.position_m, meas.valve_state, meas.pressure_fresh,
-                             meas.pa_pa, meas.pb_pa)
+        self.chambers.update(self.spool_applied, self.spool_late, meas.fresh, meas.position_m, meas.valve_state,
+                             meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
         valve_commands(VALVES_HOLD, self.joint.u_v, 1.0, False, -1, cmd.enable, cmd.hold, cmd.active, cmd.reset,
                        cmd.spool)
         ref.play(through_points(np.array([self.home_strokes, self.home_strokes + 1e-3]), 0.1, 0.2), [0], 0)
@@ -438,8 +438,8 @@ class Controller:
                             self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
         spools = self.spool_check.update(self.spool_applied, self.spool_late, meas.spool, meas.fresh,
                                          meas.valve_state) if self.cfg.spool_check else 0
-        chambers = self.chambers.update(self.spool_applied, meas.fresh, meas.position_m, meas.valve_state,
-                                        meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
+        chambers = self.chambers.update(self.spool_applied, self.spool_late, meas.fresh, meas.position_m,
+                                        meas.valve_state, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
         slot = self.cycles % PEAK_DELAY
         if self.sup.faults == 0:
             self.residual_peak = max(self.residual_peak, float(self._peaks[slot, 0]))

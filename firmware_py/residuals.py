@@ -36,10 +36,12 @@ flow it causes.
 Per leg, its chambers predicted from one LEG_PRESSURE sample to the next (every 16th cycle):
 the same continuity laws from the sampled p_A, p_B, driven by the applied spool and the
 encoder's swept volume only (no force enters them, so the seals' friction does not either),
-run nominal, and with each uncertain parameter at the edge of its spread over Table A.3
-(the flow gain k01 both ways, the leakage as b1's, the stiffness as b0's):
+run nominal, with each uncertain parameter at the edge of its spread over Table A.3 (the
+flow gain k01 both ways, the leakage as b1's, the stiffness as b0's), and nominal on the
+command before the applied one (which command the valve applied is known only to a cycle):
     d_X        = p_X,sample - p_X,predicted                              X = A, B
-    threshold  = sum over the parameters of |p_X,j - p_X,nominal| + beta_X / V_X A_X q + floor
+    threshold  = sum over the parameters j of |p_X,j - p_X,nominal| + beta_X / V_X A_X q + floor
+    ratio      = the smaller over the two commands of max_X |d_X| / threshold
 with A_X the area on chamber X (A, alpha A), q the encoder's count and `floor` the two
 samples' noise and wire steps: a count of swept volume through the chamber's stiffness, as the
 reading's error swings by q when the count steps. What it sees: flow between the chambers the
@@ -258,9 +260,11 @@ class SpoolResidual:
 
 
 PRESSURE_SIGMAS = 6.0      # a pair of samples' noise beyond this many of its sigmas: p < 2e-9
-# the chamber prediction's models: the prediction, and in coarse steps the nominal reference and
-# one model per uncertain parameter (flow gain both ways, leakage, stiffness)
-PRED_NOMINAL, PRED_REFERENCE, PRED_FLOW_LOW, PRED_FLOW_HIGH, PRED_LEAKAGE, PRED_STIFFNESS = range(6)
+# the chamber prediction's models: the prediction, and in coarse steps the nominal reference,
+# one model per uncertain parameter (flow gain both ways, leakage, stiffness) and the nominal
+# driven by the command before (a command that reached its valve after the SYNC, or sensor
+# frames a cycle late: which one was applied over a period is known only to a cycle)
+PRED_NOMINAL, PRED_REFERENCE, PRED_FLOW_LOW, PRED_FLOW_HIGH, PRED_LEAKAGE, PRED_STIFFNESS, PRED_LATE = range(7)
 # 16 steps of 125 us resolve the chambers with the spool open: under computed torque's force
 # loop ringing at rest (36 Hz, spool +-17 to +-75 %) 8 steps reached 0.60 of the threshold, 16
 # 0.42 (log replays); the spreads are differences of models stepped alike, 2 steps suffice
@@ -287,13 +291,14 @@ def predict_chambers(row, hp, spool, y_start, dy, ps, period_s, steps):
 
 
 @njit(cache=True)
-def pressure_prediction_step(models, ps, period_s, spool_applied, fresh, position, valve_state,
+def pressure_prediction_step(models, ps, period_s, spool_applied, spool_late, fresh, position, valve_state,
                              active_state, pressure_fresh, pa_meas, pb_meas, floor_pa, encoder_m, state, y_prev,
                              age, ratio, supply_like):
     """One cycle of every leg's sample-to-sample chamber prediction: `models` the parameter
     vectors (PRED_* rows), `state[m, i]` leg i under model m; the prediction in
     PRED_FINE_STEPS per cycle, the parameters' spreads as differences of models all in
-    PRED_COARSE_STEPS (their integration error cancels in the difference). At a leg's
+    PRED_COARSE_STEPS (their integration error cancels in the difference); PRED_LATE is
+    driven by `spool_late`, the command before `spool_applied`. At a leg's
     LEG_PRESSURE sample writes `ratio[i]` (largest
     |d_X| / threshold; 0 between samples) and `supply_like[i]` (both chambers beyond on one
     side), and starts again from the sample; `age[i]` counts the cycles since (-1: not
@@ -313,7 +318,8 @@ def pressure_prediction_step(models, ps, period_s, spool_applied, fresh, positio
         predict_chambers(state[PRED_NOMINAL, i], models[PRED_NOMINAL], spool_applied[i], y_prev[i], dy, ps, period_s,
                          PRED_FINE_STEPS)
         for m in range(PRED_REFERENCE, n_models):
-            predict_chambers(state[m, i], models[m], spool_applied[i], y_prev[i], dy, ps, period_s, PRED_COARSE_STEPS)
+            spool = spool_late[i] if m == PRED_LATE else spool_applied[i]
+            predict_chambers(state[m, i], models[m], spool, y_prev[i], dy, ps, period_s, PRED_COARSE_STEPS)
         y_prev[i] += dy
         if not (fresh[i] and valve_state[i] == active_state):
             age[i] = -1
@@ -326,20 +332,26 @@ def pressure_prediction_step(models, ps, period_s, spool_applied, fresh, positio
             hp = models[0]
             va, vb = hy.chamber_volumes(position[i], hp)
             swept = encoder_m * hp[hy.HP_AREA_A]          # a count: the reading's error swings by q at a step
-            worst, low, high = 0.0, 0, 0
-            for s_col, meas, volume, area_ratio in ((hy.S_PA, pa_meas[i], va, 1.0),
-                                                   (hy.S_PB, pb_meas[i], vb, hp[hy.HP_ALPHA])):
-                predicted = state[PRED_NOMINAL, i, s_col]
-                reference = state[PRED_REFERENCE, i, s_col]
-                spread = (max(abs(state[PRED_FLOW_LOW, i, s_col] - reference),
-                              abs(state[PRED_FLOW_HIGH, i, s_col] - reference))
-                          + abs(state[PRED_LEAKAGE, i, s_col] - reference)
-                          + abs(state[PRED_STIFFNESS, i, s_col] - reference))
-                threshold = spread + hy.bulk_modulus(meas, hp) / volume * area_ratio * swept + floor_pa
-                r = (meas - predicted) / threshold
-                worst = max(worst, abs(r))
-                low += r < -1.0
-                high += r > 1.0
+            # the applied command, then the one before (the late model's difference to the coarse
+            # reference moved onto the fine prediction): the candidate nearer the sample counts
+            worst, low, high = math.inf, 0, 0
+            for late in (0.0, 1.0):
+                worst_c, low_c, high_c = 0.0, 0, 0
+                for s_col, meas, volume, area_ratio in ((hy.S_PA, pa_meas[i], va, 1.0),
+                                                       (hy.S_PB, pb_meas[i], vb, hp[hy.HP_ALPHA])):
+                    reference = state[PRED_REFERENCE, i, s_col]
+                    predicted = state[PRED_NOMINAL, i, s_col] + late * (state[PRED_LATE, i, s_col] - reference)
+                    spread = (max(abs(state[PRED_FLOW_LOW, i, s_col] - reference),
+                                  abs(state[PRED_FLOW_HIGH, i, s_col] - reference))
+                              + abs(state[PRED_LEAKAGE, i, s_col] - reference)
+                              + abs(state[PRED_STIFFNESS, i, s_col] - reference))
+                    threshold = spread + hy.bulk_modulus(meas, hp) / volume * area_ratio * swept + floor_pa
+                    r = (meas - predicted) / threshold
+                    worst_c = max(worst_c, abs(r))
+                    low_c += r < -1.0
+                    high_c += r > 1.0
+                if worst_c < worst:
+                    worst, low, high = worst_c, low_c, high_c
             ratio[i] = worst
             # both chambers beyond on the same side: the valve's inflow changed, the supply's kind;
             # flow from one chamber into the other (a seal) or one transducer is the leg's own
@@ -363,12 +375,12 @@ class ChamberPrediction:
         self.supply_pa, self.period_s, self.encoder_m = supply_pa, period_s, encoder_m
         self.active_state = active_state
         self.floor_pa, self.persistence = floor_pa, persistence
-        self.models = np.tile(hp, (PRED_STIFFNESS + 1, 1))
+        self.models = np.tile(hp, (PRED_LATE + 1, 1))
         self.models[PRED_FLOW_LOW, hy.HP_KV] *= 1.0 - flow_spread
         self.models[PRED_FLOW_HIGH, hy.HP_KV] *= 1.0 + flow_spread
         self.models[PRED_LEAKAGE, [hy.HP_LEAK, hy.HP_SEAL_LEAK]] *= 1.0 + leakage_spread
         self.models[PRED_STIFFNESS, [hy.HP_BETA_OIL, hy.HP_BETA_WALL]] *= 1.0 - stiffness_spread
-        self.state = np.zeros((PRED_STIFFNESS + 1, n_legs, hy.S_SIZE))
+        self.state = np.zeros((PRED_LATE + 1, n_legs, hy.S_SIZE))
         self.y_prev = np.zeros(n_legs)
         self.age = np.full(n_legs, -1, dtype=np.int64)     # cycles since the prediction's sample
         self.ratio = np.zeros(n_legs)
@@ -383,9 +395,10 @@ class ChamberPrediction:
         self.above[:] = 0
         self.legs_faulty, self.worst_leg = 0, -1
 
-    def update(self, spool_applied, fresh, position_m, valve_state, pressure_fresh, pa_pa, pb_pa) -> int:
-        """`spool_applied` as for `ActuatorResiduals.update`. Returns the legs faulty."""
-        self.peak = pressure_prediction_step(self.models, self.supply_pa, self.period_s, spool_applied, fresh,
+    def update(self, spool_applied, spool_late, fresh, position_m, valve_state, pressure_fresh, pa_pa, pb_pa) -> int:
+        """`spool_applied`, `spool_late` as for `SpoolResidual.update`. Returns the legs faulty."""
+        self.peak = pressure_prediction_step(self.models, self.supply_pa, self.period_s, spool_applied, spool_late,
+                                             fresh,
                                              position_m, valve_state, self.active_state,
                                              pressure_fresh, pa_pa, pb_pa, self.floor_pa, self.encoder_m,
                                              self.state, self.y_prev, self.age, self.ratio, self.supply_like)

@@ -12,7 +12,14 @@ import pytest
 from firmware_py.config import load_config
 from firmware_py.control import CONTROLLER_NAMES
 from firmware_py.controller import Controller
-from firmware_py.residuals import PRESSURE_SIGMAS, SpoolResidual, breakaway_force_n, lag_uncertainty, sample_floor_pa
+from firmware_py.residuals import (
+    PRESSURE_SIGMAS,
+    ChamberPrediction,
+    SpoolResidual,
+    breakaway_force_n,
+    lag_uncertainty,
+    sample_floor_pa,
+)
 from physics import hydraulics as hy
 from plant_emulator.params import load_config as load_emulator_config
 from plant_emulator.rigs import HexapodRig
@@ -211,6 +218,50 @@ def test_a_leaking_seal_is_named_at_the_legs_next_pressure_sample(cycles_after_s
     _, detected, ctl, _ = run_move(None, pressures=True, hook=leak)
     assert onset and ctl.sup.fault_code is Fault.CHAMBER_PRESSURE and ctl.sup.fault_leg == 1
     assert detected + FAULT_AT - onset[0] <= DETECT_WITHIN, (detected, onset)
+
+
+def _ringing_leg(plant_lag: int, known_late: bool, amplitude: float, hz: float) -> float:
+    """A leg at rest, its spool swinging as computed torque's force loop rings (40 bar), the
+    emulator's chamber laws in 32 steps a cycle as the plant, which applies each command
+    `plant_lag` cycles after it was computed (1: at the next SYNC, as the controller assumes);
+    LEG_PRESSURE every 16th cycle. The prediction's largest ratio after its first samples."""
+    from physics.constants import BAR
+    from protocol.dbc import signal_scale
+    cfg = load_config(overrides={"hydraulic_model": {"supply_pressure_bar": 40.0}})
+    hp, ps = cfg.hydraulics, cfg.supply_pressure_pa
+    floor = sample_floor_pa(cfg.pressure_noise_pa, signal_scale("LEG_PRESSURE_1", "PA") * BAR)
+    prediction = ChamberPrediction(1, hp, ps, PERIOD_S, cfg.encoder_resolution_m, cfg.residual_flow_spread,
+                                   cfg.residual_leakage_spread, cfg.residual_stiffness_spread, floor, 1,
+                                   int(ValveState.ACTIVE))
+    y = np.array([0.05])
+    plant = np.zeros(hy.S_SIZE)
+    plant[hy.S_Y] = y[0]
+    plant[hy.S_PA], plant[hy.S_PB] = hy.holding_pressures(0.0, ps, hp)
+    prediction.start(y)
+    commands = amplitude * np.sin(2.0 * math.pi * hz * PERIOD_S * np.arange(600))
+    worst = 0.0
+    for k in range(3, 600):
+        for _ in range(32):
+            plant[hy.S_SPOOL] = hy.spool_step(plant[hy.S_SPOOL], commands[k - plant_lag], PERIOD_S / 32, hp)
+            hy.chamber_step(plant, y[0], 0.0, ps, PERIOD_S / 32, hp, 1.0, hp[hy.HP_SEAL_LEAK])
+        late = commands[k - 2] if known_late else commands[k - 1]
+        prediction.update(np.array([commands[k - 1]]), np.array([late]), np.ones(1, dtype=bool), y,
+                          np.array([int(ValveState.ACTIVE)]), np.array([k % 16 == 0]),
+                          plant[hy.S_PA:hy.S_PA + 1].copy(), plant[hy.S_PB:hy.S_PB + 1].copy())
+        if k > 100:
+            worst = max(worst, float(prediction.ratio[0]))
+    return worst
+
+
+@pytest.mark.parametrize("amplitude,hz", [(0.17, 36.0), (0.4, 62.5)])
+def test_a_command_applied_a_cycle_late_is_no_chamber_fault(amplitude, hz):
+    """A command applied a cycle after the controller assumed (it reached the valve after the
+    SYNC, or the sensor frames came a cycle late) while the spool swings: the prediction on
+    that command is far off the samples (a hex-kick run at 40 bar latched CHAMBER_PRESSURE
+    so), the one on the command before matches them."""
+    assert _ringing_leg(1, True, amplitude, hz) < 1.0 / 1.5                 # on time
+    assert _ringing_leg(2, True, amplitude, hz) < 1.0 / 1.5                 # a cycle late, both candidates
+    assert _ringing_leg(2, False, amplitude, hz) > 1.0                      # the applied command alone
 
 
 def test_the_prediction_floor_is_two_samples_noise_and_the_wire_step():
