@@ -298,10 +298,10 @@ def pressure_prediction_step(models, ps, period_s, spool_applied, spool_late, fr
     vectors (PRED_* rows), `state[m, i]` leg i under model m; the prediction in
     PRED_FINE_STEPS per cycle, the parameters' spreads as differences of models all in
     PRED_COARSE_STEPS (their integration error cancels in the difference); PRED_LATE is
-    driven by `spool_late`, the command before `spool_applied`. At a leg's
-    LEG_PRESSURE sample writes `ratio[i]` (largest
-    |d_X| / threshold; 0 between samples) and `supply_like[i]` (both chambers beyond on one
-    side), and starts again from the sample; `age[i]` counts the cycles since (-1: not
+    driven by `spool_late`, the command before `spool_applied`. At a leg's LEG_PRESSURE
+    sample writes `ratio[i]` (largest |d_X| / threshold of the nearer candidate; 0 between
+    samples) and `supply_like[i]` (both chambers beyond on one side), and starts again from
+    the sample; `age[i]` counts the cycles since (-1: not
     started), and samples before PRED_INTERVAL_CYCLES are passed over. A leg without a fresh
     frame, or whose valve is not ACTIVE (its load-holding valves shut), starts again from its
     next sample. Returns the largest ratio of the cycle."""
@@ -332,26 +332,23 @@ def pressure_prediction_step(models, ps, period_s, spool_applied, spool_late, fr
             hp = models[0]
             va, vb = hy.chamber_volumes(position[i], hp)
             swept = encoder_m * hp[hy.HP_AREA_A]          # a count: the reading's error swings by q at a step
-            # the applied command, then the one before (the late model's difference to the coarse
-            # reference moved onto the fine prediction): the candidate nearer the sample counts
-            worst, low, high = math.inf, 0, 0
-            for late in (0.0, 1.0):
-                worst_c, low_c, high_c = 0.0, 0, 0
-                for s_col, meas, volume, area_ratio in ((hy.S_PA, pa_meas[i], va, 1.0),
-                                                       (hy.S_PB, pb_meas[i], vb, hp[hy.HP_ALPHA])):
-                    reference = state[PRED_REFERENCE, i, s_col]
-                    predicted = state[PRED_NOMINAL, i, s_col] + late * (state[PRED_LATE, i, s_col] - reference)
-                    spread = (max(abs(state[PRED_FLOW_LOW, i, s_col] - reference),
-                                  abs(state[PRED_FLOW_HIGH, i, s_col] - reference))
-                              + abs(state[PRED_LEAKAGE, i, s_col] - reference)
-                              + abs(state[PRED_STIFFNESS, i, s_col] - reference))
-                    threshold = spread + hy.bulk_modulus(meas, hp) / volume * area_ratio * swept + floor_pa
-                    r = (meas - predicted) / threshold
-                    worst_c = max(worst_c, abs(r))
-                    low_c += r < -1.0
-                    high_c += r > 1.0
-                if worst_c < worst:
-                    worst, low, high = worst_c, low_c, high_c
+            # two candidates: the applied command (r0) and the one before (r1: the late model's
+            # difference to the coarse reference moved onto the fine prediction); the nearer counts
+            worst0, worst1, low0, high0, low1, high1 = 0.0, 0.0, 0, 0, 0, 0
+            for s_col, meas, volume, area_ratio in ((hy.S_PA, pa_meas[i], va, 1.0),
+                                                   (hy.S_PB, pb_meas[i], vb, hp[hy.HP_ALPHA])):
+                reference = state[PRED_REFERENCE, i, s_col]
+                spread = (max(abs(state[PRED_FLOW_LOW, i, s_col] - reference),
+                              abs(state[PRED_FLOW_HIGH, i, s_col] - reference))
+                          + abs(state[PRED_LEAKAGE, i, s_col] - reference)
+                          + abs(state[PRED_STIFFNESS, i, s_col] - reference))
+                threshold = spread + hy.bulk_modulus(meas, hp) / volume * area_ratio * swept + floor_pa
+                r0 = (meas - state[PRED_NOMINAL, i, s_col]) / threshold
+                r1 = r0 - (state[PRED_LATE, i, s_col] - reference) / threshold
+                worst0, worst1 = max(worst0, abs(r0)), max(worst1, abs(r1))
+                low0, high0 = low0 + (r0 < -1.0), high0 + (r0 > 1.0)
+                low1, high1 = low1 + (r1 < -1.0), high1 + (r1 > 1.0)
+            worst, low, high = (worst0, low0, high0) if worst0 <= worst1 else (worst1, low1, high1)
             ratio[i] = worst
             # both chambers beyond on the same side: the valve's inflow changed, the supply's kind;
             # flow from one chamber into the other (a seal) or one transducer is the leg's own
@@ -398,10 +395,9 @@ class ChamberPrediction:
     def update(self, spool_applied, spool_late, fresh, position_m, valve_state, pressure_fresh, pa_pa, pb_pa) -> int:
         """`spool_applied`, `spool_late` as for `SpoolResidual.update`. Returns the legs faulty."""
         self.peak = pressure_prediction_step(self.models, self.supply_pa, self.period_s, spool_applied, spool_late,
-                                             fresh,
-                                             position_m, valve_state, self.active_state,
-                                             pressure_fresh, pa_pa, pb_pa, self.floor_pa, self.encoder_m,
-                                             self.state, self.y_prev, self.age, self.ratio, self.supply_like)
+                                             fresh, position_m, valve_state, self.active_state, pressure_fresh,
+                                             pa_pa, pb_pa, self.floor_pa, self.encoder_m, self.state, self.y_prev,
+                                             self.age, self.ratio, self.supply_like)
         self.legs_faulty, self.worst_leg = sample_verdict(self.ratio, self.supply_like, pressure_fresh,
                                                           self.persistence, self.above)
         return self.legs_faulty

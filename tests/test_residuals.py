@@ -21,8 +21,10 @@ from firmware_py.residuals import (
     sample_floor_pa,
 )
 from physics import hydraulics as hy
+from physics.constants import BAR
 from plant_emulator.params import load_config as load_emulator_config
 from plant_emulator.rigs import HexapodRig
+from protocol.dbc import signal_scale
 from protocol.enums import Fault, State, ValveState
 
 PERIOD_S = 0.002
@@ -225,8 +227,6 @@ def _ringing_leg(plant_lag: int, known_late: bool, amplitude: float, hz: float) 
     emulator's chamber laws in 32 steps a cycle as the plant, which applies each command
     `plant_lag` cycles after it was computed (1: at the next SYNC, as the controller assumes);
     LEG_PRESSURE every 16th cycle. The prediction's largest ratio after its first samples."""
-    from physics.constants import BAR
-    from protocol.dbc import signal_scale
     cfg = load_config(overrides={"hydraulic_model": {"supply_pressure_bar": 40.0}})
     hp, ps = cfg.hydraulics, cfg.supply_pressure_pa
     floor = sample_floor_pa(cfg.pressure_noise_pa, signal_scale("LEG_PRESSURE_1", "PA") * BAR)
