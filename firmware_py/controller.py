@@ -167,8 +167,7 @@ class Controller:
         self.limits.check_always(self.joint.u_v, self.joint.kalman_x, meas.force_n)
         self.limits.check_active(meas.position_m, self.joint.velocity_estimate, self.joint.error_m)
         self.plausibility.update(self.joint.u_v, meas.position_m)
-        self.residuals.start(meas.position_m, meas.force_n, self.gravity_axial, meas.pressure_valid, meas.pa_pa,
-                             meas.pb_pa)
+        self.residuals.start(meas.position_m, meas.pressure_valid, meas.pa_pa, meas.pb_pa)
         self.residuals.update(self.spool_applied, meas.fresh, meas.position_m, meas.force_n, self.gravity_axial,
                               self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
         self.supply.update(meas.ps_pa, meas.pressure_fresh)
@@ -427,7 +426,7 @@ class Controller:
             self.residuals_running = False
             return
         if not self.residuals_running:
-            res.start(meas.position_m, meas.force_n, self.gravity_axial, meas.pressure_valid, meas.pa_pa, meas.pb_pa)
+            res.start(meas.position_m, meas.pressure_valid, meas.pa_pa, meas.pb_pa)
             self.spool_check.start()
             self.chambers.start(meas.position_m)
             self.supply.reset()

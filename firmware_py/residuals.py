@@ -69,16 +69,24 @@ def breakaway_force_n(fp: np.ndarray) -> float:
 
 @njit(cache=True)
 def residual_step(hp, fp, ps, period_s, substeps, spool_applied, fresh, position, force, gravity_axial,
-                  accel, rod_mass, gain, alpha_lp, pressure_fresh, pa_meas, pb_meas, state, y_prev, stale, residual,
-                  flow_velocity) -> None:
+                  accel, rod_mass, gain, alpha_lp, pressure_fresh, pa_meas, pb_meas, state, seeded, y_prev, stale,
+                  residual, flow_velocity) -> None:
     """One cycle of every leg's chamber model; writes `residual` (low-passed force error, N)
     and `flow_velocity` (the model's valve flow into A over the piston area, m/s). A leg
     without a fresh frame keeps its residual; its chambers follow the spool at the last
-    position, and the next frame's displacement is swept in one cycle (volumes telescope)."""
+    position, and the next frame's displacement is swept in one cycle (volumes telescope).
+    A leg not `seeded` waits for its first pressure sample (no level, no model)."""
     area, ratio = hp[hy.HP_AREA_A], hp[hy.HP_ALPHA]
     h = period_s / substeps
     for i in range(position.shape[0]):
         row = state[i]
+        if not seeded[i]:
+            if fresh[i] and pressure_fresh[i]:
+                row[hy.S_PA], row[hy.S_PB], row[hy.S_SPOOL] = pa_meas[i], pb_meas[i], spool_applied[i]
+                y_prev[i] = position[i]
+                stale[i] = 0
+                seeded[i] = True
+            continue
         if fresh[i]:
             dy = position[i] - y_prev[i]
             v = dy / (period_s * (1 + stale[i]))     # the rate over the time it took
@@ -132,15 +140,14 @@ def residual_verdict(residual, flow_velocity, flow_bound, gain, floor_n, flow_n_
 
 
 @njit(cache=True)
-def start_state(force, gravity_axial, rod_mass, ps, hp, pressure_valid, pa_meas, pb_meas, position, state,
-                y_prev, stale, residual, above) -> None:
-    """The chambers where the transducers last saw them, else holding the measured force."""
+def start_state(pressure_valid, pa_meas, pb_meas, position, state, seeded, y_prev, stale, residual, above) -> None:
+    """The chambers where the transducers last saw them; a leg whose transducers have not
+    spoken waits for its first sample: the chambers' level sets the valve's flows, and where
+    they rest depends on the supply and on what the leg went through."""
     for i in range(position.shape[0]):
         row = state[i]
-        if pressure_valid[i]:
-            row[hy.S_PA], row[hy.S_PB] = pa_meas[i], pb_meas[i]
-        else:
-            row[hy.S_PA], row[hy.S_PB] = hy.holding_pressures(force[i] + rod_mass * gravity_axial[i], ps, hp)
+        seeded[i] = pressure_valid[i]
+        row[hy.S_PA], row[hy.S_PB] = pa_meas[i], pb_meas[i]
         row[hy.S_SPOOL] = 0.0
         y_prev[i] = position[i]
         stale[i] = 0
@@ -162,6 +169,7 @@ class ActuatorResiduals:
         self.floor_n = breakaway_force_n(friction) + 0.5 * stiffness_n_m * encoder_m
         self.flow_n_per_m_s = flow_spread * stiffness_n_m * period_s / gain
         self.state = np.zeros((n_legs, hy.S_SIZE))
+        self.seeded = np.zeros(n_legs, dtype=np.bool_)      # the leg's chambers started from a sample
         self.y_prev = np.zeros(n_legs)
         self.stale = np.zeros(n_legs, dtype=np.int64)       # cycles since the leg's last fresh frame
         self.residual = np.zeros(n_legs)
@@ -171,9 +179,9 @@ class ActuatorResiduals:
         self.above = np.zeros(n_legs, dtype=np.int64)
         self.legs_faulty, self.worst_leg, self.peak = 0, -1, 0.0
 
-    def start(self, position_m, force_n, gravity_axial, pressure_valid, pa_pa, pb_pa) -> None:
-        start_state(force_n, gravity_axial, self.rod_mass, self.supply_pa, self.hp, pressure_valid, pa_pa, pb_pa,
-                    position_m, self.state, self.y_prev, self.stale, self.residual, self.above)
+    def start(self, position_m, pressure_valid, pa_pa, pb_pa) -> None:
+        start_state(pressure_valid, pa_pa, pb_pa, position_m, self.state, self.seeded, self.y_prev, self.stale,
+                    self.residual, self.above)
         self.flow_bound[:] = 0.0
         self.legs_faulty, self.worst_leg = 0, -1
 
@@ -184,8 +192,8 @@ class ActuatorResiduals:
         threshold, the number of legs beyond theirs this cycle."""
         residual_step(self.hp, self.friction, self.supply_pa, self.period_s, self.substeps, spool_applied, fresh,
                       position_m, force_n, gravity_axial, accel_m_s2, self.rod_mass, self.gain, self.alpha_lp,
-                      pressure_fresh, pa_pa, pb_pa, self.state, self.y_prev, self.stale, self.residual,
-                      self.flow_velocity)
+                      pressure_fresh, pa_pa, pb_pa, self.state, self.seeded, self.y_prev, self.stale,
+                      self.residual, self.flow_velocity)
         self.legs_faulty, self.worst_leg, self.peak = residual_verdict(self.residual, self.flow_velocity,
                                                                        self.flow_bound, self.gain, self.floor_n,
                                                             self.flow_n_per_m_s, self.persistence, self.above,

@@ -242,6 +242,43 @@ def pack(actuator_section: dict, valve: dict, chambers: dict) -> np.ndarray:
     return hp
 
 
+STEADY_SPOOL_UNIT = 1e-3     # the steady-state solver's spool variable, per unit of it
+
+
+def steady_state(y: float, force_n: float, ps: float, hp: np.ndarray, velocity_m_s: float = 0.0,
+                 guess=None) -> tuple[float, float, float, bool]:
+    """Chamber pressures PA, PB [Pa] and the spool [fraction] at which the chambers hold
+    still (eq. 4.7-4.8 with both rates 0) at stroke `y`, piston velocity `velocity_m_s` and
+    hydraulic force `force_n` (eq. 4.15): at rest, the spool offset that holds the load.
+    `guess` (PA, PB [Pa], spool) starts the solver. Returns (PA, PB, spool, converged)."""
+    from scipy.optimize import fsolve
+    hold = force_n / hp[HP_AREA_A]                      # load pressure PA - alpha PB
+
+    def residual(q):
+        pa, pb, spool = q[0] * BAR, q[1] * BAR, q[2] * STEADY_SPOOL_UNIT
+        rate_a, rate_b, _, _ = pressure_rates(y, velocity_m_s, pa, pb, spool, ps, hp, 1.0, hp[HP_SEAL_LEAK])
+        va, vb = chamber_volumes(y, hp)
+        return [(pa - hp[HP_ALPHA] * pb - hold) / BAR,
+                rate_a * va / bulk_modulus(pa, hp) * 1e6 / hp[HP_AREA_A],
+                rate_b * vb / bulk_modulus(pb, hp) * 1e6 / hp[HP_AREA_A]]
+
+    start = ([(0.5 * ps + hold) / BAR, 0.5 * ps / BAR, 0.0] if guess is None
+             else [guess[0] / BAR, guess[1] / BAR, guess[2] / STEADY_SPOOL_UNIT])
+    solution, _, ier, _ = fsolve(residual, start, full_output=True, xtol=1e-12)
+    converged = ier == 1 and np.max(np.abs(residual(solution))) < 1e-6
+    return solution[0] * BAR, solution[1] * BAR, solution[2] * STEADY_SPOOL_UNIT, bool(converged)
+
+
+def resting_pressures(y: float, force_n: float, ps: float, hp: np.ndarray) -> tuple[float, float]:
+    """Where a leg's chambers stand behind its closed load-holding valves after its valve
+    held it at rest (the steady state, `steady_state`); where the supply cannot hold the
+    force, `holding_pressures`."""
+    pa, pb, _, ok = steady_state(y, force_n, ps, hp)
+    if ok and hp[HP_P_MIN] <= min(pa, pb) and max(pa, pb) <= ps:
+        return pa, pb
+    return holding_pressures(force_n, ps, hp)
+
+
 @numba.njit(cache=True)
 def holding_pressures(force_n: float, ps: float, hp: np.ndarray):
     """Chamber pressures that hold `force_n` on the piston with PA + PB = supply + tank (a

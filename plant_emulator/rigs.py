@@ -20,6 +20,10 @@ cells measure) and `set_load(kg)`.
   damping implicitly); after the step the bristles and chambers advance with the new leg
   velocities, in `hydraulic_substeps` sub-steps.
 
+Both start at rest with each leg's chambers where its valve held them before the
+load-holding valves closed (`hydraulics.resting_pressures`): at the valve's own level (the
+return edges' wider underlap keeps it low), so opening the ports moves nothing.
+
 The load cell sits on the rod between piston and load (chapter 8.2.3): it measures the
 axial force the rod transmits to the load, positive when it pushes (compression).
 """
@@ -200,7 +204,8 @@ class TestbenchRig(_RigBase):
         self.set_load(cfg.load_kg if load_kg is None else load_kg)
         self.state[0, hy.S_Y] = min(max(start_mm * 1e-3, 0.0), cfg.stroke_m)
         hold = (cfg.piston_rod_mass_kg + self.load_mass_kg) * GRAVITY_M_S2
-        self.state[0, hy.S_PA], self.state[0, hy.S_PB] = hy.holding_pressures(hold, cfg.supply_pressure_pa, cfg.hp)
+        self.state[0, hy.S_PA], self.state[0, hy.S_PB] = hy.resting_pressures(float(self.state[0, hy.S_Y]), hold,
+                                                                              cfg.supply_pressure_pa, cfg.hp)
         self.rod_force_n[0] = self.load_mass_kg * GRAVITY_M_S2          # at rest
 
     def set_load(self, load_kg: float) -> None:
@@ -264,7 +269,8 @@ class HexapodRig(_RigBase):
         self.state[:, hy.S_Y] = self._stroke
         static, _ = mech.inverse_forces(mech.data.qpos.copy(), np.zeros(model.nv), np.zeros(model.nv))
         for i in range(6):
-            self.state[i, hy.S_PA], self.state[i, hy.S_PB] = hy.holding_pressures(float(static[i]),
+            self.state[i, hy.S_PA], self.state[i, hy.S_PB] = hy.resting_pressures(float(self._stroke[i]),
+                                                                                   float(static[i]),
                                                                                    cfg.supply_pressure_pa, cfg.hp)
         mech.set_pose(self.geometry.home_position_m, self.geometry.home_quaternion)
         self._measure_rod_forces()

@@ -187,6 +187,25 @@ def test_hexapod_holds_at_home_and_closes_its_loops(cfg):
     assert moved[2] - position[2] > 0.005                           # all legs extend: it rises
 
 
+@pytest.mark.parametrize("supply_bar", [20.0, 40.0])
+def test_the_rigs_start_where_their_valves_held_them(supply_bar):
+    """Each leg's chambers start at its valve's steady state for the leg's static force
+    (`hydraulics.resting_pressures`): with that holding spool commanded, opening the
+    load-holding valves moves no leg. (From PA + PB = supply + tank the level fell toward the
+    valve's ~1.5 bar after the ports opened and lurched each hexapod leg ~1 mm at 40 bar.)"""
+    cfg = load_config(overrides={"actuator": {"supply_pressure_bar": supply_bar}})
+    for rig in (HexapodRig(cfg), TestbenchRig(cfg, 6.0)):
+        for i in range(rig.n_legs):
+            force = hy.piston_force(rig.state[i, hy.S_PA], rig.state[i, hy.S_PB], cfg.hp)
+            *_, rig.command[i], ok = hy.steady_state(float(rig.state[i, hy.S_Y]), force, cfg.supply_pressure_pa,
+                                                     cfg.hp)
+            assert ok
+        rig.ports_open[:] = 1.0
+        start = rig.state[:, hy.S_Y].copy()
+        run(rig, 0.1)
+        assert np.abs(rig.state[:, hy.S_Y] - start).max() < 0.01e-3
+
+
 def test_calibration_subset_within_bounds(cfg):
     """Table A.3 at 60 and 240 mm, all three loads, by linearisation: inside the bounds."""
     rows = calibration.table_a3()

@@ -55,7 +55,8 @@ def test_noise_alone_gives_a_poor_fit():
 
 def test_a_kick_pushes_the_platform_along_its_axis_for_its_duration():
     """A 20 N, 20 ms push along +y with the legs sealed: the platform moves +y, then swings
-    back; the push is gone after its duration (the applied wrench cleared)."""
+    back by more than half of it (the sealed chambers' spring; the seals' friction keeps part
+    of the push); the push is gone after its duration (the applied wrench cleared)."""
     rig = HexapodRig(load_config())
     rig.ports_open[:] = 0.0
     for _ in range(50):
@@ -71,8 +72,8 @@ def test_a_kick_pushes_the_platform_along_its_axis_for_its_duration():
             assert rig.mechanism.data.xfrc_applied[body, 1] == pytest.approx(20.0)
     assert not rig.mechanism.data.xfrc_applied[body].any()
     trace = np.array(trace)
-    assert trace.max() > 1e-4 and trace.min() < 0.0
-    assert np.argmax(trace) < np.argmin(trace)
+    peak = int(np.argmax(trace))
+    assert trace[peak] > 1e-4 and trace[peak:].min() < 0.5 * trace[peak]
 
 
 def test_a_creep_beside_the_mode_fits_as_an_over_damped_component():

@@ -14,6 +14,7 @@ from firmware_py.control import CONTROLLER_NAMES
 from firmware_py.controller import Controller
 from firmware_py.residuals import (
     PRESSURE_SIGMAS,
+    ActuatorResiduals,
     ChamberPrediction,
     SpoolResidual,
     breakaway_force_n,
@@ -35,8 +36,9 @@ PRESSURE_PHASES = np.arange(6, 12)     # LEG_PRESSURE_1..6's SyncPhase (the DBC)
 
 
 def run_move(fault: str | None, cycles: int = 700, residuals: bool = True, supervisor: dict | None = None,
-             hook=None, noise=None, frozen=None, pressures: bool = False, forced_hold: dict | None = None):
-    """Home, then every leg +30 mm at 20 mm/s with the adaptive controller; `fault` injected
+             hook=None, noise=None, frozen=None, forced_hold: dict | None = None):
+    """Home, then every leg +30 mm at 20 mm/s with the adaptive controller, LEG_PRESSURE
+    sampled as on the bus (the residuals start from a leg's first sample); `fault` injected
     FAULT_AT cycles in. Returns (max |r| / threshold before the fault, the cycle after the
     fault at which the controller faulted or None, the controller, the platform's positions)."""
     cfg = load_config(overrides={"residuals": {"enabled": residuals}, "supervisor": supervisor or {}})
@@ -57,14 +59,15 @@ def run_move(fault: str | None, cycles: int = 700, residuals: bool = True, super
         if frozen:
             meas.force_n[2] = frozen["force"]
         meas.fresh[:] = True
-        if pressures:                                # LEG_PRESSURE_n on its SYNC phase, 0.02 bar noise
-            meas.pressure_fresh[:] = (ctl.cycles % 16) == PRESSURE_PHASES
-            meas.pa_pa[:] = np.where(meas.pressure_fresh, rig.state[:, hy.S_PA] + 2e3 * sample_noise.standard_normal(6),
-                                     meas.pa_pa)
-            meas.pb_pa[:] = np.where(meas.pressure_fresh, rig.state[:, hy.S_PB] + 2e3 * sample_noise.standard_normal(6),
-                                     meas.pb_pa)
-            supply = rig.supply_pressure_pa + 2e3 * sample_noise.standard_normal(6)
-            meas.ps_pa[:] = np.where(meas.pressure_fresh, supply, meas.ps_pa)
+        # LEG_PRESSURE_n on its SYNC phase, 0.02 bar noise
+        meas.pressure_fresh[:] = (ctl.cycles % 16) == PRESSURE_PHASES
+        meas.pa_pa[:] = np.where(meas.pressure_fresh, rig.state[:, hy.S_PA] + 2e3 * sample_noise.standard_normal(6),
+                                 meas.pa_pa)
+        meas.pb_pa[:] = np.where(meas.pressure_fresh, rig.state[:, hy.S_PB] + 2e3 * sample_noise.standard_normal(6),
+                                 meas.pb_pa)
+        supply = rig.supply_pressure_pa + 2e3 * sample_noise.standard_normal(6)
+        meas.ps_pa[:] = np.where(meas.pressure_fresh, supply, meas.ps_pa)
+        meas.pressure_valid[:] |= meas.pressure_fresh
         meas.valve_state[:] = np.where(rig.ports_open > 0, ValveState.ACTIVE, ValveState.HOLD)   # as the valves report
         ctl.update(meas, cmd)
         if forced_hold and forced_hold.get("on"):      # the loop's shutdown overrides the commands
@@ -134,6 +137,30 @@ def test_a_lost_supply_is_the_supplys_fault():
     assert ctl.sup.fault_code is Fault.SUPPLY_PRESSURE and ctl.sup.fault_leg == 0
 
 
+def test_a_leg_without_a_pressure_sample_waits_for_its_first():
+    """The chambers' level sets the valve's flows and no force shows it: a leg whose
+    transducers have not spoken at activation is judged nothing until its first sample, then
+    starts from it; a leg with a sample starts at once."""
+    cfg = load_config()
+    res = ActuatorResiduals(2, cfg.hydraulics, cfg.friction, cfg.supply_pressure_pa, PERIOD_S, 0.5,
+                            cfg.residual_stiffness_n_m, cfg.encoder_resolution_m, cfg.residual_gain,
+                            cfg.residual_filter_s, cfg.residual_persistence, cfg.residual_flow_spread)
+    position, force, zeros = np.array([0.1, 0.1]), np.array([200.0, 200.0]), np.zeros(2)
+    pa, pb = np.array([5e5, 0.0]), np.array([4e5, 0.0])
+    res.start(position, np.array([True, False]), pa, pb)
+    sampled = np.array([False, False])
+    for k in range(20):
+        if k == 10:
+            sampled[1], pa[1], pb[1] = True, 12e5, 3e5
+        res.update(np.full(2, 0.02), np.array([True, True]), position, force, zeros, zeros, sampled, pa, pb)
+        sampled[1] = False
+        if k < 10:
+            assert not res.seeded[1] and res.residual[1] == 0.0 and res.ratio[1] == 0.0
+        elif k == 10:
+            assert res.seeded[1] and res.state[1, hy.S_PA] == 12e5 and res.state[1, hy.S_PB] == 3e5
+    assert res.seeded[0] and res.residual[0] != 0.0 and res.residual[1] != 0.0
+
+
 def path_excursion_m(positions: np.ndarray, healthy: np.ndarray) -> float:
     """How far the platform strayed from the healthy run's path after the fault (a stop
     along the path is no excursion), less the distance it had before it."""
@@ -197,10 +224,10 @@ def test_chamber_pressure_samples_keep_the_margin_and_the_detection():
     """With LEG_PRESSURE samples as the bus brings them (each leg every 16th SYNC, 0.02 bar
     noise) setting the model's level: still quiet with margin, a seized rod still named in
     25 cycles."""
-    quiet, detected, ctl, _ = run_move(None, pressures=True)
+    quiet, detected, ctl, _ = run_move(None)
     assert quiet < 1.0 / 1.5 and detected is None
     assert 0.0 < ctl.pressure_peak < 1.0 / 1.5              # the chambers' sample-to-sample prediction
-    _, detected, ctl, _ = run_move("seized", pressures=True)
+    _, detected, ctl, _ = run_move("seized")
     assert detected is not None and detected <= DETECT_WITHIN
     assert ctl.sup.fault_code is Fault.ACTUATOR_RESIDUAL and ctl.sup.fault_leg == 1
 
@@ -217,7 +244,7 @@ def test_a_leaking_seal_is_named_at_the_legs_next_pressure_sample(cycles_after_s
             rig.set_seal_leak(0, 10.0)
             onset.append(k)
 
-    _, detected, ctl, _ = run_move(None, pressures=True, hook=leak)
+    _, detected, ctl, _ = run_move(None, hook=leak)
     assert onset and ctl.sup.fault_code is Fault.CHAMBER_PRESSURE and ctl.sup.fault_leg == 1
     assert detected + FAULT_AT - onset[0] <= DETECT_WITHIN, (detected, onset)
 
@@ -307,9 +334,9 @@ def test_the_supply_transducers_find_a_lost_or_dropped_supply(fault):
     """Supply lost (to the tank) or down to 60 %, both with the power unit's 50 ms decay: it
     leaves the band at 14.5 ms and 50 ms; SUPPLY_PRESSURE once three legs' samples, on their
     phases of 16 cycles, have seen it. Healthy, the samples stay within 1 / 1.5 of the band."""
-    _, detected, ctl, _ = run_move(None, pressures=True)
+    _, detected, ctl, _ = run_move(None)
     assert detected is None and ctl.supply_peak * 1.5 < 1.0
-    _, detected, ctl, _ = run_move(fault, pressures=True)
+    _, detected, ctl, _ = run_move(fault)
     assert ctl.sup.fault_code is Fault.SUPPLY_PRESSURE and ctl.sup.fault_leg == 0
     assert detected is not None and detected <= (DETECT_WITHIN if fault == "supply" else 45), detected
 

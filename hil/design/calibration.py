@@ -35,7 +35,6 @@ from plant_emulator.params import EmulatorConfig, build, merge
 from .thesis import thesis_data
 
 LOADS_KG = (0.0, 3.0, 6.0)
-SPOOL_UNIT = 1e-3        # the operating-point solver's spool variable, per unit of it
 BAND_RAD_S = np.logspace(np.log10(5.0), np.log10(300.0), 40)
 # the calibration's bounds on Table A.3: b0 and k01 within +/-20 %, b1 within +/-25 %, the complex
 # pole pair inside Re [-65, -45], Im [75, 125] 1/s widened by 10 %.
@@ -94,38 +93,12 @@ def moving_mass_kg(cfg: EmulatorConfig, load_kg: float) -> float:
     return cfg.piston_rod_mass_kg + cfg.guide.slide_mass_kg + load_kg
 
 
-def holding_point(cfg: EmulatorConfig, y: float, force_n: float, supply_pa: float | None = None,
-                  velocity_m_s: float = 0.0, guess=None) -> tuple[float, float, float, bool]:
-    """Chamber pressures PA, PB [Pa] and the spool [fraction] of the steady state at stroke
-    `y`, piston velocity `velocity_m_s` and hydraulic force `force_n`: the pressures do not
-    change (at rest: the spool offset that holds the load). `guess` (PA, PB [Pa], spool)
-    starts the solver. Returns (PA, PB, spool, converged)."""
-    from scipy.optimize import fsolve
-    ps = cfg.supply_pressure_pa if supply_pa is None else supply_pa
-    hold = force_n / cfg.area_a_m2                      # load pressure PA - alpha PB
-
-    def residual(q):
-        pa, pb, spool = q[0] * BAR, q[1] * BAR, q[2] * SPOOL_UNIT
-        rate_a, rate_b, _, _ = hy.pressure_rates(y, velocity_m_s, pa, pb, spool, ps, cfg.hp, 1.0,
-                                             cfg.hp[hy.HP_SEAL_LEAK])
-        va, vb = hy.chamber_volumes(y, cfg.hp)
-        return [(pa - cfg.alpha * pb - hold) / BAR,
-                rate_a * va / hy.bulk_modulus(pa, cfg.hp) * 1e6 / cfg.area_a_m2,
-                rate_b * vb / hy.bulk_modulus(pb, cfg.hp) * 1e6 / cfg.area_a_m2]
-
-    start = ([(0.5 * ps + hold) / BAR, 0.5 * ps / BAR, 0.0] if guess is None
-             else [guess[0] / BAR, guess[1] / BAR, guess[2] / SPOOL_UNIT])
-    solution, _, ier, _ = fsolve(residual, start, full_output=True, xtol=1e-12)
-    converged = ier == 1 and np.max(np.abs(residual(solution))) < 1e-6
-    return solution[0] * BAR, solution[1] * BAR, solution[2] * SPOOL_UNIT, bool(converged)
-
-
 def linearise(cfg: EmulatorConfig, position_mm: float, load_kg: float) -> OperatingPoint:
     y = position_mm * MM
     mass = moving_mass_kg(cfg, load_kg)
     fp = cfg.friction
     damping = 0.5 * (fp[lugre.S2_POS] + fp[lugre.S2_NEG]) + cfg.guide.viscous_ns_m
-    pa, pb, spool, converged = holding_point(cfg, y, mass * GRAVITY_M_S2)
+    pa, pb, spool, converged = hy.steady_state(y, mass * GRAVITY_M_S2, cfg.supply_pressure_pa, cfg.hp)
     x0 = np.array([0.0, pa, pb, spool])
     u0 = spool * cfg.valve_full_scale_v
     steps = np.array([1e-6, 10.0, 10.0, 1e-7])

@@ -4,7 +4,7 @@ stiffness are measured once and loaded by its controller).
 
 - valve map: the spool that holds a leg in the steady state at a hydraulic force F and a
   piston velocity v (no pressure change), and the chamber pressures there:
-  `calibration.holding_point` with the velocity, over a grid. Steady pressures do not depend
+  `hydraulics.steady_state` with the velocity, over a grid. Steady pressures do not depend
   on the chamber volumes, so one map serves every stroke (the controller takes each leg's
   oil-column stiffness from these pressures and its stroke). Where no spool within full
   input reaches (F, v) (beyond the supply) the map holds the nearest reachable point along
@@ -19,7 +19,6 @@ from physics import hydraulics as hy
 from physics.constants import BAR, MM
 from plant_emulator.params import EmulatorConfig
 
-from .calibration import holding_point
 
 # 4 N apart near the valve's null, where the steady pressures (the oil's stiffness) change
 # fastest with the force (12 -> 55 N/mm between 0 and -8 N); 20 N apart beyond
@@ -52,7 +51,8 @@ def valve_map(cfg: EmulatorConfig, forces_n=MAP_FORCES_N, velocities_m_s=MAP_VEL
             for guess in (previous,) + tuple((a * ps, b * ps, x) for a, b, x in STARTS):
                 if guess is None:
                     continue
-                pa, pb, x, ok = holding_point(cfg, MAP_STROKE_M, float(force), velocity_m_s=float(v), guess=guess)
+                pa, pb, x, ok = hy.steady_state(MAP_STROKE_M, float(force), ps, cfg.hp, velocity_m_s=float(v),
+                                                guess=guess)
                 if ok and abs(x) <= 1.0 and low <= min(pa, pb) and max(pa, pb) <= ps:
                     spool[i, j], pa_map[i, j], pb_map[i, j] = x, pa, pb
                     previous = (pa, pb, x)

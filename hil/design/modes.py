@@ -9,7 +9,7 @@ rest (no re-derivation):
   static ones), the gravity stiffness K_g = d F_static / d q;
 - actuators: per leg, the chamber rates of `hydraulics.pressure_rates` differentiated in
   PA, PB, the leg velocity and the spool, at the pressures and spool offset that hold the
-  leg's static force (`calibration.holding_point`); the seals' friction with its viscous
+  leg's static force (`hydraulics.steady_state`); the seals' friction with its viscous
   slope (the sliding regime of the movements; the pre-sliding bristles act below 0.1 mm);
   the spool's first-order lag.
 
@@ -36,7 +36,6 @@ from physics.constants import BAR, MM
 from plant_emulator.params import EmulatorConfig
 from plant_emulator.rigs import HexapodRig
 
-from .calibration import holding_point
 
 N_LEGS = 6
 POSE_STEP = 1e-6                      # finite-difference step of the pose: m and rad
@@ -268,7 +267,7 @@ def modal_models(cfg: EmulatorConfig, position_m, rpy_rad, payload_kg: float, su
     pa, pb, spool = np.empty(N_LEGS), np.empty(N_LEGS), np.empty(N_LEGS)
     converged = True
     for i in range(N_LEGS):
-        pa[i], pb[i], spool[i], ok = holding_point(cfg, float(strokes[i]), float(static[i]), supply)
+        pa[i], pb[i], spool[i], ok = hy.steady_state(float(strokes[i]), float(static[i]), supply, cfg.hp)
         converged = converged and ok
     radius = float(np.linalg.norm(rig.geometry.platform_anchor_m[0]))
     models = []
