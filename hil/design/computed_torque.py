@@ -19,7 +19,6 @@ from physics import hydraulics as hy
 from physics.constants import BAR, MM
 from plant_emulator.params import EmulatorConfig
 
-
 # 4 N apart near the valve's null, where the steady pressures (the oil's stiffness) change
 # fastest with the force (12 -> 55 N/mm between 0 and -8 N); 20 N apart beyond
 MAP_FORCES_N = np.concatenate([np.arange(-250.0, -49.0, 20.0), np.arange(-40.0, 41.0, 4.0),

@@ -36,7 +36,6 @@ from physics.constants import BAR, MM
 from plant_emulator.params import EmulatorConfig
 from plant_emulator.rigs import HexapodRig
 
-
 N_LEGS = 6
 POSE_STEP = 1e-6                      # finite-difference step of the pose: m and rad
 AXES = ("x", "y", "z", "roll", "pitch", "yaw")
