@@ -352,11 +352,15 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
     if unexplained:
         failure = (failure + "\n" if failure else "") + \
             f"the controller faulted {', '.join(unexplained)} while starting, with no machine stall before it"
+    children = _children_summaries(run)
+    diverged = _plant_diverged(children)
+    if diverged:
+        failure = (failure + "\n" if failure else "") + diverged
     doc = write_outputs(scenario, log, out, extra={
         "bus": str(spec), "pacing": pacing, "rate_hz": options.rate_hz, "short": options.short,
         "wall_time_s": round(wall_s, 1), "frames_sent_by_host": run.host.frames_sent,
         "frames_received_by_host": run.host.frames_received, "notes": run.notes,
-        "children": _children_summaries(run), "failure": failure}, plots=options.plots)
+        "children": children, "failure": failure}, plots=options.plots)
     return doc
 
 
@@ -372,6 +376,16 @@ def _children_summaries(run: Run) -> dict:
                 pass
         out[child.name] = entry
     return out
+
+
+def _plant_diverged(children: dict) -> str | None:
+    """The run's failure where an emulator's physics diverged: the log after it is not physics."""
+    for name, entry in children.items():
+        summary = entry.get("summary") or {}
+        if summary.get("plant_unstable"):
+            return (f"{name}: the emulated plant diverged at t = {summary['plant_unstable_first_s']:.3f} s "
+                    f"({summary['plant_unstable']} periods diverged): the log from there on is not physics")
+    return None
 
 
 def analyze_log(scenario: Scenario, log_path: Path, out: Path) -> dict:

@@ -83,6 +83,8 @@ class Counters:
     host_stall_max_s: float = 0.0
     free_run_steps: int = 0           # periods of physics run on the wall clock after a lost SYNC
     kicks: int = 0                    # EMU_KICK pushes applied to the platform
+    plant_unstable: int = 0           # periods after which the physics had diverged (not physics after)
+    plant_unstable_first_s: float | None = None     # the simulated time of the first
     injected: dict = field(default_factory=dict)
     # every SYNC-watchdog trip: when (epoch s), and how late this process woke for it (ms): a
     # real node's hardware timer fires on time; ours is this process's wake-up (hil faults, case 1)
@@ -93,7 +95,7 @@ class Counters:
         return {k: getattr(self, k) for k in ("syncs", "frames_in", "frames_out", "e2e_errors",
                                               "sync_sequence_errors", "valve_faults", "emergencies",
                                               "unknown_frames", "host_stalls", "free_run_steps",
-                                              "kicks")} | {
+                                              "kicks", "plant_unstable", "plant_unstable_first_s")} | {
             "host_stall_max_ms": round(self.host_stall_max_s * 1e3, 3), "injected": dict(self.injected),
             "sync_timeouts": list(self.sync_timeouts), "fault_onsets": list(self.fault_onsets)}
 
@@ -285,6 +287,7 @@ class Emulator:
             if apply_valves:
                 self._apply_valves()
             self.rig.advance(self.cfg.sync_period_s)
+            self._check_plant()
             self.counters.free_run_steps += 1
             self._send_truth(self.sync_counter)
 
@@ -433,11 +436,23 @@ class Emulator:
         self._apply_valves()
         self.rig.advance(self.cfg.sync_period_s)
         stepped = self.clock()
+        self._check_plant()
         self._count_down_faults()
         phase[SP_RESPONSE], phase[SP_NODES], phase[SP_SEND] = sent - now, nodes - now, sent - nodes
         phase[SP_PHYSICS], phase[SP_TOTAL] = stepped - sent, self.clock() - now
         if self._onsets:                          # after the response: a print takes its time
             self._report_onsets(counter)
+
+    def _check_plant(self) -> None:
+        """Say once, on stderr, that the emulated physics diverged; count every such period."""
+        rig, counters = self.rig, self.counters
+        if rig.unstable_periods == counters.plant_unstable:
+            return
+        if counters.plant_unstable == 0:
+            print(f"emulator: the emulated plant diverged at t = {rig.first_unstable_s:.3f} s (MuJoCo reset it, or a "
+                  "state not finite): what follows is not physics", file=sys.stderr, flush=True)
+        counters.plant_unstable = rig.unstable_periods
+        counters.plant_unstable_first_s = rig.first_unstable_s
 
     def _report_onsets(self, counter: int) -> None:
         for onset in self._onsets:

@@ -7,7 +7,8 @@ stuck mechanically: `set_rod_seized`), `ports_open` (per leg, 0 when the load-ho
 between servo-valve and cylinder are closed: the node layer closes them whenever the valve
 is not ACTIVE), `supply_pressure_pa`,
 `advance(period_s)` (integrate exactly that much physics), `rod_force_n` (what the load
-cells measure) and `set_load(kg)`.
+cells measure), `set_load(kg)` and `unstable_periods` / `first_unstable_s` (advances after
+which the physics had diverged: MuJoCo reset, or a state not finite).
 
 - `TestbenchRig` (chapters 5-7): one vertical actuator lifting the 1.35 kg slide of a linear
   guide plus an external mass; guide friction eq. D.3 (default: eq. D.4, see emulator.toml);
@@ -45,6 +46,9 @@ from .params import EmulatorConfig
 from .rig_geometry import RigGeometry, read_rig_geometry
 
 SUPPLY_LOSS_TIME_CONSTANT_S = 0.05    # supply pressure decay when the power unit is lost
+# MuJoCo's warnings that it reset a diverged simulation, or met a non-finite motor force
+MUJOCO_DIVERGED = tuple(int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
+                                         mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADCTRL))
 SEIZED_FRICTION_N = 1e5               # LEG_JAM on the hexapod: dry friction of a seized slide,
 SEIZED_SOLREF = (0.001, 1.0)          # as stiff as the solver allows at the 0.5 ms step
 SEIZED_SOLIMP = (0.9999, 0.9999, 0.0001, 0.5, 2.0)
@@ -159,6 +163,15 @@ class _RigBase:
         self.supply_pressure_pa = cfg.supply_pressure_pa
         self.supply_fraction = 1.0
         self.time_s = 0.0
+        self.unstable_periods = 0                  # advances after which the physics was not finite
+        self.first_unstable_s: float | None = None
+
+    def _note_stability(self, unstable: bool) -> None:
+        """Count an advance whose physics diverged (what follows it is not physics)."""
+        if unstable or not np.isfinite(self.state).all():
+            self.unstable_periods += 1
+            if self.first_unstable_s is None:
+                self.first_unstable_s = self.time_s
 
     def _supply_for(self, period_s: float) -> float:
         tank = self.cfg.hp[hy.HP_TANK]
@@ -223,6 +236,7 @@ class TestbenchRig(_RigBase):
         # the rod carries the load's weight, inertia and guide friction
         self.rod_force_n[0] = self.load_mass_kg * (self.out[0] + GRAVITY_M_S2) + self.out[2]
         self.time_s += period_s
+        self._note_stability(False)
 
     def warm_up(self) -> None:
         """Load the compiled kernels now: their first call costs 0.2-0.25 s (numba's cache),
@@ -327,6 +341,12 @@ class HexapodRig(_RigBase):
                             cfg.hp, cfg.friction)
         self._measure_rod_forces()
         self.time_s += steps * model.opt.timestep
+        # MuJoCo resets its state where it diverges (and warns on stderr): count it, then clear
+        diverged = False
+        for kind in MUJOCO_DIVERGED:
+            if data.warning[kind].number:
+                diverged, data.warning[kind].number = True, 0
+        self._note_stability(diverged)
 
     def warm_up(self) -> None:
         """As TestbenchRig.warm_up: the kernels loaded on scratch copies, the rig untouched."""

@@ -206,6 +206,21 @@ def test_the_rigs_start_where_their_valves_held_them(supply_bar):
         assert np.abs(rig.state[:, hy.S_Y] - start).max() < 0.01e-3
 
 
+def test_a_diverged_plant_is_counted(cfg):
+    """A chamber pressure no hydraulics reaches makes MuJoCo reset the mechanism (its
+    warning); the rig counts the period and when it first happened, and a healthy rig none."""
+    healthy, broken = HexapodRig(cfg), HexapodRig(cfg)
+    broken.state[0, hy.S_PA] = 1e12
+    run(healthy, 0.01)
+    run(broken, 0.01)
+    assert healthy.unstable_periods == 0 and healthy.first_unstable_s is None
+    assert broken.unstable_periods >= 1 and broken.first_unstable_s is not None
+    bench = TestbenchRig(cfg, 0.0)
+    bench.state[0, hy.S_PA] = np.nan
+    run(bench, 0.004)
+    assert bench.unstable_periods == 2
+
+
 def test_calibration_subset_within_bounds(cfg):
     """Table A.3 at 60 and 240 mm, all three loads, by linearisation: inside the bounds."""
     rows = calibration.table_a3()

@@ -1,4 +1,5 @@
-"""The runner's controller start: in realtime a start that a fault ends (a machine stall
+"""The runner's judgements: a run whose emulated plant diverged fails; the controller's
+start: in realtime a start that a fault ends (a machine stall
 while the loop starts) is recovered with RESET + ENABLE and noted, its window kept for the
 log's judgement; in lockstep, or after the last try, it is the run's failure."""
 
@@ -116,3 +117,10 @@ def test_the_users_emulator_config_sets_the_load(tmp_path, monkeypatch, scenario
     run.start_emulator()
     config = tomllib.loads(Path(started[1][started[1].index("--config") + 1]).read_text())
     assert config[section][key] == SCENARIOS[scenario].load_kg
+
+
+def test_a_run_whose_plant_diverged_fails():
+    ok = {"emulator": {"summary": {"plant_unstable": 0, "plant_unstable_first_s": None}}, "controller": {}}
+    assert runner._plant_diverged(ok) is None
+    broken = {"emulator": {"summary": {"plant_unstable": 3, "plant_unstable_first_s": 3.25}}}
+    assert "diverged at t = 3.250 s" in runner._plant_diverged(broken)
