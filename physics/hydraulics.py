@@ -281,8 +281,8 @@ def resting_pressures(y: float, force_n: float, ps: float, hp: np.ndarray) -> tu
 
 @numba.njit(cache=True)
 def holding_pressures(force_n: float, ps: float, hp: np.ndarray):
-    """Chamber pressures that hold `force_n` on the piston with PA + PB = supply + tank (a
-    start value where no transducer has spoken)."""
+    """Chamber pressures that hold `force_n` on the piston with PA + PB = supply + tank
+    (`resting_pressures` where the supply cannot hold the force)."""
     alpha = hp[HP_ALPHA]
     load_pressure = force_n / hp[HP_AREA_A]
     pb = (ps + hp[HP_TANK] - load_pressure) / (1.0 + alpha)

@@ -83,8 +83,8 @@ class Counters:
     host_stall_max_s: float = 0.0
     free_run_steps: int = 0           # periods of physics run on the wall clock after a lost SYNC
     kicks: int = 0                    # EMU_KICK pushes applied to the platform
-    plant_unstable: int = 0           # periods after which the physics had diverged (not physics after)
-    plant_unstable_first_s: float | None = None     # the simulated time of the first
+    plant_unstable: int = 0           # periods whose physics had diverged (MuJoCo reset, or not finite)
+    plant_unstable_first_s: float | None = None     # the simulated time of the first of them
     injected: dict = field(default_factory=dict)
     # every SYNC-watchdog trip: when (epoch s), and how late this process woke for it (ms): a
     # real node's hardware timer fires on time; ours is this process's wake-up (hil faults, case 1)
