@@ -21,13 +21,14 @@ wall clock with the valves in FAULT_HOLD, and EMU_TRUTH reports where the mechan
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from dataclasses import dataclass, field
 
 import can
+import mujoco
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from physics import hydraulics as hy
 from protocol.codec import CODECS, FrameDecoder
@@ -64,9 +65,12 @@ FAULT_ONSET_EVENT = "emulator: event fault_onset"
 
 
 def attitude_rpy(quat_wxyz) -> np.ndarray:
-    """(roll, pitch, yaw) of the bus's convention R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    yaw, pitch, roll = Rotation.from_quat(quat_wxyz, scalar_first=True).as_euler("ZYX")
-    return np.array([roll, pitch, yaw])
+    """(roll, pitch, yaw) of the bus's convention R = Rz(yaw) Ry(pitch) Rx(roll), from
+    MuJoCo's rotation matrix of the body's quaternion (SciPy's Rotation is the tests' oracle)."""
+    rot = np.empty(9)
+    mujoco.mju_quat2Mat(rot, np.asarray(quat_wxyz, dtype=float))
+    pitch = math.asin(max(-1.0, min(1.0, -rot[6])))
+    return np.array([math.atan2(rot[7], rot[8]), pitch, math.atan2(rot[3], rot[0])])
 
 
 @dataclass
@@ -106,7 +110,6 @@ class Emulator:
     def __init__(self, bus: can.BusABC | None, rig, cfg: EmulatorConfig, clock=time.monotonic):
         self.bus, self.rig, self.cfg, self.clock = bus, rig, cfg, clock
         rig.warm_up()                     # kernels loaded before the first SYNC, not in it
-        attitude_rpy(np.array([1.0, 0.0, 0.0, 0.0]))     # ... and SciPy's rotation code
         self.legs = range(1, rig.n_legs + 1)
         self.has_imu = rig.n_legs == 6
         self.nodes = rig_nodes(rig.n_legs)

@@ -4,6 +4,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from hil.design import calibration
 from physics import hydraulics as hy
@@ -340,3 +342,16 @@ def test_a_fast_ramp_the_spool_follows_is_not_a_jam():
         actual = demand - 0.02                               # lagging its demand a little
         assert valve.check_spool(actual, demand) is None
         demand = valve.spool_command
+
+
+@given(roll=st.floats(-3.1, 3.1), pitch=st.floats(-1.5, 1.5), yaw=st.floats(-3.1, 3.1))
+@settings(max_examples=200, deadline=None)
+def test_the_imu_reports_the_bus_convention_as_scipy_does(roll, pitch, yaw):
+    """IMU_ATTITUDE's roll, pitch, yaw of R = Rz(yaw) Ry(pitch) Rx(roll), from the body's
+    quaternion through MuJoCo, against SciPy's Euler angles."""
+    from scipy.spatial.transform import Rotation
+
+    from plant_emulator.emulator import attitude_rpy
+    quat = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_quat(scalar_first=True)
+    np.testing.assert_allclose(attitude_rpy(quat), [roll, pitch, yaw], atol=1e-9)
+    np.testing.assert_allclose(attitude_rpy(-quat), [roll, pitch, yaw], atol=1e-9)
