@@ -510,14 +510,15 @@ class Emulator:
                 continue
             i = n - 1
             valve = self.valves[n]
-            position = round(rig.state[i, hy.S_Y] / cfg.encoder_resolution_m) * cfg.encoder_resolution_m
+            measured = rig.state[i, hy.S_Y]
+            drift = self._fault(n, EmuFault.ENCODER_DRIFT)
+            if drift is not None:                      # um/s since the fault's onset, read in counts too
+                start = self._onset_values.setdefault((n, EmuFault.ENCODER_DRIFT), rig.time_s)
+                measured += drift[1] * 1e-6 * (rig.time_s - start)
+            position = round(measured / cfg.encoder_resolution_m) * cfg.encoder_resolution_m
             force = rig.rod_force_n[i] + cfg.load_cell_noise_n * rng.standard_normal()
             if self._fault(n, EmuFault.STUCK):
                 position, force = self._onset_values.setdefault((n, EmuFault.STUCK), (position, force))
-            drift = self._fault(n, EmuFault.ENCODER_DRIFT)
-            if drift is not None:                      # um/s since the fault's onset
-                start = self._onset_values.setdefault((n, EmuFault.ENCODER_DRIFT), rig.time_s)
-                position += drift[1] * 1e-6 * (rig.time_s - start)
             if self._fault(n, EmuFault.FORCE_STUCK):
                 force = self._onset_values.setdefault((n, EmuFault.FORCE_STUCK), force)
             if self._fault(n, EmuFault.FORCE_ZERO):

@@ -83,6 +83,10 @@ def test_encoder_drift_adds_its_rate_since_the_onset_and_stops_when_cleared():
     frames = bench.syncs(250)                                    # 0.5 s
     truth_mm = bench.rig.state[0, hy.S_Y] * 1e3
     assert frames[-1]["POSITION"] - truth_mm == pytest.approx(0.5, abs=0.13)    # +- one encoder count
+    # the sensor reads the drifted length in its own counts: every reading on the count grid
+    count_mm = bench.emulator.cfg.encoder_resolution_m * 1e3
+    counts = np.array([f["POSITION"] for f in frames]) / count_mm
+    assert np.abs(counts - np.round(counts)).max() < 0.05          # the wire's 0.005 mm steps
     bench.inject(EmuFault.ENCODER_DRIFT, command=EmuCommand.CLEAR_FAULT)
     frames = bench.syncs(5)
     assert frames[-1]["POSITION"] == pytest.approx(bench.rig.state[0, hy.S_Y] * 1e3, abs=0.13)
