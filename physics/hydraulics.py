@@ -279,10 +279,10 @@ def resting_pressures(y: float, force_n: float, ps: float, hp: np.ndarray) -> tu
     return holding_pressures(force_n, ps, hp)
 
 
-@numba.njit(cache=True)
-def holding_pressures(force_n: float, ps: float, hp: np.ndarray):
+def holding_pressures(force_n: float, ps: float, hp: np.ndarray) -> tuple[float, float]:
     """Chamber pressures that hold `force_n` on the piston with PA + PB = supply + tank
-    (`resting_pressures` where the supply cannot hold the force)."""
+    (`resting_pressures` where the supply cannot hold the force; plain Python: only a rig's
+    start calls it)."""
     alpha = hp[HP_ALPHA]
     load_pressure = force_n / hp[HP_AREA_A]
     pb = (ps + hp[HP_TANK] - load_pressure) / (1.0 + alpha)
