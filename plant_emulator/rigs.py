@@ -17,7 +17,7 @@ which the physics had diverged: MuJoCo reset, or a state not finite).
   LuGre bristles, implicit chambers), hard end stops.
 - `HexapodRig`: six actuators driving the MuJoCo 6-UPS (`mechanism.Mechanism`). Per MuJoCo
   step the hydraulic force minus the bristle force goes to the slide motors and the
-  friction's velocity slope to the slide's joint damping (MuJoCo's implicitfast integrates
+  friction's velocity slope to the slide's joint damping (MuJoCo's Euler integrates joint
   damping implicitly); after the step the bristles and chambers advance with the new leg
   velocities, in `hydraulic_substeps` sub-steps.
 
