@@ -90,3 +90,21 @@ def test_sha_tracking_reports_a_sweep_whose_light_load_at_the_lowest_w_was_cut(m
     analysis = SCENARIOS["sha-tracking"].analyze(None, None)
     light = next(c for c in analysis.checks if c.name.startswith("pi: rms error at the lowest w (0.1 rad/s)"))
     assert light.name.endswith("3 kg") and light.measured == "0.50 mm"
+
+
+def test_an_analysis_models_the_plant_its_run_emulated(tmp_path):
+    """The emulator.toml the runner writes beside the log (payload, plant) is the analyses'
+    plant; a log without one gets the defaults."""
+    from hil.scenarios.common import run_emulator_config
+    from plant_emulator.params import load_config
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "emulator.toml").write_text("[hexapod]\npayload_kg = 6.0\n[actuator]\n"
+                                                    "supply_pressure_bar = 40.0\n")
+
+    def log_at(path):
+        return LogData(str(path), 0, np.zeros(0), {}, [], 0, {}, {}, 0)
+    ran = run_emulator_config(log_at(tmp_path / "run" / "run.blf"))
+    assert ran.payload_kg == 6.0 and ran.supply_pressure_pa == 40e5
+    default = run_emulator_config(log_at(tmp_path / "run.blf"))
+    assert default.payload_kg == load_config().payload_kg == 0.0
+    assert default.supply_pressure_pa == load_config().supply_pressure_pa

@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from firmware_py.control import CONTROLLER_NAMES
+from plant_emulator.params import EmulatorConfig
+from plant_emulator.params import load_config as load_emulator_config
 from protocol.enums import EmuCommand, WaypointFlag
 
 from ..logdata import LogData
@@ -21,6 +25,13 @@ def controller_at(log: LogData, cycle: int) -> str | None:
     status = log.get("CTRL_STATUS")
     value = last_value_before(status.cycle, status["CONTROLLER"], cycle)
     return None if np.isnan(value) else NAME_OF_CONTROLLER.get(int(value))
+
+
+def run_emulator_config(log: LogData) -> EmulatorConfig:
+    """The plant a log's run emulated: the config file the runner wrote beside the log (the
+    scenario's and the user's sections over the defaults); the defaults without one."""
+    path = Path(log.path).parent / "emulator.toml"
+    return load_emulator_config(path if path.is_file() else None)
 
 
 def load_at(log: LogData, cycle: int) -> float | None:

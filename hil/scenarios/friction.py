@@ -28,7 +28,6 @@ import numpy as np
 from firmware_py.config import load_config
 from physics.actuator import piston_force
 from physics.constants import MM
-from plant_emulator.params import load_config as load_emulator_config
 from protocol.enums import AckKind, TestMode
 
 from ..design.friction import (
@@ -45,7 +44,7 @@ from ..design.thesis import thesis_data
 from ..logdata import LogData
 from ..plotting import colour_for_load, plt, save
 from ..scenario import Analysis, Check, Figure, Scenario
-from .common import each_controller_and_load, load_at, move_stroke
+from .common import each_controller_and_load, load_at, move_stroke, run_emulator_config
 
 STEP_S = 1.2                       # each valve step: the 0.5-1 s window and a margin (DURATION LSB 0.2 s)
 WINDOW_S = (0.5, 1.0)              # eq. 6.5's steady window (chapter 6.4.1.1)
@@ -145,8 +144,8 @@ def _seal_friction(log: LogData, cfg, rod_n: np.ndarray) -> tuple[np.ndarray, np
     return cycle, cylinder_friction(fp - rod, 0.0, 0.0, cfg.moving_mass_kg, 0.0, 0.0)
 
 
-def _truth_steady() -> dict[str, SteadySide]:
-    return steady_sides(load_emulator_config().raw["friction"])
+def _truth_steady(log: LogData) -> dict[str, SteadySide]:
+    return steady_sides(run_emulator_config(log).raw["friction"])
 
 
 def _table_6_1() -> dict[str, SteadySide]:
@@ -244,7 +243,7 @@ class FrictionSteady(Scenario):
                            "window_s": round((hi - lo) * period, 3)})
         v = np.array([p["velocity_mm_s"] for p in points]) * MM
         f = np.array([p["friction_n"] for p in points])
-        truth, thesis = _truth_steady(), _table_6_1()
+        truth, thesis = _truth_steady(log), _table_6_1()
         fits, checks, rows = {}, [], []
         for side, sign in (("+", 1.0), ("-", -1.0)):
             try:
@@ -364,7 +363,7 @@ class FrictionPresliding(Scenario):
                 chart[side] = (float(d[i]), float(df[i])) if np.sign(d[i]) == (1 if side == "+" else -1) else None
             charts.append(chart)
         model = self._model_fit(log, cfg, y, rod_n, p_cycle, seal_n, period)
-        emulator = load_emulator_config().raw
+        emulator = run_emulator_config(log).raw
         seal, bristle = emulator["friction"], emulator["guide"]["bristle_stiffness_n_mm"]
         c6 = chapter6()
         sigma2 = {"+": seal["sigma2_pos_ns_mm"] / MM, "-": seal["sigma2_neg_ns_mm"] / MM}

@@ -22,7 +22,6 @@ from pathlib import Path
 import numpy as np
 
 from firmware_py.geometry import default_geometry
-from plant_emulator.params import load_config as load_emulator_config
 from protocol.enums import Command, KickAxis, State, WaypointFlag
 
 from ..logdata import LogData
@@ -30,7 +29,7 @@ from ..metrics import damped_oscillation
 from ..motions import circle_motion
 from ..plotting import plt, save
 from ..scenario import Analysis, Check, Figure, Scenario
-from .common import load_at
+from .common import load_at, run_emulator_config
 
 # the push: the seals stay in pre-sliding (10 N slides them), the response ~0.5 mm against
 # EMU_TRUTH's 0.025 mm steps
@@ -136,7 +135,7 @@ class HexapodKick(Scenario):
 
         period = 1.0 / rate_hz
         truth = log.get("EMU_TRUTH")
-        cfg = load_emulator_config()
+        cfg = run_emulator_config(log)
         rows, models = [], {}
         for event in log.events_named("EMU_KICK"):
             axis = KickAxis(int(event.values["AXIS"]))
@@ -150,7 +149,8 @@ class HexapodKick(Scenario):
             stop = int(OBSERVE_S / period) - 2
             y = truth.per_cycle(log.n_cycles, TRUTH_SIGNALS[axis])[k0 + start:min(k0 + stop, log.n_cycles)]
             main, fit = free_mode(y, period)
-            load = load_at(log, k0) or 0.0
+            load = load_at(log, k0)
+            load = cfg.payload_kg if load is None else load     # set at start, or by EMU_CTRL
             pressures = sealed_pressures(log, k0, period)
             # the model: the same push on the sealed platform in the state the log shows
             model = None if pressures is None else free_mode(sealed_response(

@@ -22,7 +22,6 @@ import numpy as np
 
 from firmware_py.config import load_config as load_controller_config
 from physics.constants import MM
-from plant_emulator.params import load_config as load_emulator_config
 from protocol.enums import WaypointFlag
 
 from .. import identification as ident
@@ -31,7 +30,7 @@ from ..logdata import LogData
 from ..plotting import colour_for_load, plt, save
 from ..reference import rebuild
 from ..scenario import Analysis, Check, Figure, Scenario
-from .common import load_at, move_stroke
+from .common import load_at, move_stroke, run_emulator_config
 
 LEVELS_MM = (-10.0, -5.0, 0.0, 5.0, 10.0)
 HOLD_S = (0.3, 0.6)
@@ -153,7 +152,7 @@ class ShaIdentification(Scenario):
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
         period = 1.0 / rate_hz
         windows = self.windows(log, period)
-        ecfg = load_emulator_config()
+        ecfg = run_emulator_config(log)
         a3 = table_a3()
         points = sorted({(w["set_point_mm"], w["load_kg"]) for w in windows}, key=lambda p: (p[1], p[0]))
         rows = []
