@@ -131,9 +131,9 @@ def test_six_kg_on_the_platform_completes_both_movements_at_three_times_the_thes
 @pytest.mark.hil
 def test_a_six_kg_platform_stays_physics_at_twice_the_emulators_step():
     """The case that ran away under MuJoCo's implicitfast at a 500 us step (legs at 1-3 m/s,
-    FORCE_LIMIT within 0.4 s of the circle) completes under the emulator's Euler integrator;
-    the same integrator keeps a sealed 6 kg platform from diverging (docs/MEASUREMENTS.md
-    "The emulator's integrator")."""
+    FORCE_LIMIT within 0.4 s of the circle) completes under the emulator's Euler integrator
+    (the sealed platform that implicitfast let diverge: docs/MEASUREMENTS.md "The emulator's
+    integrator")."""
     emulator = load_config(overrides={"hexapod": {"mujoco_timestep_us": 500.0, "hydraulic_substeps": 4}})
     overrides = {s: dict(v) for s, v in PlatformMovement.controller_overrides.items()}
     overrides["hexapod"] = {"payload_kg": 6.0}
