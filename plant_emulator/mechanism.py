@@ -28,7 +28,7 @@ TIMESTEP_S = 0.0005
 CONNECT_SOLREF = "0.002 1"
 CONNECT_SOLIMP = "0.9999 0.9999 0.0001 0.5 2"
 # Semi-implicit Euler (joint damping implicit: the seals' friction slope). Under implicitfast
-# a sealed platform carrying 6 kg at 25 bar diverged within 50 ms, at 250 and 125 us steps
+# a sealed platform carrying 6 kg at 25 bar diverged within 0.1 s, at 250 and 125 us steps
 # (docs/MEASUREMENTS.md "The emulator's integrator").
 INTEGRATOR = "Euler"
 STOP_MARGIN_M = 0.001

@@ -115,14 +115,18 @@ def test_design_modes_prints_the_closed_loop(capsys):
     assert doc["closed_loop"] and all(m["damping_ratio"] >= MIN_DAMPING for m in doc["closed_loop"])
 
 
+def _six_kg_controller():
+    """The pm scenarios' controller config with 6 kg declared."""
+    overrides = {s: dict(v) for s, v in PlatformMovement.controller_overrides.items()}
+    overrides["hexapod"] = {"payload_kg": 6.0}
+    return load_controller_config(overrides=overrides)
+
+
 @pytest.mark.hil
 def test_six_kg_on_the_platform_completes_both_movements_at_three_times_the_thesis_timing():
     """In process, the emulator's hexapod carrying 6 kg (declared to the controller), both
     movements at 3 x the thesis's timing: no fault, within 10 mm."""
-    emulator = load_config()
-    overrides = {s: dict(v) for s, v in PlatformMovement.controller_overrides.items()}
-    overrides["hexapod"] = {"payload_kg": 6.0}
-    controller = load_controller_config(overrides=overrides)
+    emulator, controller = load_config(), _six_kg_controller()
     for motion in thesis_motions().values():
         run = run_movement(controller, emulator, motion, payload_kg=6.0, time_scale=3.0)
         assert run.completed, (motion.name, run.fault)
@@ -135,10 +139,7 @@ def test_a_six_kg_platform_stays_physics_at_twice_the_emulators_step():
     FORCE_LIMIT within 0.4 s of the circle) completes under the emulator's Euler integrator
     (docs/MEASUREMENTS.md "The emulator's integrator")."""
     emulator = load_config(overrides={"hexapod": {"mujoco_timestep_us": 500.0, "hydraulic_substeps": 4}})
-    overrides = {s: dict(v) for s, v in PlatformMovement.controller_overrides.items()}
-    overrides["hexapod"] = {"payload_kg": 6.0}
-    run = run_movement(load_controller_config(overrides=overrides), emulator, thesis_motions()["circle"],
-                       payload_kg=6.0, time_scale=3.0)
+    run = run_movement(_six_kg_controller(), emulator, thesis_motions()["circle"], payload_kg=6.0, time_scale=3.0)
     assert run.completed, run.fault
     assert np.max(run.max_error_m) < 0.010
 
