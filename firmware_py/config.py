@@ -17,8 +17,8 @@ from physics import hydraulics as hy
 from physics import lugre
 from physics.actuator import cylinder_areas
 from physics.constants import BAR, MM
-from protocol.errors import UserInputError
-from protocol.tomlconfig import TABLE, load_layered
+from program.errors import UserInputError
+from program.tomlconfig import TABLE, load_layered
 
 RANGES: dict[str, dict[str, object]] = {
     "timing": {

@@ -16,27 +16,26 @@ import math
 import numpy as np
 from numba import njit
 
+from firmware_py.config import ControllerConfig
+from firmware_py.hostlink import HostLink
+from firmware_py.mechanics.geometry import Geometry, default_geometry
+from firmware_py.motion_control.computed_torque import ComputedTorque, LegComputedTorque
+from firmware_py.motion_control.excitation import TEST_MODES, IdentificationSignal
+from firmware_py.motion_control.joint_space import COMPUTED_TORQUE, MODEL_BASED, JointController
+from firmware_py.motion_control.reference import Reference
+from firmware_py.motion_control.trajectory import through_points
+from firmware_py.supervision.monitors import FrameMonitor, LimitMonitor, LoopMonitor, NodeMonitor
+from firmware_py.supervision.plausibility import AttitudeCrossCheck, FrozenLoadCells, MotionPlausibility, SupplyPressure
+from firmware_py.supervision.residuals import ActuatorResiduals, ChamberPrediction, SpoolResidual, sample_floor_pa
+from firmware_py.supervision.stopping import ControlledStop
+from firmware_py.supervision.supervisor import ACTIVE, LATCHED, Action, Supervisor
+from firmware_py.supervision.waypoints import HexapodCheck, TestbenchCheck, WaypointQueue
 from physics import hydraulics as hy
 from physics.actuator import piston_force
 from physics.constants import BAR, GRAVITY_M_S2
 from protocol.dbc import signal_scale
 from protocol.enums import Ack, Command, Fault, State, TestMode, ValveState, WaypointFlag
-
-from .computed_torque import ComputedTorque, LegComputedTorque
-from .config import ControllerConfig
-from .control import COMPUTED_TORQUE, MODEL_BASED, JointController
-from .geometry import Geometry, default_geometry
-from .hostlink import HostLink
-from .identification import TEST_MODES, IdentificationSignal
-from .interfaces import Measurements, ValveCommands
-from .monitors import FrameMonitor, LimitMonitor, LoopMonitor, NodeMonitor
-from .plausibility import AttitudeCrossCheck, FrozenLoadCells, MotionPlausibility, SupplyPressure
-from .reference import Reference
-from .residuals import ActuatorResiduals, ChamberPrediction, SpoolResidual, sample_floor_pa
-from .stopping import ControlledStop
-from .supervisor import ACTIVE, LATCHED, Action, Supervisor
-from .trajectory import through_points
-from .waypoints import HexapodCheck, TestbenchCheck, WaypointQueue
+from protocol.interfaces import Measurements, ValveCommands
 
 RIGS = ("testbench", "hexapod")
 MOTION_COMMANDS = (Command.ENABLE, Command.HOME, Command.PARK, Command.START)
@@ -53,7 +52,7 @@ class Controller:
         self.hexapod = rig == "hexapod"
         self.n = n = 6 if self.hexapod else 1
         if self.hexapod:
-            from .platform import PlatformModel
+            from firmware_py.mechanics.platform import PlatformModel
             self.geometry = (geometry or default_geometry()).with_payload(cfg.hexapod_payload_kg)
             self.platform = PlatformModel(self.geometry, cfg.dk_tolerance_m, cfg.dk_max_iterations, period_s)
             self.stroke_m = self.geometry.stroke_m

@@ -27,9 +27,9 @@ import can
 import numpy as np
 
 from firmware_py.config import load_config
-from firmware_py.control import CONTROLLER_NAMES
 from firmware_py.controller import Controller
-from firmware_py.loop import ControllerLoop
+from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
+from firmware_py.runtime.loop import ControllerLoop
 from protocol import e2e
 from protocol.codec import CODECS, FrameDecoder, RxStatus
 from protocol.enums import ValveState

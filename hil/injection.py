@@ -3,7 +3,7 @@ against the DBC's EMU_CTRL (its FAULT value table and its signals' ranges)."""
 
 from __future__ import annotations
 
-from protocol.errors import UserInputError
+from program.errors import UserInputError
 
 
 def parse_faults(text: str | None, option: str = "--inject") -> tuple[tuple[str, int, int], ...]:

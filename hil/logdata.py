@@ -17,11 +17,11 @@ from pathlib import Path
 import can
 import numpy as np
 
+from program.errors import UserInputError
 from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import NmtCommand
-from protocol.errors import UserInputError
 
 LOG_SUFFIXES = (".blf", ".asc")
 # the emulator sends EMU_TRUTH right after the frames of the same SYNC; a stall of it in

@@ -6,9 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from hil.logdata import LogData
 from protocol.enums import AckKind, Command, Fault, State
-
-from .logdata import LogData
 
 
 class LogView:

@@ -9,9 +9,8 @@ import math
 
 import numpy as np
 
+from hil.logdata import LogData
 from protocol.enums import Fault, State
-
-from .logdata import LogData
 
 SETTLING_BAND = 0.05          # settling time: last exit from +/- 5 % of the step
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .logdata import LogData
-from .metrics import ctrl_status_timing
-from .scenario import Scenario
+from hil.logdata import LogData
+from hil.metrics import ctrl_status_timing
+from hil.scenario import Scenario
 
 
 def write_outputs(scenario: Scenario, log: LogData, out: Path, extra: dict, rate_hz: float = 500.0,

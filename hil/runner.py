@@ -17,18 +17,17 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from firmware_py.control import CONTROLLER_NAMES
+from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
+from hil.host import Host, HostError
+from hil.logdata import read_log
+from hil.metrics import faults_in_windows
+from hil.processes import Child, ChildFailed, describe_status
+from hil.report import write_outputs
+from hil.scenario import Scenario
+from program.errors import UserInputError
+from program.realtime import freeze_gc, thaw_gc
 from protocol.bus import BusSpec, default_bus_spec, open_bus, parse_bus_spec
 from protocol.enums import Ack, Command, EmuCommand, EmuFault, Fault, State
-from protocol.errors import UserInputError
-from protocol.realtime import freeze_gc, thaw_gc
-
-from .host import Host, HostError
-from .logdata import read_log
-from .metrics import faults_in_windows
-from .processes import Child, ChildFailed, describe_status
-from .report import write_outputs
-from .scenario import Scenario
 
 LOG_NAME = "run.blf"
 LOCKSTEP_EMULATOR_SYNC_TIMEOUT_PERIODS = 5000      # wall clock: > the controller's 50 ms lockstep wait

@@ -7,9 +7,8 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from protocol.errors import UserInputError
-
-from .logdata import LogData
+from hil.logdata import LogData
+from program.errors import UserInputError
 
 
 @dataclass

@@ -22,7 +22,7 @@ import math
 import numba
 import numpy as np
 
-from .constants import MM
+from physics.constants import MM
 
 # parameter vector, SI
 A0_POS = 0      # alpha0+ [N]

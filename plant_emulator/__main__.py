@@ -2,12 +2,12 @@
 
 import sys
 
-from physics.numba_cache import configure
+from program.numba_cache import configure
 
-configure()     # before any kernel is defined (see physics/numba_cache.py)
+configure()     # before any kernel is defined (see program/numba_cache.py)
 
-from plant_emulator.cli import configure_parser  # noqa: E402
-from protocol.cliutil import OneLineArgumentParser, run  # noqa: E402
+from plant_emulator.process import configure_parser  # noqa: E402
+from program.cliutil import OneLineArgumentParser, run  # noqa: E402
 
 PROG = "python -m plant_emulator"
 

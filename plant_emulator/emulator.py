@@ -31,16 +31,15 @@ import mujoco
 import numpy as np
 
 from physics import hydraulics as hy
+from plant_emulator.params import EmulatorConfig
+from plant_emulator.valve_node import Emergency, ValveDriver, ValveState
+from program.realtime import percentiles_us
 from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import EmuCommand, EmuFault, NmtCommand, NmtState
 from protocol.nodes import CONTROLLER_NODE, IMU_NODE, rig_nodes
 from protocol.outbox import Outbox
-from protocol.realtime import percentiles_us
-
-from .params import EmulatorConfig
-from .valve_node import Emergency, ValveDriver, ValveState
 
 # per SYNC (seconds each, `phase_s`): from the SYNC's handling to the last sampled frame sent;
 # the valve nodes' SYNC handling; sampling, encoding and sending; the physics step; the whole

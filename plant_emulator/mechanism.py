@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from .rig_geometry import RigGeometry
+from plant_emulator.rig_geometry import RigGeometry
 
 TIMESTEP_S = 0.0005
 # Equality constraints nearly hard: impedance 0.9999 and a 2 ms reference time constant

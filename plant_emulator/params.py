@@ -18,9 +18,9 @@ import numpy as np
 from physics import hydraulics as hy
 from physics import lugre
 from physics.constants import BAR, MM
-from protocol.errors import UserInputError
-from protocol.tomlconfig import load_layered
-from protocol.tomlconfig import merge as _merge
+from program.errors import UserInputError
+from program.tomlconfig import load_layered
+from program.tomlconfig import merge as _merge
 
 # (low, high) per key; ints are declared with int bounds. Lists are checked separately.
 RANGES: dict[str, dict[str, tuple]] = {

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from physics.constants import GRAVITY_M_S2, KG_MM2, MM
-from protocol.errors import UserInputError
+from program.errors import UserInputError
 
 
 class RigGeometryError(UserInputError):

@@ -40,10 +40,9 @@ import numpy as np
 from physics import hydraulics as hy
 from physics.constants import GRAVITY_M_S2
 from physics.lugre import force_split, z_step
-
-from .mechanism import Mechanism
-from .params import EmulatorConfig
-from .rig_geometry import RigGeometry, read_rig_geometry
+from plant_emulator.mechanism import Mechanism
+from plant_emulator.params import EmulatorConfig
+from plant_emulator.rig_geometry import RigGeometry, read_rig_geometry
 
 SUPPLY_LOSS_TIME_CONSTANT_S = 0.05    # supply pressure decay when the power unit is lost
 # MuJoCo's warnings that it reset a diverged simulation, or met a non-finite motor force

@@ -28,8 +28,8 @@ from pathlib import Path
 import can
 from can.interfaces.udp_multicast.utils import pack_message, unpack_message
 
-from . import udpfilter
-from .errors import UserInputError
+from program.errors import UserInputError
+from protocol import udpfilter
 
 BUS_FORMS = ("socketcan:<interface> | udp_multicast:<group>[:<port>] "
              "| udp_multicast:[<ipv6-group>]:<port> | virtual:<name>")

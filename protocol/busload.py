@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
-from .dbc import CONTROLLER_NODE, Schedule, schedules, sync_counter_overflow
+from protocol.dbc import CONTROLLER_NODE, Schedule, schedules, sync_counter_overflow
 
 MAX_LOAD = 0.80
 MIN_COMPUTE_WINDOW_US = 400.0

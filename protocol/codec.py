@@ -29,9 +29,9 @@ from enum import IntEnum
 
 import numpy as np
 
-from . import e2e
-from .dbc import Schedule, load_database, schedule_of, schedules
-from .e2e import RxStatus
+from protocol import e2e
+from protocol.dbc import Schedule, load_database, schedule_of, schedules
+from protocol.e2e import RxStatus
 
 STANDARD_ID_MASK = 0x7FF          # the protocol uses 11-bit ids only
 

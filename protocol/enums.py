@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from enum import IntEnum, IntFlag
 
-from .dbc import load_database
+from protocol.dbc import load_database
 
 
 def value_table(message: str, signal: str) -> dict[int, str]:

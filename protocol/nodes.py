@@ -5,7 +5,7 @@ controller. The host and the emulator's own frames have no node id.
 
 from __future__ import annotations
 
-from .dbc import load_database
+from protocol.dbc import load_database
 
 
 def _node_ids() -> dict[str, int]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import can
 
-from .codec import CODECS, EncodeStatus
+from protocol.codec import CODECS, EncodeStatus
 
 
 class Outbox:

@@ -1,9 +1,9 @@
 """Suite-wide settings: a deterministic Hypothesis profile, and a record of what pytest
 collected so `test_suite_integrity` can prove nothing was silently left out."""
 
-from physics.numba_cache import configure
+from program.numba_cache import configure
 
-configure()     # before any kernel is defined (see physics/numba_cache.py)
+configure()     # before any kernel is defined (see program/numba_cache.py)
 
 import pytest  # noqa: E402
 from hypothesis import HealthCheck, settings  # noqa: E402

@@ -9,13 +9,13 @@ from __future__ import annotations
 import json
 import sys
 
-from physics.numba_cache import configure
+from program.numba_cache import configure
 
 configure(prune=False)
 
 from numba.core.registry import CPUDispatcher  # noqa: E402
 
-from firmware_py.control import CONTROLLER_NAMES  # noqa: E402
+from firmware_py.motion_control.joint_space import CONTROLLER_NAMES  # noqa: E402
 from protocol.enums import Command, State  # noqa: E402
 from tests.rig_loop import cycles, make_loop, send_waypoint  # noqa: E402
 

@@ -4,9 +4,9 @@ supervisor, allocation and identification tests drive."""
 from __future__ import annotations
 
 from firmware_py.config import load_config
-from firmware_py.control import CONTROLLER_NAMES
 from firmware_py.controller import Controller
-from firmware_py.loop import ControllerLoop
+from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
+from firmware_py.runtime.loop import ControllerLoop
 from hil.design.simulate import send_waypoint  # noqa: F401  (the tests' one way to send a waypoint)
 from protocol.enums import State
 from protocol.nodes import rig_nodes

@@ -9,10 +9,10 @@ import pytest
 from scipy.interpolate import RegularGridInterpolator
 from scipy.spatial.transform import Rotation
 
-from firmware_py.computed_torque import pose_error_into, valve_map_eval
 from firmware_py.config import load_config
-from firmware_py.control import COMPUTED_TORQUE, CONTROLLER_NAMES
 from firmware_py.controller import Controller
+from firmware_py.motion_control.computed_torque import pose_error_into, valve_map_eval
+from firmware_py.motion_control.joint_space import COMPUTED_TORQUE, CONTROLLER_NAMES
 from hil.cli import main
 from protocol.enums import Ack, Command, State
 

@@ -6,7 +6,7 @@ import pytest
 from scipy.interpolate import CubicSpline
 
 from firmware_py.config import load_config
-from firmware_py.control import (
+from firmware_py.motion_control.joint_space import (
     ADAPTIVE,
     PI,
     ST_KI,

@@ -5,8 +5,8 @@ in-process fake; zero growth of NumPy-domain traces and of traced memory."""
 import numpy as np
 import pytest
 
-from firmware_py.control import CONTROLLER_NAMES
-from firmware_py.trajectory import through_points
+from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
+from firmware_py.motion_control.trajectory import through_points
 from protocol.enums import State
 from tests.alloc_probe import allocations
 from tests.rig_loop import make_loop

@@ -5,9 +5,9 @@ and `hil run --profile` print the table from the processes' summaries."""
 from __future__ import annotations
 
 from firmware_py.config import load_config
-from firmware_py.control import CONTROLLER_NAMES
 from firmware_py.controller import Controller
-from firmware_py.loop import PHASES, ControllerLoop
+from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
+from firmware_py.runtime.loop import PHASES, ControllerLoop
 from hil.report import format_budget
 from plant_emulator.emulator import SYNC_PHASES, Emulator
 from plant_emulator.params import load_config as load_emulator_config

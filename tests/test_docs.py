@@ -10,7 +10,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = sorted((ROOT / "docs").glob("*.md"))
-PACKAGES = ("physics", "protocol", "firmware_py", "plant_emulator", "hil")
+PACKAGES = ("program", "physics", "protocol", "firmware_py", "plant_emulator", "hil")
 DOTTED = re.compile(r"`((?:" + "|".join(PACKAGES) + r")(?:\.\w+)+)`")
 
 

@@ -7,9 +7,9 @@ from importlib import resources
 import numpy as np
 import pytest
 
-from firmware_py.dynamics import InverseDynamics
-from firmware_py.geometry import GeometryError, default_geometry, parse_geometry
-from firmware_py.rotation import rpy_to_quat
+from firmware_py.mechanics.dynamics import InverseDynamics
+from firmware_py.mechanics.geometry import GeometryError, default_geometry, parse_geometry
+from firmware_py.mechanics.rotation import rpy_to_quat
 from hil.tools.validate_dynamics import forward_run, table_10_2, validate
 from plant_emulator.mechanism import Mechanism
 from plant_emulator.rig_geometry import read_rig_geometry
@@ -27,7 +27,7 @@ def _statics_by_hand(geometry, position, quat):
     at B vanish along u1 and u2. Rod along its axis: tau_i = -(F_i + m_rod g) . u3.
     Platform: sum of -F_i plus its weight is zero, and so are the moments about P.
     """
-    from firmware_py.rotation import quat_to_matrix
+    from firmware_py.mechanics.rotation import quat_to_matrix
     g = geometry.gravity_m_s2
     rot = quat_to_matrix(quat)
     rows, rhs = [], []
@@ -146,8 +146,8 @@ def test_the_declared_payload_is_in_every_dynamics_model_of_the_controller():
     """[hexapod] payload_kg: a point mass at the platform's centre of mass, in the platform
     model, computed torque and the waypoints' force check alike."""
     from firmware_py.config import load_config
-    from firmware_py.control import CONTROLLER_NAMES
     from firmware_py.controller import Controller
+    from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
     base = default_geometry().platform.mass_kg
     ctl = Controller(load_config(overrides={"hexapod": {"payload_kg": 3.0}}), "hexapod", 0.002,
                      CONTROLLER_NAMES["computed-torque"])

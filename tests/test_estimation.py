@@ -9,7 +9,7 @@ from filterpy.kalman import KalmanFilter
 from scipy import signal
 
 from firmware_py.config import load_config
-from firmware_py.estimation import (
+from firmware_py.motion_control.estimation import (
     adaptive_r,
     filter_step,
     kalman_model,

@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from hil.design.friction import (
+from hil.design.friction_fit import (
     SteadySide,
     bristle_forces,
     cylinder_friction,
@@ -170,9 +170,9 @@ def _presliding_in_process(start_cycles: int, force_filter_hz: float | None = No
     the bristle fit on the quantised record read as the analysis reads it (its code crossings)
     and on the true displacement."""
     from firmware_py.config import load_config
-    from firmware_py.control import CONTROLLER_NAMES
     from firmware_py.controller import Controller
-    from hil.design.friction import displacement_from_crossings, steady_sides
+    from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
+    from hil.design.friction_fit import displacement_from_crossings, steady_sides
     from hil.scenarios.friction import _at_rest
     from physics import hydraulics as hy
     from physics.actuator import piston_force

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from firmware_py.config import load_config
-from firmware_py.control import CONTROLLER_NAMES, JP_KI_SCALE, JP_KP_SCALE, JP_PI_KI, JP_PI_KP, ST_KP
 from firmware_py.controller import Controller
+from firmware_py.motion_control.joint_space import CONTROLLER_NAMES, JP_KI_SCALE, JP_KP_SCALE, JP_PI_KI, JP_PI_KP, ST_KP
 from plant_emulator.params import load_config as load_emulator_config
 from plant_emulator.rigs import HexapodRig
 from protocol.enums import State

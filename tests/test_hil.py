@@ -8,7 +8,7 @@ import can
 import cantools
 import pytest
 
-from firmware_py.loop import PEAK_KEYS
+from firmware_py.runtime.loop import PEAK_KEYS
 from hil.logdata import frames_by_sender, frames_counted_by_senders, read_log
 from protocol.dbc import dbc_path
 from tests.cli_run import hydrapod

@@ -1,11 +1,11 @@
 """The reference the HIL analysis rebuilds from a log equals the controller's own, cycle by
 cycle: a move started at once, a step queued to start when it ends, then a multi-point
-trajectory queued the same way (the rules of firmware_py/reference.py and waypoints.py)."""
+trajectory queued the same way (the rules of firmware_py/motion_control/reference.py and waypoints.py)."""
 
 import numpy as np
 
 from hil.logdata import Event, LogData, Series
-from hil.reference import rebuild
+from hil.reference_rebuild import rebuild
 from protocol.enums import Ack, AckKind, Command, WaypointFlag
 from tests.rig_loop import make_loop, send_waypoint
 

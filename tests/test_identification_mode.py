@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from firmware_py.config import load_config
-from firmware_py.control import CONTROLLER_NAMES
 from firmware_py.controller import Controller
-from firmware_py.identification import IdentificationSignal
+from firmware_py.motion_control.excitation import IdentificationSignal
+from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
 from physics.actuator import piston_force
 from protocol.enums import Ack, Command, Fault, State, TestMode
 from tests.alloc_probe import allocations

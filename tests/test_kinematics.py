@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from firmware_py.geometry import default_geometry
-from firmware_py.kinematics import (
+from firmware_py.mechanics.geometry import default_geometry
+from firmware_py.mechanics.kinematics import (
     DirectKinematics,
     constraint_into,
     constraint_jacobian_into,
@@ -13,7 +13,7 @@ from firmware_py.kinematics import (
     jacobian_batch,
     jacobian_into,
 )
-from firmware_py.rotation import (
+from firmware_py.mechanics.rotation import (
     axis_angle_to_quat,
     quat_multiply,
     quat_to_matrix,
@@ -22,7 +22,7 @@ from firmware_py.rotation import (
     rotation_angle_between,
     rpy_to_quat,
 )
-from firmware_py.workspace import (
+from firmware_py.mechanics.workspace import (
     MIN_CONDITION_INDEX,
     OUT_CLEARANCE,
     OUT_CONDITION,

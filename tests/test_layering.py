@@ -1,5 +1,7 @@
-"""The packages' layering (docs/ARCHITECTURE.md): each imports only those below it, the
-plant nothing of the controller, and no two modules import each other."""
+"""The layering (docs/ARCHITECTURE.md): each package imports only those below it, the plant
+nothing of the controller; inside firmware_py and hil each part imports only the parts on
+the floors below it; and no two modules import each other. Imports inside functions count.
+"""
 
 from __future__ import annotations
 
@@ -10,11 +12,35 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 ALLOWED = {
-    "physics": set(),
-    "protocol": {"physics"},
-    "firmware_py": {"physics", "protocol"},
-    "plant_emulator": {"physics", "protocol"},
-    "hil": {"physics", "protocol", "firmware_py", "plant_emulator"},
+    "program": set(),
+    "physics": {"program"},
+    "protocol": {"program", "physics"},
+    "firmware_py": {"program", "physics", "protocol"},
+    "plant_emulator": {"program", "physics", "protocol"},
+    "hil": {"program", "physics", "protocol", "firmware_py", "plant_emulator"},
+}
+# the parts of a package (a subpackage or a module) floor by floor, lowest first: a part
+# imports parts of lower floors only (and itself)
+FLOORS = {
+    "firmware_py": [
+        {"config"},                                   # its configuration
+        {"mechanics"},                                # the mechanism's model
+        {"motion_control"},                           # estimation and control
+        {"supervision"},                              # faults, limits, waypoints' admission
+        {"hostlink", "rig_model", "status"},          # the controller's ports and its rig
+        {"controller"},                               # one cycle of the controller
+        {"runtime"},                                  # the controller on the bus
+        {"__main__"},
+    ],
+    "hil": [
+        {"logdata", "plotting", "injection", "identification", "experiments", "host", "processes", "fuzz"},
+        {"logquery", "metrics", "monitor", "reference_rebuild", "scenario"},
+        {"design", "report"},
+        {"runner", "tools"},
+        {"scenarios"},
+        {"faults", "campaign"},
+        {"cli"},
+    ],
 }
 
 
@@ -24,7 +50,8 @@ def _module_name(path: Path, root: Path = ROOT) -> str:
 
 
 def imports_of(path: Path, root: Path = ROOT) -> set[str]:
-    """Absolute names of the project's modules `path` imports (relative imports resolved)."""
+    """Absolute names of the project's modules `path` imports, at any depth of the file
+    (inside functions too; relative imports resolved)."""
     tree = ast.parse(path.read_text(), filename=str(path))
     package = _module_name(path, root).split(".")
     if path.name != "__init__.py":
@@ -42,16 +69,65 @@ def imports_of(path: Path, root: Path = ROOT) -> set[str]:
     return {name for name in out if name.split(".")[0] in ALLOWED}
 
 
-def project_modules():
+def project_modules(root: Path = ROOT):
     for package in ALLOWED:
-        for path in sorted((ROOT / package).rglob("*.py")):
+        for path in sorted((root / package).rglob("*.py")):
             yield package, path
+
+
+def wrong_package_imports(root: Path = ROOT) -> list[tuple[str, str]]:
+    return [(str(path.relative_to(root)), name) for package, path in project_modules(root)
+            for name in sorted(imports_of(path, root)) if name.split(".")[0] not in ALLOWED[package] | {package}]
+
+
+def floor_of(package: str, part: str) -> int:
+    for k, floor in enumerate(FLOORS[package]):
+        if part in floor:
+            return k
+    raise KeyError(f"{package}.{part} is on no floor of tests/test_layering.py's FLOORS")
+
+
+def wrong_floor_imports(root: Path = ROOT) -> list[tuple[str, str]]:
+    """(file, imported name) for every import inside firmware_py or hil that does not go down."""
+    wrong = []
+    for package, path in project_modules(root):
+        if package not in FLOORS:
+            continue
+        parts = _module_name(path, root).split(".")
+        if len(parts) < 2:
+            continue                                   # the package's __init__
+        here = floor_of(package, parts[1])
+        for name in sorted(imports_of(path, root)):
+            target = name.split(".")
+            if target[0] != package or len(target) < 2 or target[1] == parts[1]:
+                continue
+            if not (root / package / target[1]).is_dir() and not (root / package / f"{target[1]}.py").is_file():
+                continue                               # a name imported from the package's __init__
+            if floor_of(package, target[1]) >= here:
+                wrong.append((str(path.relative_to(root)), name))
+    return wrong
 
 
 @pytest.mark.parametrize("package", list(ALLOWED))
 def test_each_package_imports_only_those_below_it(package):
-    wrong = [(str(path.relative_to(ROOT)), name) for pkg, path in project_modules() if pkg == package
-             for name in sorted(imports_of(path)) if name.split(".")[0] not in ALLOWED[package] | {package}]
+    wrong = [(path, name) for path, name in wrong_package_imports() if path.startswith(package + "/")]
+    assert not wrong, wrong
+
+
+def test_every_part_is_on_a_floor():
+    for package in FLOORS:
+        for path in sorted((ROOT / package).iterdir()):
+            if path.name.startswith(("_", ".")) and path.name != "__main__.py" or path.name in ("data",):
+                continue
+            if path.is_dir() and not (path / "__init__.py").exists():
+                continue
+            if path.is_file() and path.suffix != ".py":
+                continue
+            floor_of(package, path.stem)
+
+
+def test_inside_firmware_py_and_hil_every_import_goes_down():
+    wrong = wrong_floor_imports()
     assert not wrong, wrong
 
 
@@ -62,10 +138,31 @@ def test_no_two_modules_import_each_other():
     assert not cycles, cycles
 
 
+def _plant(tmp_path: Path, relative: str, text: str) -> None:
+    """A copy of the tree's packages with one more file."""
+    for package in ALLOWED:
+        for path in (ROOT / package).rglob("*.py"):
+            copy = tmp_path / path.relative_to(ROOT)
+            copy.parent.mkdir(parents=True, exist_ok=True)
+            copy.write_text(path.read_text())
+    planted = tmp_path / relative
+    planted.write_text(text)
+
+
 def test_the_check_sees_an_upward_import(tmp_path):
     """The checker itself: a module of the plant importing the controller is found."""
-    bad = tmp_path / "plant_emulator" / "probe.py"
-    bad.parent.mkdir()
-    bad.write_text("from firmware_py.kinematics import ik_into\nfrom . import hydraulics\n")
-    names = imports_of(bad, tmp_path)
-    assert "firmware_py.kinematics" in names and "plant_emulator.hydraulics" in names
+    _plant(tmp_path, "plant_emulator/probe.py", "from firmware_py.mechanics.kinematics import ik_into\n")
+    assert ("plant_emulator/probe.py", "firmware_py.mechanics.kinematics") in wrong_package_imports(tmp_path)
+
+
+def test_the_check_sees_a_back_edge_inside_hil(tmp_path):
+    """The design tools importing a scenario (a floor above them) is found."""
+    _plant(tmp_path, "hil/design/probe.py", "from hil.scenarios.pm import PmCircle\n")
+    assert ("hil/design/probe.py", "hil.scenarios.pm") in wrong_floor_imports(tmp_path)
+
+
+def test_the_check_sees_an_upward_import_inside_a_function(tmp_path):
+    """An import hidden in a function body that goes up a floor is found."""
+    _plant(tmp_path, "firmware_py/mechanics/probe.py",
+           "def f():\n    from firmware_py.controller import Controller\n    return Controller\n")
+    assert ("firmware_py/mechanics/probe.py", "firmware_py.controller") in wrong_floor_imports(tmp_path)

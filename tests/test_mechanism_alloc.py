@@ -2,10 +2,10 @@
 
 import numpy as np
 
-from firmware_py.dynamics import InverseDynamics
-from firmware_py.geometry import default_geometry
-from firmware_py.kinematics import DirectKinematics, ik_batch
-from hil.motions import diagonal_motion
+from firmware_py.mechanics.dynamics import InverseDynamics
+from firmware_py.mechanics.geometry import default_geometry
+from firmware_py.mechanics.kinematics import DirectKinematics, ik_batch
+from hil.experiments import diagonal_motion
 from tests.alloc_probe import allocations
 
 GEOMETRY = default_geometry()

@@ -4,11 +4,11 @@ DK pose estimate, gravity along the legs and the reference forces against Invers
 import numpy as np
 import pytest
 
-from firmware_py.dynamics import InverseDynamics, gauss_solve_into
-from firmware_py.geometry import default_geometry
-from firmware_py.kinematics import ik_batch
-from firmware_py.platform import PlatformModel
-from firmware_py.rotation import rpy_to_quat
+from firmware_py.mechanics.dynamics import InverseDynamics, gauss_solve_into
+from firmware_py.mechanics.geometry import default_geometry
+from firmware_py.mechanics.kinematics import ik_batch
+from firmware_py.mechanics.platform import PlatformModel
+from firmware_py.mechanics.rotation import rpy_to_quat
 
 G = default_geometry()
 

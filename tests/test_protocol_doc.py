@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from e2e.p01 import E2E_P01_DATAID_BOTH, e2e_p01_protect
 
-from firmware_py.supervisor import Supervisor
+from firmware_py.supervision.supervisor import Supervisor
 from protocol.codec import CODECS
 from protocol.enums import Ack, Command, State
 

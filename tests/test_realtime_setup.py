@@ -1,4 +1,4 @@
-"""The realtime process set-up (protocol.realtime): each measure is applied, or its reason is
+"""The realtime process set-up (program.realtime): each measure is applied, or its reason is
 returned for the process to log; none is fatal."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import gc
 import subprocess
 import sys
 
-from protocol import realtime
+from program import realtime
 
 
 def test_freeze_gc_freezes_and_disables_and_thaw_restores():
@@ -32,7 +32,7 @@ def test_a_refused_scheduling_policy_is_a_reason_not_an_exception():
 
 
 def test_the_emulator_applies_each_measure_or_logs_why_not():
-    code = ("import os; from plant_emulator.params import load_config; from plant_emulator.cli import "
+    code = ("import os; from plant_emulator.params import load_config; from plant_emulator.process import "
             "realtime_setup; print(realtime_setup(load_config()), os.sched_getscheduler(0) == os.SCHED_FIFO, "
             "os.sched_getparam(0).sched_priority)")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
@@ -47,7 +47,7 @@ def test_the_emulator_applies_each_measure_or_logs_why_not():
 
 
 def test_the_controller_daemon_applies_each_measure_or_logs_why_not():
-    code = ("from firmware_py.config import load_config; from firmware_py.daemon import realtime_setup; "
+    code = ("from firmware_py.config import load_config; from firmware_py.runtime.daemon import realtime_setup; "
             "print(realtime_setup(load_config(), True))")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
@@ -60,7 +60,7 @@ def test_the_controller_daemon_applies_each_measure_or_logs_why_not():
 def test_a_lockstep_controller_asks_for_the_cpu_latency_alone():
     """Lockstep: no realtime scheduling or memory locking, but the wake-up latency request
     (each cycle waits on the other process's frames), applied or logged."""
-    code = ("from firmware_py.config import load_config; from firmware_py.daemon import realtime_setup; "
+    code = ("from firmware_py.config import load_config; from firmware_py.runtime.daemon import realtime_setup; "
             "print(realtime_setup(load_config(), False))")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr

@@ -1,4 +1,4 @@
-"""The actuator residuals (firmware_py/residuals.py) in the controller's cycle, on the
+"""The actuator residuals (firmware_py/supervision/residuals.py) in the controller's cycle, on the
 emulator's hexapod in process: quiet on a healthy move (margin >= 1.5), the leg named when
 its spool sticks (within 25 cycles) or its rod seizes (30 cycles measured: the valve first
 has to open against the blocked piston), SUPPLY_PRESSURE when the supply is lost; the valves'
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from firmware_py.config import load_config
-from firmware_py.control import CONTROLLER_NAMES
 from firmware_py.controller import Controller
-from firmware_py.residuals import (
+from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
+from firmware_py.supervision.residuals import (
     PRESSURE_SIGMAS,
     ActuatorResiduals,
     ChamberPrediction,
@@ -184,7 +184,7 @@ def test_the_controlled_stop_keeps_the_platform_near_its_path():
 
 
 def test_frozen_limit_follows_from_the_noise_and_the_bit():
-    from firmware_py.plausibility import FROZEN_FALSE_ALARM, frozen_limit
+    from firmware_py.supervision.plausibility import FROZEN_FALSE_ALARM, frozen_limit
     n = frozen_limit(0.3, 0.1)
     p = 0.1 / (2 * np.sqrt(np.pi) * 0.3)
     assert p ** n < FROZEN_FALSE_ALARM <= p ** (n - 1) and n == 9
@@ -194,7 +194,7 @@ def test_frozen_limit_follows_from_the_noise_and_the_bit():
 def test_a_healthy_noisy_load_cell_is_never_frozen_a_stuck_one_is():
     """Quantised Gaussian readings (0.3 N on 0.1 N) over 100,000 cycles of six legs: no
     fault; the same reading repeated: the leg after the derived count."""
-    from firmware_py.plausibility import FrozenLoadCells
+    from firmware_py.supervision.plausibility import FrozenLoadCells
     cells = FrozenLoadCells(6, 0.3, 0.1)
     rng = np.random.default_rng(11)
     fresh = np.ones(6, dtype=bool)
@@ -299,7 +299,7 @@ def test_the_prediction_floor_is_two_samples_noise_and_the_wire_step():
 def test_the_supply_band_is_the_flow_gains_spread_through_the_orifice_law():
     """A supply p gives sqrt((p - p_T) / (p_S - p_T)) of the model's flow: the band's edges are
     where that leaves 1 -+ the spread (ratio 1)."""
-    from firmware_py.plausibility import supply_step
+    from firmware_py.supervision.plausibility import supply_step
     tank, drop, spread = 0.9e5, 24.1e5, 0.135
     ps = tank + np.array([(1 - spread) ** 2, (1 + spread) ** 2, 1.0, 0.0]) * drop
     ratio, run = np.zeros(4), np.zeros(4, dtype=np.int64)
@@ -310,7 +310,7 @@ def test_the_supply_band_is_the_flow_gains_spread_through_the_orifice_law():
 
 
 def test_supply_samples_name_the_power_unit_or_the_lone_transducer():
-    from firmware_py.plausibility import SupplyPressure
+    from firmware_py.supervision.plausibility import SupplyPressure
     nominal, tank = 25e5, 0.9e5
     low = np.full(6, nominal)
     monitor = SupplyPressure(6, nominal, tank, 0.135, 3)

@@ -12,9 +12,9 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from firmware_py.hostlink import COMMIT_MAX_WAIT_CYCLES
-from firmware_py.kinematics import DirectKinematics, ik_batch
-from firmware_py.rotation import quat_to_rpy
-from firmware_py.supervisor import Supervisor
+from firmware_py.mechanics.kinematics import DirectKinematics, ik_batch
+from firmware_py.mechanics.rotation import quat_to_rpy
+from firmware_py.supervision.supervisor import Supervisor
 from protocol.dbc import load_database
 from protocol.enums import Ack, AckKind, Command, EmcyCode, Fault, State
 from protocol.nodes import CONTROLLER_NODE, IMU_NODE
@@ -352,7 +352,7 @@ def test_a_recovering_leg_that_goes_further_out_faults():
 
 
 def test_plausibility_window_needs_motion_along_the_command():
-    from firmware_py.plausibility import MotionPlausibility
+    from firmware_py.supervision.plausibility import MotionPlausibility
     check = MotionPlausibility(2, input_min_v=2.0, window=10, travel_min_m=1e-3)
     spool, y = np.array([3.0, -3.0]), np.zeros(2)
     for _ in range(9):                                   # leg 1 follows, leg 2 does not
@@ -373,7 +373,7 @@ def test_plausibility_window_needs_motion_along_the_command():
 def test_plausibility_counts_progress_from_the_furthest_point_back():
     """A heavy load still coasting against a reversed command, then following it, is
     plausible (sha-identification's P-control reversals with 6 kg); coasting, then still, is not."""
-    from firmware_py.plausibility import MotionPlausibility
+    from firmware_py.supervision.plausibility import MotionPlausibility
     check = MotionPlausibility(2, input_min_v=0.5, window=25, travel_min_m=0.5e-3)
     spool, y = np.array([1.0, 1.0]), np.zeros(2)
     for k in range(25):
@@ -410,7 +410,7 @@ def test_a_stuck_encoder_during_a_move_faults_within_half_a_second():
 def test_attitude_kernels_match_scipy(roll, pitch, yaw, axis, angle):
     from scipy.spatial.transform import Rotation
 
-    from firmware_py.rotation import angle_between_matrices, rpy_to_matrix_into
+    from firmware_py.mechanics.rotation import angle_between_matrices, rpy_to_matrix_into
     rot = np.empty((3, 3))
     rpy_to_matrix_into(roll, pitch, yaw, rot)
     oracle = Rotation.from_euler("ZYX", [yaw, pitch, roll])          # R = Rz Ry Rx, the bus's convention
@@ -422,7 +422,7 @@ def test_attitude_kernels_match_scipy(roll, pitch, yaw, axis, angle):
 
 
 def test_attitude_cross_check_needs_samples_in_a_row():
-    from firmware_py.plausibility import AttitudeCrossCheck
+    from firmware_py.supervision.plausibility import AttitudeCrossCheck
     check = AttitudeCrossCheck(limit_rad=math.radians(1.0), samples=3)
     level = np.eye(3)
     assert not check.update(level, 0.0, 0.0, 0.0) and check.angle_rad < 1e-12

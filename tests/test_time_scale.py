@@ -10,7 +10,7 @@ import pytest
 from hil.cli import main
 from hil.runner import RunOptions, run_scenario
 from hil.scenarios import SCENARIOS
-from protocol.errors import UserInputError
+from program.errors import UserInputError
 
 
 @pytest.mark.parametrize("name", ["pm-circle", "pm-diagonal"])

@@ -5,11 +5,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from firmware_py.geometry import default_geometry
-from firmware_py.kinematics import DirectKinematics
-from firmware_py.trajectory import sls_coefficients, through_points
-from firmware_py.workspace import MIN_CONDITION_INDEX, check_poses
-from hil.motions import MOTIONS
+from firmware_py.mechanics.geometry import default_geometry
+from firmware_py.mechanics.kinematics import DirectKinematics
+from firmware_py.mechanics.workspace import MIN_CONDITION_INDEX, check_poses
+from firmware_py.motion_control.trajectory import sls_coefficients, through_points
+from hil.experiments import MOTIONS
 
 GEOMETRY = default_geometry()
 finite = st.floats(-0.3, 0.3)
@@ -80,6 +80,6 @@ def test_named_motions_stay_in_the_usable_workspace(name):
     # the platform reaches every waypoint with the orientation fixed
     starts = np.cumsum([0.0] + [motion.tm_s] * (len(motion.waypoints()) - 1))
     reached, _, _ = traj.sample(starts)
-    from firmware_py.kinematics import ik_batch
+    from firmware_py.mechanics.kinematics import ik_batch
     expected, _ = ik_batch(GEOMETRY, motion.waypoints(), np.tile([1.0, 0, 0, 0], (len(starts), 1)))
     assert np.allclose(reached, expected, atol=1e-12)

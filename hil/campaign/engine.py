@@ -11,10 +11,9 @@ import sys
 import time
 from pathlib import Path
 
-from protocol.errors import UserInputError
-
-from .execute import base_row, run_one
-from .spec import Campaign
+from hil.campaign.execute import base_row, run_one
+from hil.campaign.spec import Campaign
+from program.errors import UserInputError
 
 RESULTS = "results"                    # results.parquet, results.csv
 STATUSES = ("ok", "failed", "hung", "error", "spoiled")

@@ -13,9 +13,8 @@ import sys
 import time
 from pathlib import Path
 
-from firmware_py.loop import PEAK_KEYS
-
-from ..runner import toml_sections
+from firmware_py.runtime.loop import PEAK_KEYS
+from hil.runner import toml_sections
 
 METRICS_PREFIX = "metric."
 CONTROLLER_SUMMARY_KEYS = ("faults", *PEAK_KEYS, "missing_frames")

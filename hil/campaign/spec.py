@@ -48,12 +48,11 @@ from pathlib import Path
 import numpy as np
 
 from firmware_py.config import load_config as controller_config_load
+from hil.injection import parse_faults
 from physics.constants import BAR
 from plant_emulator.params import load_raw as emulator_raw_load
-from protocol.errors import UserInputError
-from protocol.tomlconfig import read_toml
-
-from ..injection import parse_faults
+from program.errors import UserInputError
+from program.tomlconfig import read_toml
 
 # plant parameter groups: the emulator's (section, key) scaled together
 SCALES = {
@@ -263,7 +262,7 @@ def load_campaign(path: str | Path) -> Campaign:
     scenario_name = head.get("scenario")
     if not isinstance(scenario_name, str):
         raise _fail(source, "campaign.scenario", "missing (a name from `hydrapod hil list`)")
-    from ..scenarios import SCENARIOS
+    from hil.scenarios import SCENARIOS
     scenario = SCENARIOS.get(scenario_name)
     if scenario is None:
         raise _fail(source, "campaign.scenario", f"unknown scenario {scenario_name!r} (known: {', '.join(SCENARIOS)})")

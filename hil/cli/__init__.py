@@ -8,13 +8,21 @@ from __future__ import annotations
 
 import sys
 
-from physics.numba_cache import configure
+from program.numba_cache import configure
 
-configure()     # before any kernel is defined (see physics/numba_cache.py)
+configure()     # before any kernel is defined (see program/numba_cache.py)
 
-from protocol.cliutil import OneLineArgumentParser, run  # noqa: E402
-
-from . import campaign, controller, design, emulator, hil, kinematics, monitor, protocol  # noqa: E402
+from hil.cli import (  # noqa: E402
+    campaign_cmd,
+    controller_cmd,
+    design_cmd,
+    emulator_cmd,
+    hil_cmd,
+    kinematics_cmd,
+    monitor_cmd,
+    protocol_cmd,
+)
+from program.cliutil import OneLineArgumentParser, run  # noqa: E402
 
 PROG = "hydrapod"
 
@@ -24,7 +32,8 @@ def build_parser() -> OneLineArgumentParser:
                                                           "Stewart-Gough platform over CAN")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineArgumentParser,
                                 metavar="COMMAND")
-    for module in (protocol, controller, kinematics, emulator, hil, campaign, design, monitor):
+    for module in (protocol_cmd, controller_cmd, kinematics_cmd, emulator_cmd, hil_cmd, campaign_cmd, design_cmd,
+                   monitor_cmd):
         module.add_parsers(sub)
     return parser
 

@@ -27,12 +27,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hil.design.thesis import thesis_data
 from physics import hydraulics as hy
 from physics import lugre
 from physics.constants import BAR, GRAVITY_M_S2, MM
 from plant_emulator.params import EmulatorConfig, build, merge
-
-from .thesis import thesis_data
 
 LOADS_KG = (0.0, 3.0, 6.0)
 BAND_RAD_S = np.logspace(np.log10(5.0), np.log10(300.0), 40)

@@ -26,14 +26,13 @@ import numpy as np
 from scipy.signal import cont2discrete
 
 from firmware_py.config import ControllerConfig, load_config
-from firmware_py.control import CONTROLLER_NAMES
 from firmware_py.controller import Controller
-from firmware_py.geometry import default_geometry
+from firmware_py.mechanics.geometry import default_geometry
+from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
+from hil.design.modes import AXES, ModalModel, blocks, modal_model
 from physics.constants import GRAVITY_M_S2
 from plant_emulator.params import EmulatorConfig
 from protocol.enums import State, ValveState
-
-from .modes import AXES, ModalModel, blocks, modal_model
 
 PERIOD_S = 0.002
 CONVERGE_CYCLES = 400                # the Kalman filters settle (their gain: the linearisation's)

@@ -70,7 +70,7 @@ class Candidate:
 
 def operating_set(cfg: EmulatorConfig) -> list[tuple[str, object]]:
     """(label, ModalModel) of every point of the operating set."""
-    from .modes import modal_model
+    from hil.design.modes import modal_model
     out = []
     for name, pose in DESIGN_POSES_M.items():
         for payload in DESIGN_PAYLOADS_KG:
@@ -83,7 +83,7 @@ def operating_set(cfg: EmulatorConfig) -> list[tuple[str, object]]:
 def worst_damping(cfg: EmulatorConfig, models, gains: dict) -> tuple[float, str, float]:
     """(the smallest damping ratio of the closed loop's modes over `models`, where, its
     frequency Hz) for the controller with `gains`."""
-    from .closed_loop import hexapod_closed_loop
+    from hil.design.closed_loop import hexapod_closed_loop
     worst = (math.inf, "", 0.0)
     for label, model in models:
         loop = hexapod_closed_loop(cfg, model.position_m, payload_kg=model.payload_kg, supply_pa=model.supply_pa,
@@ -100,22 +100,21 @@ def worst_damping(cfg: EmulatorConfig, models, gains: dict) -> tuple[float, str,
 def tracking(cfg: EmulatorConfig, gains: dict) -> tuple[float, dict]:
     """The tracking score of `gains` and each movement's figures (in process)."""
     from firmware_py.config import load_config
-
-    from ..scenarios.pm import IAE_FACTOR_MAX, MAX_ERROR_MM, PlatformMovement, PmCircle, PmDiagonal
-    from .simulate import run_movement, thesis_motions
-    overrides = {section: dict(values) for section, values in PlatformMovement.controller_overrides.items()}
+    from hil.design.simulate import run_movement, thesis_motions
+    from hil.experiments import IAE_FACTOR_MAX, MAX_ERROR_MM, MOVEMENT_OVERRIDES, THESIS_MOVEMENTS
+    overrides = {section: dict(values) for section, values in MOVEMENT_OVERRIDES.items()}
     overrides["computed_torque"] = gains
     ctl_cfg = load_config(overrides=overrides)
     motions = thesis_motions()
     score, figures = 0.0, {}
-    for scenario in (PmCircle, PmDiagonal):
-        run = run_movement(ctl_cfg, cfg, motions[scenario.motion_name])
-        thesis = scenario.thesis["iae_model_based"]
+    for name in ("circle", "diagonal"):
+        run = run_movement(ctl_cfg, cfg, motions[name])
+        thesis = THESIS_MOVEMENTS[name]["iae_model_based"]
         iae, largest = run.iae_m_s, run.max_error_m * 1e3
         ratios = [largest[i] / MAX_ERROR_MM for i in range(3)]
         ratios += [iae[i] / (IAE_FACTOR_MAX * thesis[a]) for i, a in enumerate("xyz")]
         score = max(score, max(ratios) if run.completed else INFEASIBLE)
-        figures[scenario.name] = {"fault": run.fault, "iae_m_s": [round(float(v), 5) for v in iae],
+        figures[f"pm-{name}"] = {"fault": run.fault, "iae_m_s": [round(float(v), 5) for v in iae],
                                   "max_error_mm": [round(float(v), 2) for v in largest]}
     return score, figures
 
@@ -205,9 +204,8 @@ def _evaluate_bench(args) -> Candidate:
     """The bench's score: the largest sine error / 1 mm over BENCH_SINES; infeasible (the
     damping field -1) when a step overshoots 14 % or settles later than 1 s."""
     from firmware_py.config import load_config
-
-    from ..scenarios.sha_tracking import TRACKING_OVERRIDES
-    from .simulate import bench_sine, bench_step
+    from hil.design.simulate import bench_sine, bench_step
+    from hil.experiments import TRACKING_OVERRIDES
     cfg, gains = args
     plain = load_config(overrides={"computed_torque": gains})
     tracking_cfg = load_config(overrides={**{k: dict(v) for k, v in TRACKING_OVERRIDES.items()},

@@ -387,9 +387,8 @@ def model_doc(model: ModalModel, count: int = 6) -> dict:
 
 def movement_waypoints() -> dict[str, np.ndarray]:
     """Home and every waypoint of both movements of the thesis (chapter 11.3), by movement."""
-    from firmware_py.geometry import default_geometry
-
-    from ..motions import MOTIONS
+    from firmware_py.mechanics.geometry import default_geometry
+    from hil.experiments import MOTIONS
     geometry = default_geometry()
     return {name: motion(geometry).waypoints() for name, motion in MOTIONS.items()}
 
@@ -455,7 +454,7 @@ def plot_modes(doc: dict, along: dict | None, out_dir) -> list[str]:
     """Mode frequencies and damping at the pose (bars) and along the movements."""
     from pathlib import Path
 
-    from ..plotting import plt, save
+    from hil.plotting import plt, save
     out_dir = Path(out_dir)
     names = []
     modes = [m for m in doc["modes"] if m["platform_share"] >= 0.5]

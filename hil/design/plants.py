@@ -18,13 +18,12 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
+from hil.design.calibration import LOADS_KG, linearise, table_a3
+from hil.design.thesis import thesis_data
+from hil.identification import fit_index
 from physics.constants import MM
 from plant_emulator.params import load_config as load_emulator_config
-from protocol.errors import UserInputError
-
-from ..identification import fit_index
-from .calibration import LOADS_KG, linearise, table_a3
-from .thesis import thesis_data
+from program.errors import UserInputError
 
 SOURCES = ("table-a3", "emulator")       # or a sha-identification metrics.json
 # The identification registers of eq. 7.10-7.11, synthesised (the thesis's are not

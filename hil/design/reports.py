@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..plotting import colour_for_load, plt, save
-from . import robustness as rb
-from .plants import MM, Plant, chapter7, select_nominal
-from .schedule import KI_DETUNING, compare_with_table_7_2, tune, ziegler_nichols
+from hil.design import robustness as rb
+from hil.design.plants import MM, Plant, chapter7, select_nominal
+from hil.design.schedule import KI_DETUNING, compare_with_table_7_2, tune, ziegler_nichols
+from hil.plotting import colour_for_load, plt, save
 
 
 def _poly_mm(p: np.ndarray, scale: float) -> list[float]:

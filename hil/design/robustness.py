@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import optimize, signal
 
-from .plants import Plant
+from hil.design.plants import Plant
 
 W_RANGE_RAD_S = (1e-2, 1e3)          # chapter 7.4.1.1: the uncertainty's frequency range
 GRID_POINTS = 4000
@@ -197,7 +197,7 @@ def sensitivity(plant: Plant, kp: float, ki: float) -> tuple[np.ndarray, np.ndar
 def step_on_plant(plant: Plant, kp: float, ki: float, step_m: float = 0.010, t_end_s: float = 3.0) -> dict:
     """The linear loop's step response (T = L / (1 + L)) on one plant: overshoot (%) and
     settling (5 %) as the HIL analysis measures them (`hil.metrics.step_response`)."""
-    from ..metrics import step_response
+    from hil.metrics import step_response
     t = np.linspace(0.0, t_end_s, 3001)
     _, y = signal.step(complementary(plant, kp, ki), T=t)
     return step_response(t, y * step_m, 0.0, step_m)

@@ -19,8 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from firmware_py.config import SCHEDULE_LOADS, load_config
-
-from .plants import MM, Plant, PlantSetError
+from hil.design.plants import MM, Plant, PlantSetError
 
 ZN_KP_FRACTION = 0.45            # Kp = 0.45 Ku
 ZN_TI_FRACTION = 1.0 / 1.2       # Ti = Tu / 1.2

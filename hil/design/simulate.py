@@ -16,16 +16,15 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from firmware_py.config import ControllerConfig
-from firmware_py.control import CONTROLLER_NAMES
 from firmware_py.controller import Controller
-from firmware_py.geometry import default_geometry
+from firmware_py.mechanics.geometry import default_geometry
+from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
+from hil.experiments import Motion
 from physics import hydraulics as hy
 from plant_emulator.params import EmulatorConfig
 from plant_emulator.rigs import make_rig
 from protocol.dbc import signal_scale
 from protocol.enums import Ack, State, ValveState, WaypointFlag
-
-from ..motions import Motion
 
 PERIOD_S = 0.002
 SETTLE_S = 0.5                       # after the movement's last point, inside the error window
@@ -122,7 +121,7 @@ class RigLoop:
     def movement(self, motion: Motion) -> Movement:
         """The movement's waypoints queued as `hil run pm-*` sends them, run to SETTLE_S after
         its last point or to a fault."""
-        from ..scenarios.pm import segment_time
+        from hil.experiments import segment_time
         points = []
         for p, part in enumerate(motion.parts):
             for k, point in enumerate(part[1:]):
@@ -154,7 +153,7 @@ def run_movement(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig,
 
 
 def thesis_motions() -> dict[str, Motion]:
-    from ..motions import MOTIONS
+    from hil.experiments import MOTIONS
     geometry = default_geometry()
     return {name: motion(geometry) for name, motion in MOTIONS.items()}
 
@@ -164,7 +163,9 @@ def bench_sine(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig, l
     """sha-tracking's experiment on the test bench, in process: from the sine's bottom, one
     period of 150 - 125 cos(w t) mm as its waypoints; (the largest |y_r - y| over it [m],
     the fault that cut it or "NONE")."""
-    from ..scenarios.sha_tracking import AMPLITUDE_MM, CENTRE_MM, POINTS_PER_PERIOD
+    from hil.experiments import SINE_AMPLITUDE_MM as AMPLITUDE_MM
+    from hil.experiments import SINE_CENTRE_MM as CENTRE_MM
+    from hil.experiments import SINE_POINTS_PER_PERIOD as POINTS_PER_PERIOD
     loop = RigLoop(controller_cfg, emulator_cfg, "computed-torque", load_kg, seed, rig="testbench")
     loop.activate(100)
     start = WaypointFlag.START | WaypointFlag.LAST
@@ -191,7 +192,7 @@ def bench_step(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig, l
                step_m: float = 0.01, hold_s: float = 1.2, seed: int = 7) -> dict:
     """sha-step's experiment at one position, in process: there, then a `step_m` square wave
     up, down, up; the last up-step's `hil.metrics.step_response` (or {"fault": ...})."""
-    from ..metrics import step_response
+    from hil.metrics import step_response
     loop = RigLoop(controller_cfg, emulator_cfg, "computed-torque", load_kg, seed, rig="testbench")
     loop.activate(100)
     flags = WaypointFlag.START | WaypointFlag.LAST

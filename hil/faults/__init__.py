@@ -26,8 +26,8 @@ reads from the log:
   criterion.
 """
 
-from .cases import LOCKSTEP_CASES, REALTIME_CASES, Case, CaseKind
-from .matrix import format_matrix, format_terminal, run_matrix, sessions
+from hil.faults.cases import LOCKSTEP_CASES, REALTIME_CASES, Case, CaseKind
+from hil.faults.matrix import format_matrix, format_terminal, run_matrix, sessions
 
 __all__ = ["LOCKSTEP_CASES", "REALTIME_CASES", "Case", "CaseKind", "format_matrix", "format_terminal", "run_matrix",
            "sessions"]

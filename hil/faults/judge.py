@@ -11,11 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from firmware_py.config import load_config
-from plant_emulator.emulator import FAULT_ONSET_EVENT, SYNC_TIMEOUT_EVENT
-from protocol.enums import AckKind, Command
-
-from ..logquery import LogView
-from .cases import (
+from hil.faults.cases import (
     ENCODER_COUNT_M,
     HOLD_MOTION_MAX_M,
     HOLD_WITHIN_PERIODS,
@@ -28,8 +24,11 @@ from .cases import (
     CaseKind,
     Marks,
 )
+from hil.logquery import LogView
+from plant_emulator.emulator import FAULT_ONSET_EVENT, SYNC_TIMEOUT_EVENT
+from protocol.enums import AckKind, Command
 
-# a controlled stop (firmware_py/stopping.py) keeps the healthy legs ACTIVE this long at most
+# a controlled stop (firmware_py/supervision/stopping.py) keeps the healthy legs ACTIVE this long at most
 CONTROLLED_STOP_S = load_config().controlled_stop_s
 
 

@@ -5,11 +5,10 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from firmware_py.loop import PEAK_KEYS
-
-from ..runner import RunOptions, run_scenario
-from .cases import LOCKSTEP_CASES, VALVE_WATCHDOG_PERIODS, realtime_cases
-from .session import Session
+from firmware_py.runtime.loop import PEAK_KEYS
+from hil.faults.cases import LOCKSTEP_CASES, VALVE_WATCHDOG_PERIODS, realtime_cases
+from hil.faults.session import Session
+from hil.runner import RunOptions, run_scenario
 
 PACINGS = ("lockstep", "realtime")
 

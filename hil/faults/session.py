@@ -14,16 +14,8 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from firmware_py.geometry import default_geometry
-from protocol.enums import Command, EmuCommand, EmuFault, Fault, State, WaypointFlag
-
-from ..host import HostError
-from ..logdata import LogData
-from ..logquery import LogView
-from ..metrics import faults_in_windows
-from ..processes import ChildFailed
-from ..scenario import Analysis, Check, Scenario
-from .cases import (
+from firmware_py.mechanics.geometry import default_geometry
+from hil.faults.cases import (
     INJECT_AT_S,
     OBSERVE_S,
     PROBE_ACCEL_S,
@@ -37,7 +29,14 @@ from .cases import (
     CaseResult,
     Marks,
 )
-from .judge import JUDGES
+from hil.faults.judge import JUDGES
+from hil.host import HostError
+from hil.logdata import LogData
+from hil.logquery import LogView
+from hil.metrics import faults_in_windows
+from hil.processes import ChildFailed
+from hil.scenario import Analysis, Check, Scenario
+from protocol.enums import Command, EmuCommand, EmuFault, Fault, State, WaypointFlag
 
 
 class Session(Scenario):

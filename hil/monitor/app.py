@@ -18,13 +18,12 @@ from textual.screen import ModalScreen
 from textual.widget import Widget
 from textual.widgets import Footer, Label, Sparkline
 
-from firmware_py.geometry import default_geometry
-from firmware_py.kinematics import DirectKinematics
-from firmware_py.rotation import quat_to_rpy
+from firmware_py.mechanics.geometry import default_geometry
+from firmware_py.mechanics.kinematics import DirectKinematics
+from firmware_py.mechanics.rotation import quat_to_rpy
+from hil.monitor.sources import CommandSender, ReplaySource, Source
+from hil.monitor.view import COLUMNS, N_LEGS, BusView, Snapshot
 from protocol.enums import Command
-
-from .sources import CommandSender, ReplaySource, Source
-from .view import COLUMNS, N_LEGS, BusView, Snapshot
 
 REDRAW_S = 0.08                # 12.5 Hz asked: at least 10 Hz with the redraw's own time
 WINDOW_S = 5.0                 # the sparklines' and the export's window

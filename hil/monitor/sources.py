@@ -12,12 +12,11 @@ from pathlib import Path
 import can
 
 from hil.logdata import LOG_SUFFIXES
+from hil.monitor.view import BusView
+from program.errors import UserInputError
 from protocol.codec import CODECS
 from protocol.enums import Command
-from protocol.errors import UserInputError
 from protocol.outbox import Outbox
-
-from .view import BusView
 
 PROBE_FRAMES = 20_000              # a log must hold a frame of this DBC among its first this many
 _IDS = frozenset(c.frame_id for c in CODECS.values())

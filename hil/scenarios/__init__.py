@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-from ..scenario import Scenario
-from .friction import FrictionPresliding, FrictionSteady
-from .kick import HexapodKick
-from .pm import PmCircle, PmDiagonal
-from .realtime import RealtimeHexapod, RealtimeTestbench
-from .sha_identification import ShaIdentification
-from .sha_step import ShaStep
-from .sha_tracking import ShaPerturbation, ShaTracking
-from .soak import Soak
+from hil.scenario import Scenario
+from hil.scenarios.friction import FrictionPresliding, FrictionSteady
+from hil.scenarios.kick import HexapodKick
+from hil.scenarios.pm import PmCircle, PmDiagonal
+from hil.scenarios.rt_loop import RealtimeHexapod, RealtimeTestbench
+from hil.scenarios.sha_identification import ShaIdentification
+from hil.scenarios.sha_step import ShaStep
+from hil.scenarios.sha_tracking import ShaPerturbation, ShaTracking
+from hil.scenarios.soak import Soak
 
 SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
     ShaStep(), ShaTracking(), ShaPerturbation(), ShaIdentification(), PmDiagonal(), PmCircle(),

@@ -6,13 +6,12 @@ from pathlib import Path
 
 import numpy as np
 
-from firmware_py.control import CONTROLLER_NAMES
+from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
+from hil.logdata import LogData
+from hil.metrics import last_value_before
 from plant_emulator.params import EmulatorConfig
 from plant_emulator.params import load_config as load_emulator_config
 from protocol.enums import EmuCommand, WaypointFlag
-
-from ..logdata import LogData
-from ..metrics import last_value_before
 
 NAME_OF_CONTROLLER = {v: k for k, v in CONTROLLER_NAMES.items()}
 

@@ -26,11 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from firmware_py.config import load_config
-from physics.actuator import piston_force
-from physics.constants import MM
-from protocol.enums import AckKind, TestMode
-
-from ..design.friction import (
+from hil.design.friction_fit import (
     SteadySide,
     cylinder_friction,
     displacement_from_crossings,
@@ -40,11 +36,14 @@ from ..design.friction import (
     presliding_stiffness,
     steady_sides,
 )
-from ..design.thesis import thesis_data
-from ..logdata import LogData
-from ..plotting import colour_for_load, plt, save
-from ..scenario import Analysis, Check, Figure, Scenario
-from .common import each_controller_and_load, load_at, move_stroke, run_emulator_config
+from hil.design.thesis import thesis_data
+from hil.logdata import LogData
+from hil.plotting import colour_for_load, plt, save
+from hil.scenario import Analysis, Check, Figure, Scenario
+from hil.scenarios.common import each_controller_and_load, load_at, move_stroke, run_emulator_config
+from physics.actuator import piston_force
+from physics.constants import MM
+from protocol.enums import AckKind, TestMode
 
 STEP_S = 1.2                       # each valve step: the 0.5-1 s window and a margin (DURATION LSB 0.2 s)
 WINDOW_S = (0.5, 1.0)              # eq. 6.5's steady window (chapter 6.4.1.1)

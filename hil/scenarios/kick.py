@@ -21,15 +21,14 @@ from pathlib import Path
 
 import numpy as np
 
-from firmware_py.geometry import default_geometry
+from firmware_py.mechanics.geometry import default_geometry
+from hil.experiments import circle_motion
+from hil.logdata import LogData
+from hil.metrics import damped_oscillation
+from hil.plotting import plt, save
+from hil.scenario import Analysis, Check, Figure, Scenario
+from hil.scenarios.common import load_at, run_emulator_config
 from protocol.enums import Command, KickAxis, State, WaypointFlag
-
-from ..logdata import LogData
-from ..metrics import damped_oscillation
-from ..motions import circle_motion
-from ..plotting import plt, save
-from ..scenario import Analysis, Check, Figure, Scenario
-from .common import load_at, run_emulator_config
 
 # the push: the seals stay in pre-sliding (10 N slides them), the response ~0.5 mm against
 # EMU_TRUTH's 0.025 mm steps
@@ -85,9 +84,8 @@ def sealed_pressures(log: LogData, cycle: int, period_s: float) -> np.ndarray | 
 
 def bristle_forces(cfg, position_m, payload_kg: float, pressures: np.ndarray) -> np.ndarray:
     """What the seals' bristles hold at rest: the chambers' force less the static load."""
+    from hil.design.modes import joint_space, pose_quaternion
     from plant_emulator.rigs import HexapodRig
-
-    from ..design.modes import joint_space, pose_quaternion
     rig = HexapodRig(cfg)
     rig.set_load(payload_kg)
     static = joint_space(rig, position_m, pose_quaternion((0.0, 0.0, 0.0)))[1]
@@ -131,7 +129,7 @@ class HexapodKick(Scenario):
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
         # the modal model here: it loads MuJoCo's model and SciPy, which the hosts that only
         # list or run scenarios need not import (0.8 s of every `hydrapod` start)
-        from ..design.modes import sealed_modes, sealed_response
+        from hil.design.modes import sealed_modes, sealed_response
 
         period = 1.0 / rate_hz
         truth = log.get("EMU_TRUTH")

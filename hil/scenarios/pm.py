@@ -9,27 +9,32 @@ from pathlib import Path
 
 import numpy as np
 
-from firmware_py.geometry import default_geometry
-from firmware_py.kinematics import DirectKinematics
+from firmware_py.mechanics.geometry import default_geometry
+from firmware_py.mechanics.kinematics import DirectKinematics
+from hil.experiments import (
+    IAE_FACTOR_MAX,
+    MAX_ERROR_MM,
+    MOVEMENT_OVERRIDES,
+    THESIS_MOVEMENTS,
+    Motion,
+    circle_motion,
+    diagonal_motion,
+    segment_time,
+)
+from hil.host import HostError
+from hil.logdata import LogData
+from hil.metrics import iae, split_faults
+from hil.plotting import plt, save
+from hil.reference_rebuild import rebuild
+from hil.scenario import Analysis, Check, Figure, Scenario
+from hil.scenarios.common import NAME_OF_CONTROLLER, NEW_CONTROLLER, controller_at
 from protocol.enums import Fault, State, WaypointFlag
-
-from ..host import HostError
-from ..logdata import LogData
-from ..metrics import iae, split_faults
-from ..motions import Motion, circle_motion, diagonal_motion
-from ..plotting import plt, save
-from ..reference import rebuild
-from ..scenario import Analysis, Check, Figure, Scenario
-from .common import NAME_OF_CONTROLLER, NEW_CONTROLLER, controller_at
 
 AXES = ("x", "y", "z")
 SETTLE_AFTER_S = 0.5            # the IAE window ends this long after the movement's last point
 RETURN_TIME_S, RETURN_ACCEL_S = 1.5, 0.3
-APPROACH_SPEED_M_S = 0.2
 THESIS_NAMES = {"adaptive": "iae_pi_plus_p", "model-based": "iae_model_based"}
 THESIS_CONTROLLERS = tuple(THESIS_NAMES)     # at the thesis's timing they may fault: reported
-IAE_FACTOR_MAX = 2.0                         # its IAE <= this x the thesis's model-based, every axis
-MAX_ERROR_MM = 10.0                          # its largest position error, every axis
 # realtime: a movement a fault cut short is repeated (after RESET + ENABLE) at most this often;
 # the analysis judges from the log whether a machine stall caused the fault
 MAX_ATTEMPTS = 3
@@ -39,10 +44,7 @@ class PlatformMovement(Scenario):
     rig = "hexapod"
     controllers = ("adaptive", "model-based", NEW_CONTROLLER)
     short_controllers = (NEW_CONTROLLER,)
-    # the thesis ran these timings on the rig; the packaged waypoint limits are a safe default
-    # for operators, set for this experiment to what the actuators can do (~2.5 m/s at 10 V)
-    controller_overrides = {"supervisor": {"waypoint_velocity_max_mm_s": 1200.0},
-                            "limits": {"velocity_max_mm_s": 1500.0}}
+    controller_overrides = MOVEMENT_OVERRIDES
     motion_name = ""
     thesis: dict = {}
     # the thesis's ta/tm; `--time-scale` runs them slower (the thesis's two controllers complete
@@ -250,15 +252,6 @@ class PlatformMovement(Scenario):
                 Figure(path_3d.name, "3-D path", f"thesis {self.chapter}: the path in space")]
 
 
-def segment_time(motion: Motion, part: int, start, end) -> float:
-    """The thesis's tm, except the approach from home (part 0), whose timing the thesis does
-    not give: at APPROACH_SPEED_M_S (0.25 s for 200 mm asks more than the actuators give)."""
-    if part > 0:
-        return motion.tm_s
-    distance = float(np.linalg.norm(np.asarray(end) - np.asarray(start)))
-    return round(max(motion.tm_s, distance / APPROACH_SPEED_M_S), 3)
-
-
 def _dk_path(dk: DirectKinematics, geometry, strokes: np.ndarray) -> np.ndarray:
     """Platform positions of joint strokes (n, 6), warm-started cycle to cycle; NaN where not solved."""
     out = np.full((len(strokes), 3), np.nan)
@@ -279,8 +272,7 @@ class PmDiagonal(PlatformMovement):
     title = "movement I (cube diagonals), PI+P vs model-based"
     chapter = "11.3 movement I, 11.5"
     motion_name = "diagonal"
-    thesis = {"iae_pi_plus_p": {"x": 0.071408, "y": 0.074467, "z": 0.1019},
-              "iae_model_based": {"x": 0.063427, "y": 0.064862, "z": 0.079075}, "ta_s": 0.05, "tm_s": 0.4}
+    thesis = THESIS_MOVEMENTS["diagonal"]
 
     def thesis_motion(self) -> Motion:
         return diagonal_motion(default_geometry())
@@ -291,8 +283,7 @@ class PmCircle(PlatformMovement):
     title = "movement II (circle in z = 631 mm), PI+P vs model-based"
     chapter = "11.3 movement II, 11.5"
     motion_name = "circle"
-    thesis = {"iae_pi_plus_p": {"x": 0.0070614, "y": 0.012584, "z": 0.0038265},
-              "iae_model_based": {"x": 0.0069071, "y": 0.01151, "z": 0.003308}, "ta_s": 0.05, "tm_s": 0.25}
+    thesis = THESIS_MOVEMENTS["circle"]
 
     def thesis_motion(self) -> Motion:
         return circle_motion(default_geometry())

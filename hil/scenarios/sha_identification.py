@@ -21,16 +21,15 @@ from pathlib import Path
 import numpy as np
 
 from firmware_py.config import load_config as load_controller_config
+from hil import identification as ident
+from hil.design.calibration import LOADS_KG, linearise, moving_mass_kg, table_a3
+from hil.logdata import LogData
+from hil.plotting import colour_for_load, plt, save
+from hil.reference_rebuild import rebuild
+from hil.scenario import Analysis, Check, Figure, Scenario
+from hil.scenarios.common import load_at, move_stroke, run_emulator_config
 from physics.constants import MM
 from protocol.enums import WaypointFlag
-
-from .. import identification as ident
-from ..design.calibration import LOADS_KG, linearise, moving_mass_kg, table_a3
-from ..logdata import LogData
-from ..plotting import colour_for_load, plt, save
-from ..reference import rebuild
-from ..scenario import Analysis, Check, Figure, Scenario
-from .common import load_at, move_stroke, run_emulator_config
 
 LEVELS_MM = (-10.0, -5.0, 0.0, 5.0, 10.0)
 HOLD_S = (0.3, 0.6)

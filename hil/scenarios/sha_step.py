@@ -7,15 +7,12 @@ from pathlib import Path
 import numpy as np
 
 from firmware_py.config import load_config
-from physics.constants import MM
-from protocol.errors import UserInputError
-
-from ..logdata import LogData
-from ..metrics import step_response
-from ..plotting import colour_for_load, plt, save
-from ..reference import rebuild
-from ..scenario import Analysis, Check, Figure, Scenario
-from .common import (
+from hil.logdata import LogData
+from hil.metrics import step_response
+from hil.plotting import colour_for_load, plt, save
+from hil.reference_rebuild import rebuild
+from hil.scenario import Analysis, Check, Figure, Scenario
+from hil.scenarios.common import (
     NEW_CONTROLLER,
     TESTBENCH_CONTROLLERS,
     controller_at,
@@ -24,6 +21,8 @@ from .common import (
     move_stroke,
     step_stroke,
 )
+from physics.constants import MM
+from program.errors import UserInputError
 
 THESIS = {"step_mm": 10, "pi_overshoot_pct": 25, "pi_settling_s": 0.5, "adaptive_overshoot_pct_max": 14,
           "adaptive_settling_s": 1.0, "figure": "Fig. 7.16"}

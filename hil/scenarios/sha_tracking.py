@@ -16,28 +16,32 @@ from pathlib import Path
 
 import numpy as np
 
+from hil.design.calibration import table_a3
+from hil.experiments import SINE_AMPLITUDE_MM as AMPLITUDE_MM
+from hil.experiments import SINE_CENTRE_MM as CENTRE_MM
+from hil.experiments import SINE_POINTS_PER_PERIOD as POINTS_PER_PERIOD
+from hil.experiments import TRACKING_OVERRIDES
+from hil.host import HostError
+from hil.logdata import LogData
+from hil.plotting import colour_for_load, plt, save
+from hil.reference_rebuild import rebuild
+from hil.scenario import Analysis, Check, Figure, Scenario
+from hil.scenarios.common import (
+    NEW_CONTROLLER,
+    TESTBENCH_CONTROLLERS,
+    controller_at,
+    each_controller_and_load,
+    load_at,
+    move_stroke,
+)
 from physics.constants import MM
 from protocol.enums import EmuCommand, Fault, State, WaypointFlag
 
-from ..design.calibration import table_a3
-from ..host import HostError
-from ..logdata import LogData
-from ..plotting import colour_for_load, plt, save
-from ..reference import rebuild
-from ..scenario import Analysis, Check, Figure, Scenario
-from .common import NEW_CONTROLLER, TESTBENCH_CONTROLLERS, controller_at, each_controller_and_load, load_at, move_stroke
-
-CENTRE_MM, AMPLITUDE_MM = 150.0, 125.0
 # The thesis's robust PI (eq. 7.13) on the thesis's own plant at the sine's centre (Table A.3,
 # 150 mm, per load): the linear loop's tracking-error amplitude |S(jw)| A is what Fig. 7.19's
 # PI curve should show where friction no longer dominates (w >= 3 rad/s).
 PI_KP_V_MM, PI_KI_V_MM_S = 0.085, 0.46
 LINEAR_FROM_W = 3.0
-POINTS_PER_PERIOD = 16
-# The waypoint guards are for operators; this experiment asks up to 1.25 m/s (w = 10 rad/s),
-# and the SLS's blend-time acceleration bound overestimates a sine's by ~10x.
-TRACKING_OVERRIDES = {"supervisor": {"waypoint_velocity_max_mm_s": 3000.0, "waypoint_force_max_n": 6000.0},
-                      "limits": {"velocity_max_mm_s": 2500.0, "tracking_error_max_mm": 100.0}}
 
 
 def sine_waypoints(run, w_rad_s: float, periods: int = 1) -> float:

@@ -22,16 +22,15 @@ from pathlib import Path
 
 import numpy as np
 
-from firmware_py.geometry import default_geometry
+from firmware_py.mechanics.geometry import default_geometry
+from hil.host import HostError
+from hil.logdata import LogData, frames_by_sender, frames_counted_by_senders
+from hil.logquery import LogView
+from hil.metrics import after_machine_stall, fault_transitions, late_sensor_frames
+from hil.scenario import Analysis, Check, Scenario
+from hil.scenarios.rt_loop import loop_timing
 from physics.constants import MM
 from protocol.enums import EmuCommand, EmuFault, Fault, State, WaypointFlag
-
-from ..host import HostError
-from ..logdata import LogData, frames_by_sender, frames_counted_by_senders
-from ..logquery import LogView
-from ..metrics import after_machine_stall, fault_transitions, late_sensor_frames
-from ..scenario import Analysis, Check, Scenario
-from .realtime import loop_timing
 
 DEFAULT_SEED = 20161
 MOVE_S = 2.0                    # one move of the loop

@@ -15,11 +15,10 @@ import time
 import numpy as np
 
 from firmware_py.config import ControllerConfig
-from firmware_py.control import CONTROLLER_NAMES
 from firmware_py.controller import RIGS, Controller
-from firmware_py.trajectory import through_points
-
-from ..motions import circle_motion, concatenate
+from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
+from firmware_py.motion_control.trajectory import through_points
+from hil.experiments import circle_motion, concatenate
 
 GOALS_US = {("hexapod", "model-based"): {"p99": 300.0, "max": 1000.0},
             ("hexapod", "computed-torque"): {"p99": 300.0, "max": 1000.0}}

@@ -15,10 +15,10 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from firmware_py.geometry import Geometry
-from firmware_py.kinematics import DirectKinematics, ik_batch
-from firmware_py.rotation import axis_angle_to_quat, quat_to_axis_angle, quat_to_rpy, rpy_to_quat
-from firmware_py.workspace import MIN_CONDITION_INDEX, check_poses
+from firmware_py.mechanics.geometry import Geometry
+from firmware_py.mechanics.kinematics import DirectKinematics, ik_batch
+from firmware_py.mechanics.rotation import axis_angle_to_quat, quat_to_axis_angle, quat_to_rpy, rpy_to_quat
+from firmware_py.mechanics.workspace import MIN_CONDITION_INDEX, check_poses
 
 GUESS_CLASSES = ("qH", "q1", "q10", "q25", "q50")
 GUESS_OFFSET = {"q1": 1.0, "q10": 10.0, "q25": 25.0, "q50": 50.0}     # mm and deg

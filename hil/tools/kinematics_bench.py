@@ -13,11 +13,10 @@ import tracemalloc
 
 import numpy as np
 
-from firmware_py.dynamics import InverseDynamics
-from firmware_py.geometry import N_LEGS, Geometry
-from firmware_py.kinematics import DirectKinematics, ik_batch, ik_into, jacobian_into
-
-from ..motions import diagonal_motion
+from firmware_py.mechanics.dynamics import InverseDynamics
+from firmware_py.mechanics.geometry import N_LEGS, Geometry
+from firmware_py.mechanics.kinematics import DirectKinematics, ik_batch, ik_into, jacobian_into
+from hil.experiments import diagonal_motion
 
 CYCLE_S = 0.002
 

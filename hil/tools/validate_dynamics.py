@@ -5,7 +5,7 @@ closed form (eq. 10.43-10.49). MuJoCo's answer: the leg joints' positions follow
 pose, their rates and accelerations by a 5-point central difference, and
 `Mechanism.inverse_forces` gives the actuator forces from MuJoCo's own tree dynamics and
 constraint Jacobian; each side reads the geometry file with its own code. The model's
-answer: `firmware_py.dynamics.InverseDynamics`. A
+answer: `firmware_py.mechanics.dynamics.InverseDynamics`. A
 forward run then drives the MuJoCo model with the model's forces plus a leg-length PD
 loop, to show the forces hold the mechanism on the trajectory with the loop closed.
 """
@@ -17,14 +17,13 @@ from dataclasses import asdict, dataclass
 import mujoco
 import numpy as np
 
-from firmware_py.dynamics import InverseDynamics
-from firmware_py.geometry import Geometry
-from firmware_py.workspace import MIN_CONDITION_INDEX, check_poses
+from firmware_py.mechanics.dynamics import InverseDynamics
+from firmware_py.mechanics.geometry import Geometry
+from firmware_py.mechanics.workspace import MIN_CONDITION_INDEX, check_poses
+from hil.design.thesis import thesis_data
 from physics.constants import MM
 from plant_emulator.mechanism import Mechanism
 from plant_emulator.rig_geometry import RigGeometry
-
-from ..design.thesis import thesis_data
 
 DIFF_STEP_S = 1e-3
 FORWARD_PD = (4.0e4, 4.0e2)      # N/m, N s/m on each leg's length error in the forward run

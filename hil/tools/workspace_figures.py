@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from firmware_py.geometry import Geometry
-from firmware_py.rotation import axis_angle_to_quat, rpy_to_quat
-from firmware_py.workspace import check_poses
+from firmware_py.mechanics.geometry import Geometry
+from firmware_py.mechanics.rotation import axis_angle_to_quat, rpy_to_quat
+from firmware_py.mechanics.workspace import check_poses
 
 DEXTERITY_DEG = 25.0
 

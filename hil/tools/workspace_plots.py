@@ -6,12 +6,11 @@ from pathlib import Path
 
 import numpy as np
 
-from firmware_py.geometry import Geometry
-from firmware_py.rotation import rpy_to_quat
-from firmware_py.workspace import check_poses
-
-from ..plotting import plt, save
-from .workspace_figures import dexterous_mask
+from firmware_py.mechanics.geometry import Geometry
+from firmware_py.mechanics.rotation import rpy_to_quat
+from firmware_py.mechanics.workspace import check_poses
+from hil.plotting import plt, save
+from hil.tools.workspace_figures import dexterous_mask
 
 
 def _grid(a_range, b_range, n):

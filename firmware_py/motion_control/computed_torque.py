@@ -1,0 +1,287 @@
+"""Computed-torque control of the hexapod through its hydraulics (beyond the thesis).
+
+The thesis's controllers close a PI per leg. On this platform the legs stand near vertical:
+a leg sees ~100 kg of joint-space inertia sideways and under 1 kg upwards, and a per-leg
+loop cannot suit both (`hydrapod design modes`). Here the loop is closed on the platform's
+pose, and the legs are driven through the inverse of their dynamics, in three steps:
+
+1. task space (pose error e, twist error, reference acceleration a_r, eq. 10.5's virtual-work
+   dynamics at the measured pose and twist):
+       a_cmd = a_r + Kd (xd_r - xd) + Kp e + Ki int(e),   Kp = w^2, Kd = 2 zeta w, Ki = f w^3
+       F_cmd = tau(pose, xd, a_cmd)                       (the legs' forces for a_cmd)
+   the same closed-loop poles in every direction, whatever its inertia;
+2. each valve through its steady-state map (the spool that holds a leg at force F and
+   piston velocity v), with the commanded velocity v_r + lambda e_leg and the compliance flow
+   F_r' / K of the oil column (F_r the forces along the reference, differenced):
+       x = map(F_cmd, v_r + lambda e_leg + F_r' / K) + k_F (F_cmd - F_load cell)
+   lambda keeps the light directions stiff (the valve is a velocity source there), k_F closes
+   a force loop on the load cells around the map's error and the seals' friction;
+3. the spool to volts, saturated; the integral stops while a valve saturates.
+Allocation-free; every array is made here.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from firmware_py.config import ComputedTorqueGains, ControllerConfig
+from firmware_py.mechanics.dynamics import InverseDynamics, gauss_solve_into
+from firmware_py.mechanics.geometry import N_LEGS, Geometry
+from firmware_py.mechanics.rotation import rotation_vector_between_into
+from firmware_py.motion_control.estimation import filter_step, first_order_gain, second_order_filter
+from physics import hydraulics as hy
+from physics import lugre
+from physics.constants import GRAVITY_M_S2
+
+
+@njit(cache=True)
+def pose_error_into(reference, measured, out) -> None:
+    """out[0:3] = p_r - p, out[3:6] = rotation vector of R_r R^T (base frame); poses are
+    (x, y, z, qw, qx, qy, qz)."""
+    for k in range(3):
+        out[k] = reference[k] - measured[k]
+    rotation_vector_between_into(reference[3:7], measured[3:7], out[3:6])
+
+
+@njit(cache=True)
+def valve_map_eval(forces, velocities, spool, force, velocity) -> float:
+    """Bilinear interpolation of the map, held at its edges."""
+    nf, nv = forces.shape[0], velocities.shape[0]
+    f = min(max(force, forces[0]), forces[nf - 1])
+    v = min(max(velocity, velocities[0]), velocities[nv - 1])
+    i = 0
+    while i < nf - 2 and f > forces[i + 1]:
+        i += 1
+    j = 0
+    while j < nv - 2 and v > velocities[j + 1]:
+        j += 1
+    s = (f - forces[i]) / (forces[i + 1] - forces[i])
+    t = (v - velocities[j]) / (velocities[j + 1] - velocities[j])
+    return ((1.0 - s) * ((1.0 - t) * spool[i, j] + t * spool[i, j + 1])
+            + s * ((1.0 - t) * spool[i + 1, j] + t * spool[i + 1, j + 1]))
+
+
+@njit(cache=True)
+def task_acceleration_into(accel_ref, twist_ref, twist, error, integral, kp, kd, ki, out) -> None:
+    """a_cmd = a_r + Kd (xd_r - xd) + Kp e + Ki int(e)."""
+    for k in range(out.shape[0]):
+        out[k] = accel_ref[k] + kd * (twist_ref[k] - twist[k]) + kp * error[k] + ki * integral[k]
+
+
+@njit(cache=True)
+def spool_commands_into(force_map, force_cmd, force_ref, force_ref_prev, force_measured, velocity_ref, joint_error,
+                        strokes_ref, period_s, velocity_gain, force_bandwidth, rate_floor, forces, velocities, spool,
+                        pressure_a, pressure_b, hp, supply_pa, u_max, stiffness, force_gain, out) -> bool:
+    """Each valve's spool (fraction of full input, saturated at u_max) from the map at the
+    hydraulic force `force_map` and the force loop on the load cell (`force_cmd` its wanted
+    reading); True when one saturated. Scheduled per leg on the reference's operating point
+    (its force, velocity and stroke, the map's steady pressures and spool there): the oil
+    column's stiffness K (`stiffness`, for the compliance flow F_r' / K) and the force loop's
+    gain k_F = w_F / (dF'/dx) (`force_gain`), dF'/dx the force rate per spool there: the
+    same bandwidth w_F wherever the leg stands. dF'/dx is taken no lower than `rate_floor`
+    (the smallest at rest over the design's operating set): where a chamber nears the tank
+    pressure its entrained air makes the rate collapse, and the pressures of a transient
+    are not the map's steady ones."""
+    saturated = False
+    for i in range(out.shape[0]):
+        f_ref, v_ref, y_ref = force_ref[i], velocity_ref[i], strokes_ref[i]
+        pa = valve_map_eval(forces, velocities, pressure_a, f_ref, v_ref)
+        pb = valve_map_eval(forces, velocities, pressure_b, f_ref, v_ref)
+        k = hy.column_stiffness(y_ref, pa, pb, hp)
+        stiffness[i] = k
+        rate = hy.force_rate_per_spool(y_ref, pa, pb, valve_map_eval(forces, velocities, spool, f_ref, v_ref),
+                                       supply_pa, hp)
+        force_gain[i] = force_bandwidth / max(rate, rate_floor)
+        velocity = v_ref + velocity_gain * joint_error[i] + (f_ref - force_ref_prev[i]) / period_s / k
+        x = (valve_map_eval(forces, velocities, spool, force_map[i], velocity)
+             + force_gain[i] * (force_cmd[i] - force_measured[i]))
+        if abs(x) >= u_max:
+            saturated = True
+            x = u_max if x > 0.0 else -u_max
+        out[i] = x
+    return saturated
+
+
+@njit(cache=True)
+def low_pass_into(raw, state, ad, bd, wn, zeta, out) -> None:
+    """out = F(s) raw per component (2nd order, state rows [x, x', u_prev]); advances F."""
+    for k in range(raw.shape[0]):
+        filter_step(state[k], ad, bd, wn, zeta, raw[k])
+        out[k] = state[k, 0]
+
+
+@njit(cache=True)
+def leg_forces_into(accel_cmd, accel_ref, load_force, force_measured, velocity_ref, joint_error, velocity_gain,
+                    rod_mass, friction, force_map, force_cmd, force_ref) -> None:
+    """One actuator lifting a load it weighs on its load cell (the test bench): the load's
+    mass from the cell's low-passed force F_lp, m = F_lp / g;
+        F_cmd = F + m a_cmd                   (the cell's wanted reading: the force loop adds m a_cmd)
+        F_map = F_lp + (m_rod + m) a_cmd + m_rod g + F_ss(v_r + lambda e)   (the piston's force)
+        F_ref = (m_rod + m) (a_r + g)                               (along the reference)
+    with F_ss the seals' steady friction (eq. 6.4) at the commanded velocity. The force loop
+    has no part that opposes the cell's own swings: on this leg that pressure feedback made
+    the steps overshoot more (13 % against 5 % with 6 kg, docs/MEASUREMENTS.md)."""
+    for i in range(force_map.shape[0]):
+        mass = max(load_force[i], 0.0) / GRAVITY_M_S2
+        force_cmd[i] = force_measured[i] + mass * accel_cmd[i]
+        seals = lugre.steady_friction(velocity_ref[i] + velocity_gain * joint_error[i], friction)
+        force_map[i] = load_force[i] + (rod_mass + mass) * accel_cmd[i] + rod_mass * GRAVITY_M_S2 + seals
+        force_ref[i] = (rod_mass + mass) * (accel_ref[i] + GRAVITY_M_S2)
+
+
+@njit(cache=True)
+def first_order_into(raw, alpha, state) -> None:
+    """state += alpha (raw - state): a first-order low-pass (alpha: `first_order_gain`)."""
+    for i in range(state.shape[0]):
+        state[i] += alpha * (raw[i] - state[i])
+
+
+@njit(cache=True)
+def integrate_into(integral, error, period_s) -> None:
+    for k in range(integral.shape[0]):
+        integral[k] += error[k] * period_s
+
+
+FILTER_ZETA = 0.7                     # the measured twist's low-pass: Butterworth-like
+
+
+class _Gains:
+    """What both forms share: the PID's gains, the valve map and force loop, the velocity
+    low-pass (its filter's constants)."""
+
+    def __init__(self, cfg: ControllerConfig, gains: ComputedTorqueGains, n_legs: int, period_s: float):
+        w = gains.bandwidth_rad_s
+        self.kp, self.kd, self.ki = w * w, 2.0 * gains.damping * w, gains.integral_fraction * w ** 3
+        self.period_s = period_s
+        self.velocity_gain = gains.velocity_gain_per_s
+        self.force_bandwidth, self.rate_floor = gains.force_bandwidth_rad_s, cfg.ct_force_rate_floor
+        self.forces, self.velocities, self.spool = (cfg.valve_map_force_n, cfg.valve_map_velocity_m_s,
+                                                    cfg.valve_map_spool)
+        self.pressure_a, self.pressure_b = cfg.valve_map_pressure_a_pa, cfg.valve_map_pressure_b_pa
+        self.hp, self.supply_pa = cfg.hydraulics, cfg.supply_pressure_pa
+        self.u_max = cfg.spool_max
+        self.full_scale_v = cfg.valve_full_scale_v
+        self.filter_wn, self.filter_zeta = 2 * math.pi * gains.velocity_filter_hz, FILTER_ZETA
+        self.filter_ad, self.filter_bd = second_order_filter(period_s, gains.velocity_filter_hz, FILTER_ZETA)
+        self.stiffness = np.zeros(n_legs)         # each leg's oil column at its operating point, N/m
+        self.force_gain = np.zeros(n_legs)        # ... and its force loop's gain, spool fraction per N
+
+    def spool_commands(self, force_map, force_cmd, force_ref, force_ref_prev, force_measured, velocity_ref,
+                       joint_error, strokes_ref) -> bool:
+        """`spool_commands_into` with this controller's map, gains and scratch: writes spool_cmd."""
+        return spool_commands_into(force_map, force_cmd, force_ref, force_ref_prev, force_measured, velocity_ref,
+                                   joint_error, strokes_ref, self.period_s, self.velocity_gain, self.force_bandwidth,
+                                   self.rate_floor,
+                                   self.forces, self.velocities, self.spool, self.pressure_a, self.pressure_b,
+                                   self.hp, self.supply_pa, self.u_max, self.stiffness, self.force_gain, self.spool_cmd)
+
+
+class ComputedTorque(_Gains):
+    """The controller's state and scratch arrays; `update(...)` writes the valve inputs."""
+
+    def __init__(self, cfg: ControllerConfig, geometry: Geometry, period_s: float):
+        super().__init__(cfg, cfg.ct_hexapod, N_LEGS, period_s)
+        self.dynamics = InverseDynamics(geometry)
+        self.error = np.zeros(6)              # pose error: m, rad
+        self.integral = np.zeros(6)
+        self.twist_raw = np.zeros(6)          # measured, from the legs' velocity estimates
+        self.twist = np.zeros(6)              # ... low-passed: the encoders' counts make it jump
+        self._twist_filter = np.zeros((6, 3))
+        self.accel_cmd = np.zeros(6)
+        self.force_cmd = self.dynamics.force_n
+        self.force_ref_prev = np.zeros(N_LEGS)
+        self.spool_cmd = np.zeros(N_LEGS)
+        self._lu = np.empty((6, 6))
+        self._fresh = True                    # no previous reference force yet
+
+    def reset(self) -> None:
+        """Valves locked or a fault: the integral and the reference-force history start again."""
+        self.integral[:] = 0.0
+        self._twist_filter[:] = 0.0
+        self._fresh = True
+
+    def update(self, platform, strokes_ref, velocity_estimate, joint_error, velocity_ref, accel_ref, force_measured,
+               u_out) -> bool:
+        """One cycle from the platform model (measured and reference pose, the reference's
+        twist, acceleration and forces: the legs' `accel_ref` is not used); writes u_out (V).
+        False: singular (u_out held)."""
+        if self._fresh:
+            self.force_ref_prev[:] = platform.force_n
+            self._fresh = False
+        pose, ref_pose = platform.dk.pose, platform.ref_dk.pose
+        pose_error_into(ref_pose, pose, self.error)
+        if gauss_solve_into(platform.jacobian, velocity_estimate, self._lu, self.twist_raw, False) == 0.0:
+            return False
+        low_pass_into(self.twist_raw, self._twist_filter, self.filter_ad, self.filter_bd, self.filter_wn,
+                      self.filter_zeta, self.twist)
+        task_acceleration_into(platform.accel, platform.twist, self.twist, self.error, self.integral, self.kp,
+                               self.kd, self.ki, self.accel_cmd)
+        if not self.dynamics.forces(pose[0:3], pose[3:7], self.twist, self.accel_cmd):
+            return False
+        saturated = self.spool_commands(self.force_cmd, self.force_cmd, platform.force_n, self.force_ref_prev,
+                                        force_measured, velocity_ref, joint_error, strokes_ref)
+        self.force_ref_prev[:] = platform.force_n
+        if not saturated:                     # conditional integration (anti-windup)
+            integrate_into(self.integral, self.error, self.period_s)
+        np.multiply(self.spool_cmd, self.full_scale_v, out=u_out)
+        return True
+
+
+LOAD_FILTER_HZ = 1.0                  # the load cell's low-pass: the load's weight, not its dynamics
+
+
+class LegComputedTorque(_Gains):
+    """The same control on one actuator per leg in joint space (the test bench): task-space
+    PID on the stroke, the load from its load cell, each valve through the map. Its own
+    velocity gain: the test bench's leg is light (its oil-column mode is far above the
+    hexapod's horizontal modes), so a stiffer velocity loop stays damped there."""
+
+    def __init__(self, cfg: ControllerConfig, n_legs: int, period_s: float):
+        super().__init__(cfg, cfg.ct_testbench, n_legs, period_s)
+        self.rod_mass = cfg.moving_mass_kg
+        self.friction = cfg.friction
+        self.load_alpha = first_order_gain(period_s, LOAD_FILTER_HZ)
+        self.integral = np.zeros(n_legs)
+        self.velocity = np.zeros(n_legs)      # the estimate, low-passed
+        self._velocity_filter = np.zeros((n_legs, 3))
+        self.load_force = np.zeros(n_legs)    # the load cell, low-passed
+        self.accel_cmd = np.zeros(n_legs)
+        self.force_map = np.zeros(n_legs)
+        self.force_cmd = np.zeros(n_legs)
+        self.force_ref = np.zeros(n_legs)
+        self.force_ref_prev = np.zeros(n_legs)
+        self.spool_cmd = np.zeros(n_legs)
+        self._fresh = True
+
+    def reset(self) -> None:
+        self.integral[:] = 0.0
+        self._velocity_filter[:] = 0.0
+        self._fresh = True
+
+    def update(self, platform, strokes_ref, velocity_estimate, joint_error, velocity_ref, accel_ref, force_measured,
+               u_out) -> bool:
+        """One cycle, as `ComputedTorque.update` (no platform: `platform` is not used); writes
+        u_out (V). Always True: the stroke has no singularity."""
+        if self._fresh:                       # the load's weight and the reference force start here
+            self.load_force[:] = force_measured
+        first_order_into(force_measured, self.load_alpha, self.load_force)
+        low_pass_into(velocity_estimate, self._velocity_filter, self.filter_ad, self.filter_bd, self.filter_wn,
+                      self.filter_zeta, self.velocity)
+        task_acceleration_into(accel_ref, velocity_ref, self.velocity, joint_error, self.integral, self.kp,
+                               self.kd, self.ki, self.accel_cmd)
+        leg_forces_into(self.accel_cmd, accel_ref, self.load_force, force_measured, velocity_ref, joint_error,
+                        self.velocity_gain, self.rod_mass, self.friction, self.force_map, self.force_cmd,
+                        self.force_ref)
+        if self._fresh:
+            self.force_ref_prev[:] = self.force_ref
+            self._fresh = False
+        saturated = self.spool_commands(self.force_map, self.force_cmd, self.force_ref, self.force_ref_prev,
+                                        force_measured, velocity_ref, joint_error, strokes_ref)
+        self.force_ref_prev[:] = self.force_ref
+        if not saturated:
+            integrate_into(self.integral, joint_error, self.period_s)
+        np.multiply(self.spool_cmd, self.full_scale_v, out=u_out)
+        return True

@@ -1,0 +1,80 @@
+"""`hydrapod controller`: the controller daemon on a bus (and `python -m firmware_py`).
+
+Runs until SIGTERM/SIGINT, then brings the valves to HOLD and DISABLED and exits 0 with a
+one-line summary. Real-time measures (gc frozen and disabled, SCHED_FIFO, mlockall, CPU
+affinity) are applied when permitted; each one that is not is logged and skipped.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from firmware_py.config import ControllerConfig, load_config
+from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
+from program.cliutil import StopFlag
+from program.realtime import applied, cpu_latency_measure, freeze_gc, lock_memory, pin_cpu, set_fifo, thaw_gc
+
+
+def log(text: str) -> None:
+    print(f"controller: {text}", file=sys.stderr, flush=True)
+
+
+def realtime_setup(cfg: ControllerConfig, realtime: bool) -> list[str]:
+    """GC frozen and disabled always, and the CPUs' wake-up latency (lockstep too: each cycle
+    waits on the emulator's frames, and a halted CPU's wake-up costs every one of those);
+    scheduling, memory locking and affinity for realtime."""
+    freeze_gc(disable=True)
+    if not realtime:
+        return applied(cpu_latency_measure(cfg.cpu_latency_us), log)
+    measures = {f"SCHED_FIFO priority {cfg.realtime_priority}": set_fifo(cfg.realtime_priority),
+                "mlockall": lock_memory()}
+    if cfg.cpu >= 0:
+        measures[f"CPU {cfg.cpu}"] = pin_cpu(cfg.cpu)
+    return applied({**measures, **cpu_latency_measure(cfg.cpu_latency_us)}, log)
+
+
+def realtime_teardown() -> None:
+    thaw_gc()
+
+
+def run_daemon(args) -> int:
+    from firmware_py.controller import Controller
+    from firmware_py.runtime.loop import ActivationError, ControllerLoop
+    from protocol.bus import open_bus, parse_bus_spec
+
+    spec = parse_bus_spec(args.bus) if args.bus is not None else None     # a bad string fails first
+    cfg = load_config(args.config)
+    controller = Controller(cfg, args.rig, 1.0 / args.rate_hz, CONTROLLER_NAMES[args.controller])
+    stop = StopFlag()
+    bus = open_bus(spec)
+    loop = ControllerLoop(bus, controller, args.rate_hz, args.pacing, log=log)
+    bus.set_filters(loop.decoder.can_filters())       # the CAN controller's acceptance filter
+    code = 0
+    notes = realtime_setup(cfg, args.pacing == "realtime")
+    if notes:
+        log("real-time: " + ", ".join(notes))
+    try:
+        try:
+            loop.activate(stop)
+        except ActivationError as exc:
+            log(f"activation failed: {exc}")
+            code = 1
+        else:
+            loop.run(stop)
+            loop.shutdown()
+    finally:
+        realtime_teardown()
+        bus.shutdown()
+    summary = loop.summary()
+    if args.summary:
+        with open(args.summary, "w") as handle:
+            json.dump(summary, handle, indent=1)
+    timing = summary["timing"].get("compute_us", {})
+    print(f"controller: rig={controller.rig} controller={args.controller} pacing={args.pacing} "
+          f"cycles={summary['cycles']} "
+          f"overruns={summary['overruns']} e2e_errors={summary['e2e_errors']} "
+          f"missing_frames={summary['missing_frames']} faults={summary['faults']} "
+          f"fault_code={summary['fault_code']} state={summary['state']} "
+          f"compute_p99_us={timing.get('p99', 'n/a')}", flush=True)
+    return code

@@ -1,0 +1,501 @@
+"""The controller on the bus (its hardware interface): lifecycle (configure -> activate ->
+run -> shut down) and the fixed-step cycle SYNC -> collect -> read -> update -> write.
+
+configure (constructor): codecs compiled at import, every array and CAN message allocated.
+activate: NMT start (repeated until every node's heartbeat says OPERATIONAL), then
+`hold_cycles` cycles with the valves in HOLD (the first with a Reset pulse, clearing faults
+left by an earlier session), then IDLE or READY (auto_enable).
+cycle k: send SYNC k; collect cycle k's LEG_STATE frames until all are in or the window
+closes (realtime: a fraction of the period; lockstep: a timeout); `read` fills the
+Measurements; `Controller.update(meas, cmd)`; `write` encodes the ValveCommands as
+VALVE_CMD_* (applied by the valves at SYNC k+1), CTRL_STATUS when due, CTRL_ACK for host
+frames and the heartbeat when due; then the controller's host work that must not delay
+VALVE_CMD (a waypoint commit).
+The loop decides nothing: it records what it saw (frames, heartbeats, EMCY, a stall of its
+own) and the controller's supervisor raises the faults, in the cycle they are seen.
+pacing: `realtime` - absolute deadlines on the monotonic clock, sleep then spin, late
+cycles counted as overruns and skipped (never bursts); a stall (the clock
+`stall_fault_periods` past the last SYNC, seen after any wait) is reported to the next
+update, which faults OVERRUN before acting on anything received meanwhile. `lockstep` -
+SYNC k+1 as soon as cycle k's exchange is complete.
+nodes: a node that boots again (boot-up heartbeat: power cycle, reset) restarts its alive
+counters, and the NMT master starts it again on the host's RESET (CiA 302's boot-up of a
+slave), so RESET + ENABLE recovers from a plant that was restarted.
+shutdown: valves HOLD for `shutdown_hold_cycles`, DISABLED for `shutdown_disable_cycles`.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from firmware_py.controller import RESET_GRACE_CYCLES, Controller
+from firmware_py.supervision.supervisor import LATCHED, emergency_code
+from program.realtime import percentiles_us
+from protocol.codec import CODECS, FrameDecoder
+from protocol.dbc import sync_counter_overflow
+from protocol.e2e import E2E_REJECTED, RxStatus
+from protocol.enums import ImuStatus, NmtCommand, NmtState
+from protocol.nodes import CONTROLLER_NODE, IMU_NODE, SENDER_OF_NODE, rig_nodes
+from protocol.outbox import Outbox
+
+PACINGS = ("realtime", "lockstep")
+# the summary's false-alarm measures: each monitor's largest ratio to its threshold before the first fault
+PEAK_KEYS = ("residual_peak", "supply_peak", "spool_peak", "attitude_peak", "pressure_peak")
+HISTORY = 1 << 16                       # cycles kept for the timing percentiles
+# the cycle's phases, in order (seconds each, per cycle, in `phase_s`): SYNC sent; the sensor
+# window less the frames' handling; the frames' handling (decode, dispatch); read; update;
+# write (frames encoded and sent, heartbeat); host work after the write (a waypoint commit);
+# idle until the next cycle (sleep, spin, frames handled meanwhile)
+PHASES = ("sync", "window", "decode", "read", "update", "write", "host_work", "idle")
+(PH_SYNC, PH_WINDOW, PH_DECODE, PH_READ, PH_UPDATE, PH_WRITE, PH_HOST_WORK, PH_IDLE) = range(len(PHASES))
+HOST_FRAMES = ("HOST_CMD", "HOST_WAYPOINT_POS", "HOST_WAYPOINT_ROT", "HOST_WAYPOINT_TIME", "HOST_TEST")
+
+
+class ActivationError(RuntimeError):
+    """The nodes did not come up (no heartbeat) within the activation timeout."""
+
+
+@dataclass
+class Stats:
+    cycles: int = 0
+    overruns: int = 0
+    e2e_errors: int = 0
+    missing_frames: int = 0
+    faults: int = 0
+    emergencies: int = 0
+    host_commands: int = 0
+    unknown_frames: int = 0
+    frames_sent: int = 0          # every frame the bus accepted (a log must hold as many of ours)
+
+
+class ControllerLoop:
+    def __init__(self, bus, controller: Controller, rate_hz: float, pacing: str, clock=time.perf_counter,
+                 log=None):
+        if pacing not in PACINGS:
+            raise ValueError(f"pacing must be one of {PACINGS}, got {pacing!r}")
+        self.bus, self.controller, self.pacing, self.clock = bus, controller, pacing, clock
+        self.cfg = controller.cfg
+        self.period_s = 1.0 / rate_hz
+        self.log = log or (lambda text: print(f"controller: {text}", file=sys.stderr, flush=True))
+        self.meas, self.cmd = controller.new_interfaces()
+        n = controller.n
+        self.legs = range(1, n + 1)
+        self.nodes = rig_nodes(n)
+        rx = [f"LEG_STATE_{i}" for i in self.legs] + [f"VALVE_STATUS_{i}" for i in self.legs]
+        rx += [f"LEG_PRESSURE_{i}" for i in self.legs] + [f"EMCY_{i}" for i in self.nodes]
+        rx += [f"HEARTBEAT_{i}" for i in self.nodes] + list(HOST_FRAMES)
+        if controller.hexapod:
+            rx += ["IMU_ATTITUDE", "IMU_RATE"]
+        self.decoder = FrameDecoder(rx)
+        self.expected = self.decoder.expected_mask([f"LEG_STATE_{i}" for i in self.legs])
+        self._leg_slots = [self.decoder.slot[f"LEG_STATE_{i}"] for i in self.legs]
+        self._leg_values = [self.decoder.values[f"LEG_STATE_{i}"] for i in self.legs]
+        index = CODECS["LEG_STATE_1"].index
+        self._i_pos, self._i_force, self._i_spool = index["POSITION"], index["FORCE"], index["SPOOL"]
+        self._i_valve, self._i_sensor = index["VALVE_STATE"], index["SENSOR_FAULT"]
+        self._leg_of_id = {CODECS[f"LEG_STATE_{i}"].frame_id: i - 1 for i in self.legs}
+        self._heartbeat_of_id = {CODECS[f"HEARTBEAT_{node}"].frame_id: k for k, node in enumerate(self.nodes)}
+        self._heartbeat_values = [self.decoder.values[f"HEARTBEAT_{node}"] for node in self.nodes]
+        self._emcy_of_id = {CODECS[f"EMCY_{node}"].frame_id: node for node in self.nodes}
+        self._host_ids = {CODECS[name].frame_id: name for name in HOST_FRAMES}
+        index = CODECS["LEG_PRESSURE_1"].index
+        self._i_pa, self._i_pb, self._i_ps = index["PA"], index["PB"], index["PS"]
+        self._i_pfault = (index["SENSOR_FAULT_A"], index["SENSOR_FAULT_B"])
+        self._pressure_of_id = {CODECS[f"LEG_PRESSURE_{i}"].frame_id: i - 1 for i in self.legs}
+        self._pressure_values = [self.decoder.values[f"LEG_PRESSURE_{i}"] for i in self.legs]
+        self._imu_attitude_id = CODECS["IMU_ATTITUDE"].frame_id if controller.hexapod else -1
+        if controller.hexapod:                        # views made once: the cycle copies through them
+            attitude, index = self.decoder.values["IMU_ATTITUDE"], CODECS["IMU_ATTITUDE"].index
+            self._imu_status = attitude[index["STATUS"]:index["STATUS"] + 1]
+            self._imu_rpy = attitude[index["ROLL"]:index["YAW"] + 1]
+        self.out_sync = Outbox("SYNC")
+        self.out_nmt = Outbox("NMT")
+        self.out_cmd = [Outbox(f"VALVE_CMD_{i}") for i in self.legs]
+        self.out_status = Outbox("CTRL_STATUS")
+        self.out_ack = Outbox("CTRL_ACK")
+        self.out_heartbeat = Outbox(f"HEARTBEAT_{CONTROLLER_NODE}")
+        self.out_emcy = Outbox(f"EMCY_{CONTROLLER_NODE}")
+        self._status_schedule = CODECS["CTRL_STATUS"].schedule
+        c = CODECS["VALVE_CMD_1"].index
+        self._i_d, self._i_h, self._i_m, self._i_r, self._i_sp = (c[k] for k in ("CW_D", "CW_H", "CW_M", "CW_R",
+                                                                                   "SPOOL_SETPOINT"))
+        self._overflow = sync_counter_overflow()
+        self.sync_counter = 0
+        self.heartbeat_seen = np.full(len(self.nodes), -np.inf)
+        self.nmt_state = {node: -1 for node in self.nodes}
+        self.stats = Stats()
+        self.compute_s = np.zeros(HISTORY)
+        self.period_error_s = np.zeros(HISTORY)
+        self.phase_s = np.zeros((HISTORY, len(PHASES)))
+        self._decode_s = 0.0                         # frames' handling inside this cycle's window
+        self._cycle_end = math.nan
+        self._compute_max = 0.0
+        self._period_error_max = 0.0
+        self._last_sync = math.nan
+        self._next_heartbeat = 0.0
+        self._overrun = False
+        self._next_deadline = math.inf          # realtime: the next SYNC's deadline (lockstep: none)
+        self._stalled = False                        # seen since the last read
+        self._emergency = False                     # an EMCY from a valve node ...
+        self._imu_emergency = False                 # ... from the IMU
+        self._latched = False                       # the last EMCY_16 said: a fault is latched
+        self._attitude_new = False
+        self._pressure_new = np.zeros(len(self.legs), dtype=bool)    # LEG_PRESSURE since the last read
+        self._stall_s = self.cfg.stall_fault_periods * self.period_s if pacing == "realtime" else math.inf
+        self._forced: bool | None = None            # shutdown: True HOLD, False DISABLED
+        self.state_at_stop = None                   # the controller's state when the shutdown began
+
+    # -- receive --------------------------------------------------------------------------
+    def dispatch(self, msg) -> None:
+        """One received frame: decoded, and recorded for the next read or queued for the host link."""
+        status = self.decoder.receive_message(msg)
+        frame_id = msg.arbitration_id
+        if status is RxStatus.UNKNOWN_ID:
+            self.stats.unknown_frames += 1
+            return
+        if status is not RxStatus.OK:
+            if status in E2E_REJECTED:
+                self.stats.e2e_errors += 1
+                leg = self._leg_of_id.get(frame_id)
+                if leg is not None:
+                    self.meas.rejected[leg] = True
+            return
+        if frame_id in self._leg_of_id:
+            return                                   # read() copies it after the window
+        leg = self._pressure_of_id.get(frame_id)
+        if leg is not None:                          # SI (Pa) from the codec
+            values = self._pressure_values[leg]
+            valid = not (values[self._i_pfault[0]] or values[self._i_pfault[1]])
+            self.meas.pressure_valid[leg] = valid    # a transducer fault: no piston force
+            if valid:
+                self.meas.pa_pa[leg] = values[self._i_pa]
+                self.meas.pb_pa[leg] = values[self._i_pb]
+                self.meas.ps_pa[leg] = values[self._i_ps]
+                self._pressure_new[leg] = True
+            return
+        if frame_id == self._imu_attitude_id:
+            if self._imu_status[0] == ImuStatus.VALID:
+                self.meas.attitude_rad[:] = self._imu_rpy
+                self._attitude_new = True
+            return
+        k = self._heartbeat_of_id.get(frame_id)
+        if k is not None:
+            self.heartbeat_seen[k] = self.clock()
+            state = int(self._heartbeat_values[k][0])
+            node = self.nodes[k]
+            if state == NmtState.BOOTUP:             # the node restarted: so did its alive counters
+                self.decoder.restart_sender(SENDER_OF_NODE[node])
+            self.nmt_state[node] = state
+            return
+        node = self._emcy_of_id.get(frame_id)
+        if node is not None:
+            self.stats.emergencies += 1
+            if self.decoder.values[f"EMCY_{node}"][0] != 0:     # ERROR_CODE 0 announces a reset
+                if node == IMU_NODE:
+                    self._imu_emergency = True
+                else:
+                    self._emergency = True
+            return
+        name = self._host_ids.get(frame_id)
+        if name is not None:
+            self._host_frame(name, self.decoder.values[name])
+
+    def _host_frame(self, name: str, v) -> None:
+        host = self.controller.host
+        if name == "HOST_CMD":
+            self.stats.host_commands += 1
+            host.command(int(v[2]), int(v[3]), int(v[4]))                          # COMMAND, ARGUMENT, SEQ
+        elif name == "HOST_WAYPOINT_POS":
+            host.waypoint_position(int(v[2]), float(v[3]), float(v[4]), float(v[5]))       # TAG, X, Y, Z
+        elif name == "HOST_WAYPOINT_ROT":
+            host.waypoint_rotation(int(v[2]), float(v[3]), float(v[4]), float(v[5]))       # TAG, ROLL, PITCH, YAW
+        elif name == "HOST_WAYPOINT_TIME":                # TAG, SEQ, SEGMENT_TIME, ACCEL_TIME, FLAGS
+            host.waypoint_commit(int(v[2]), int(v[3]), float(v[4]), float(v[5]), int(v[6]))
+        else:                                             # HOST_TEST: MODE, SEQ, VALVE, FORCE, DURATION
+            host.test(int(v[2]), int(v[3]), float(v[4]), float(v[5]), float(v[6]))
+
+    def _collect(self, deadline: float) -> None:
+        """Receive until every LEG_STATE of the cycle is in or the window closes; frames
+        already waiting in the receive queue when it closes arrived in time and are taken."""
+        while not self._all_fresh():
+            remaining = deadline - self.clock()
+            msg = self.bus.recv(timeout=max(remaining, 0.0))
+            self._note_stall()
+            if msg is None:
+                if remaining <= 0.0:
+                    return
+                continue
+            received = self.clock()
+            self.dispatch(msg)
+            self._decode_s += self.clock() - received
+
+    def _all_fresh(self) -> bool:
+        fresh = self.decoder.fresh
+        for slot in self._leg_slots:
+            if not fresh[slot]:
+                return False
+        return True
+
+    def _drain_until(self, deadline: float) -> None:
+        """Between cycles: handle host and node frames until `deadline - spin`, then spin."""
+        spin = self.cfg.spin_s
+        while True:
+            remaining = deadline - spin - self.clock()
+            if remaining <= 0.0:
+                break
+            msg = self.bus.recv(timeout=remaining)
+            self._note_stall()
+            if msg is not None:
+                self.dispatch(msg)
+        while self.clock() < deadline:
+            pass
+
+    def _note_stall(self) -> None:
+        """Realtime: the process was not running for longer than the valves' watchdog."""
+        if self.clock() - self._last_sync > self._stall_s:
+            self._stalled = True
+
+    # -- read / write ---------------------------------------------------------------------
+    def read(self, now: float) -> None:
+        """The cycle's Measurements: LEG_STATE of the legs whose frame came, and the events
+        since the last read."""
+        meas, fresh = self.meas, self.decoder.fresh
+        for leg, slot in enumerate(self._leg_slots):
+            values = self._leg_values[leg]
+            ok = bool(fresh[slot])
+            meas.fresh[leg] = ok
+            if ok:
+                meas.position_m[leg] = values[self._i_pos]
+                meas.force_n[leg] = values[self._i_force]
+                meas.spool[leg] = values[self._i_spool]
+                meas.valve_state[leg] = int(values[self._i_valve])
+                meas.sensor_fault[leg] = values[self._i_sensor] != 0.0
+        np.subtract(now, self.heartbeat_seen, out=meas.heartbeat_age_s)
+        meas.attitude_fresh, self._attitude_new = self._attitude_new, False
+        np.copyto(meas.pressure_fresh, self._pressure_new)
+        self._pressure_new[:] = False
+        meas.emergency, self._emergency = self._emergency, False
+        meas.imu_emergency, self._imu_emergency = self._imu_emergency, False
+        meas.stalled, self._stalled = self._stalled, False
+        meas.overrun = self._overrun
+
+    def _send(self, outbox: Outbox) -> None:
+        if outbox.encode():
+            try:
+                self.bus.send(outbox.message)
+            except Exception as exc:               # a full queue or a bus error drops the frame
+                self.log(f"send {outbox.codec.name} failed: {exc}")
+                return
+            self.stats.frames_sent += 1
+
+    def write(self) -> None:
+        """VALVE_CMD_* from the ValveCommands, CTRL_STATUS when due, CTRL_ACK, NMT start."""
+        controller, cmd = self.controller, self.cmd
+        if self._forced is True:
+            cmd.hold_all()
+        elif self._forced is False:
+            cmd.disable_all()
+        for leg, box in enumerate(self.out_cmd):
+            v = box.values
+            v[self._i_d] = cmd.enable[leg]
+            v[self._i_h] = cmd.hold[leg]
+            v[self._i_m] = cmd.active[leg]
+            v[self._i_r] = cmd.reset[leg]
+            v[self._i_sp] = cmd.spool[leg]
+            self._send(box)
+        if self._status_schedule.due(self.sync_counter):
+            v = self.out_status.values
+            i = self.out_status.index
+            v[i["STATE"]] = int(controller.state)
+            v[i["FAULT_CODE"]] = int(controller.sup.fault_code)
+            v[i["CONTROLLER"]] = controller.sup.controller
+            v[i["COMPUTE_TIME_MAX"]] = self._compute_max
+            v[i["PERIOD_ERROR_MAX"]] = self._period_error_max
+            v[i["OVERRUNS"]] = self.stats.overruns % 256
+            v[i["ACTIVE_WAYPOINT"]] = controller.active_waypoint % 256
+            self._send(self.out_status)
+            self._compute_max = 0.0
+            self._period_error_max = 0.0
+        self._send_acks()
+        if controller.nodes_restart_requested:
+            controller.nodes_restart_requested = False
+            if any(self.nmt_state[n] != NmtState.OPERATIONAL for n in self.nodes):
+                self._nmt_start()                    # nodes that rebooted since activation
+
+    def _send_acks(self) -> None:
+        acks = self.controller.host.acks
+        while acks:
+            kind, seq, result = acks.popleft()
+            v, i = self.out_ack.values, self.out_ack.index
+            v[i["KIND"]], v[i["SEQ"]], v[i["RESULT"]] = kind, seq % 256, result
+            v[i["QUEUE_FREE"]] = self.controller.waypoints.free()
+            self._send(self.out_ack)
+
+    def _nmt_start(self) -> None:
+        self.out_nmt.values[:] = (NmtCommand.START, 0)
+        self._send(self.out_nmt)
+
+    def _heartbeat(self, now: float) -> None:
+        if now >= self._next_heartbeat:
+            self.out_heartbeat.values[0] = NmtState.OPERATIONAL
+            self._send(self.out_heartbeat)
+            self._next_heartbeat = now + self.cfg.heartbeat_s
+
+    # -- one cycle ------------------------------------------------------------------------
+    def cycle(self) -> None:
+        """SYNC, collect, read, update, write, then host work (pacing is `_run_cycles`'s)."""
+        now = self.clock()
+        self._note_stall()
+        k = self.stats.cycles % HISTORY
+        phase = self.phase_s[k]
+        phase[PH_IDLE] = now - self._cycle_end if not math.isnan(self._cycle_end) else 0.0
+        if not math.isnan(self._last_sync):
+            error = abs(now - self._last_sync - self.period_s)
+            self.period_error_s[k] = error
+            self._period_error_max = max(self._period_error_max, error)
+        self._last_sync = now
+        self.sync_counter = self.sync_counter % self._overflow + 1
+        self.out_sync.values[0] = self.sync_counter
+        self._send(self.out_sync)
+        sent = self.clock()
+        self.decoder.begin_cycle()
+        self.meas.rejected[:] = False
+        window = self.cfg.sync_window_fraction * self.period_s if self.pacing == "realtime" \
+            else self.cfg.lockstep_timeout_s
+        self._decode_s = 0.0
+        self._collect(now + window)
+        self.stats.missing_frames += self.decoder.end_cycle(self.expected)
+        start = self.clock()
+        faults_before = self.controller.sup.faults
+        self.read(start)
+        read = self.clock()
+        self.controller.update(self.meas, self.cmd)
+        updated = self.clock()
+        self.write()
+        self._heartbeat(start)
+        self.stats.faults += self.controller.sup.faults - faults_before
+        written = self.clock()
+        compute = written - start
+        self.compute_s[k] = compute
+        phase[PH_SYNC], phase[PH_WINDOW], phase[PH_DECODE] = sent - now, start - sent - self._decode_s, self._decode_s
+        phase[PH_READ], phase[PH_UPDATE], phase[PH_WRITE] = read - start, updated - read, written - updated
+        self._compute_max = max(self._compute_max, compute)
+        self.stats.cycles += 1
+        if self.controller.sup.faults != faults_before:
+            self._log_fault(now)
+        self._report_latch()
+        # after the write: its cost never delays VALVE_CMD, and it waits when the SYNC is near
+        self.controller.after_write(self._next_deadline - self.clock())
+        self._cycle_end = self.clock()
+        phase[PH_HOST_WORK] = self._cycle_end - written
+
+    def _report_latch(self) -> None:
+        """EMCY_16 when the controller latches a fault or an e-stop (its code in DETAIL, the
+        leg in INFO), and with ERROR_CODE 0 when a RESET clears it: what a CANopen watcher
+        listens for."""
+        sup = self.controller.sup
+        latched = sup.state in LATCHED
+        if latched == self._latched:
+            return
+        self._latched = latched
+        v, i = self.out_emcy.values, self.out_emcy.index
+        v[i["ERROR_CODE"]] = emergency_code(sup.fault_code) if latched else 0
+        v[i["ERROR_REGISTER"]] = 1 if latched else 0          # CiA 301 bit 0: generic error
+        v[i["STATE"]] = int(sup.state)
+        v[i["DETAIL"]] = int(sup.fault_code) if latched else 0
+        v[i["SYNC_COUNTER"]] = self.sync_counter
+        v[i["INFO"]] = sup.fault_leg if latched else 0         # the leg a leg fault was isolated to
+        self._send(self.out_emcy)
+
+    def _log_fault(self, sync_time: float) -> None:
+        """One stderr line when the controller faults (an event, not the steady cycle): which
+        legs' frames were missing or rejected how many cycles in a row, and what the receiver
+        last made of each; the leg a SENSOR_TIMEOUT or E2E_ERROR came from is named here."""
+        c = self.controller
+        last = [RxStatus(int(self.decoder.last_status[slot])).name for slot in self._leg_slots]
+        leg = f" leg {c.sup.fault_leg}" if c.sup.fault_leg else ""
+        self.log(f"fault {c.sup.fault_code.name}{leg} at cycle {self.stats.cycles}: residual/threshold "
+                 f"{[round(r, 2) for r in c.residuals.ratio.tolist()]}, missing in a row "
+                 f"{c.frames.missing.tolist()}, rejected in a row {c.frames.rejected.tolist()}, last LEG_STATE "
+                 f"status {last}, overruns in a row {c.loop_monitor.overruns_in_row}, this cycle "
+                 f"{1e6 * (self.clock() - sync_time):.0f} us after its SYNC")
+
+    # -- lifecycle ------------------------------------------------------------------------
+    def activate(self, should_stop=lambda: False) -> None:
+        """NMT start until every node reports OPERATIONAL, then HOLD cycles, then IDLE/READY."""
+        cfg = self.cfg
+        give_up = self.clock() + cfg.activation_timeout_s
+        next_start = 0.0
+        while not all(self.nmt_state[n] == NmtState.OPERATIONAL for n in self.nodes):
+            now = self.clock()
+            if now > give_up or should_stop():
+                missing = [n for n in self.nodes if self.nmt_state[n] != NmtState.OPERATIONAL]
+                raise ActivationError(f"no OPERATIONAL heartbeat from node(s) {missing} within "
+                                      f"{cfg.activation_timeout_s:g} s")
+            if now >= next_start:
+                self._nmt_start()
+                next_start = now + 0.2
+            msg = self.bus.recv(timeout=0.02)
+            if msg is not None:
+                self.dispatch(msg)
+        self.controller.reset_cycles = RESET_GRACE_CYCLES  # one Reset pulse: clears faults left from before
+        self._run_cycles(cfg.hold_cycles, should_stop)
+        self.controller.activated(cfg.auto_enable)
+        self.log(f"active: rig={self.controller.rig} state={self.controller.state.name} pacing={self.pacing} "
+                 f"rate={1.0 / self.period_s:g} Hz")
+
+    def _run_cycles(self, count: int | None, should_stop) -> None:
+        deadline = self.clock()
+        done = 0
+        while (count is None or done < count) and not should_stop():
+            if self.pacing == "realtime":
+                self._next_deadline = deadline + self.period_s
+                self.cycle()
+                deadline += self.period_s
+                now = self.clock()
+                self._overrun = now > deadline
+                if self._overrun:
+                    self.stats.overruns += 1
+                    deadline += math.ceil((now - deadline) / self.period_s) * self.period_s
+                self._drain_until(deadline)
+            else:
+                self.cycle()
+            done += 1
+
+    def run(self, should_stop) -> None:
+        self._run_cycles(None, should_stop)
+
+    def shutdown(self) -> None:
+        """Valves to HOLD, then DISABLED, over a few cycles; SYNC keeps running meanwhile."""
+        never = lambda: False  # noqa: E731
+        self.state_at_stop = self.controller.state
+        self.controller.shut_down()
+        self._forced = True
+        self._run_cycles(self.cfg.shutdown_hold_cycles, never)
+        self._forced = False
+        self._run_cycles(self.cfg.shutdown_disable_cycles, never)
+
+    def timing(self) -> dict:
+        """Percentiles (us) of the compute time, the period error and each phase of the cycle,
+        over the last HISTORY cycles."""
+        n = min(self.stats.cycles, HISTORY)
+        if not n:
+            return {}
+        out = {"compute_us": percentiles_us(self.compute_s[:n]),
+               "period_error_us": percentiles_us(self.period_error_s[:n])}
+        out["phases_us"] = {name: percentiles_us(self.phase_s[:n, j]) for j, name in enumerate(PHASES)}
+        return out
+
+    def summary(self) -> dict:
+        c, s = self.controller, self.stats
+        return {"rig": c.rig, "controller": c.sup.controller, "pacing": self.pacing,
+                "cycles": s.cycles, "overruns": s.overruns, "e2e_errors": s.e2e_errors,
+                "missing_frames": s.missing_frames, "faults": s.faults, "fault_code": c.sup.fault_code.name,
+                **{key: round(getattr(c, key), 3) for key in PEAK_KEYS},
+                "state": (self.state_at_stop or c.state).name, "emergencies": s.emergencies,
+                "host_commands": s.host_commands, "frames_sent": s.frames_sent, "timing": self.timing()}

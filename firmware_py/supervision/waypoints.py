@@ -1,0 +1,195 @@
+"""The host's waypoints: staging of the POS and ROT halves by TAG, the checks a commit
+must pass (with the reason of a refusal), the queue, and the trajectory the queue's head
+makes. Events, outside the steady cycle: they may allocate, the cycle does not.
+
+Rules (docs/PROTOCOL.md): HOST_WAYPOINT_POS and _ROT are staged under their TAG;
+HOST_WAYPOINT_TIME with the same TAG (= SEQ & 0xF) commits them, whatever its result
+consuming the staged halves of its TAG. The first SEQ after start-up or CLEAR_WAYPOINTS is
+free; then each accepted SEQ must be the previous accepted one + 1 (mod 256), and a refused
+one does not count. Rigs: `testbench` (a waypoint's Z is the stroke; X, Y and the rotation
+must be 0) and `hexapod` (platform poses; strokes by inverse kinematics, the path between
+waypoints checked pose by pose).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from firmware_py.config import ControllerConfig
+from firmware_py.motion_control.trajectory import JointTrajectory, hold_at, through_points
+from physics.constants import GRAVITY_M_S2
+from protocol.enums import Ack, State, WaypointFlag
+
+COMMIT_STATES = (State.IDLE, State.READY, State.RUNNING)
+KNOWN_FLAGS = int(sum(WaypointFlag))         # other FLAGS bits are reserved and ignored
+
+
+@dataclass
+class Waypoint:
+    seq: int
+    strokes: np.ndarray          # joint targets [m]
+    segment_time_s: float
+    accel_time_s: float
+    flags: WaypointFlag
+    pose: tuple                  # (x, y, z, roll, pitch, yaw) as sent, SI
+
+
+class TestbenchCheck:
+    """One leg: Z within the stroke's guard, a bounded speed and a bounded actuator force."""
+
+    __test__ = False             # not a pytest class despite the name
+
+    def __init__(self, cfg: ControllerConfig, stroke_m: float):
+        self.cfg, self.stroke_m = cfg, stroke_m
+
+    def __call__(self, previous, pos, rot, segment_time, accel_time, step: bool, load_kg: float):
+        cfg, margin = self.cfg, self.cfg.stroke_margin_m
+        if max(abs(pos[0]), abs(pos[1]), *(abs(r) for r in rot)) > 1e-9 or not (
+                margin <= pos[2] <= self.stroke_m - margin):
+            return Ack.OUTSIDE_WORKSPACE, None
+        strokes = np.array([pos[2]])
+        if not peak_velocity_ok(cfg, previous, strokes, segment_time, accel_time, step):
+            return Ack.TOO_FAST, None
+        if step:
+            return Ack.ACCEPTED, strokes
+        # the static load as estimated plus the segment's peak SLS acceleration
+        peak_accel = abs(pos[2] - float(previous[0])) / (segment_time - accel_time) * math.pi / (2.0 * accel_time)
+        force = (cfg.moving_mass_kg + load_kg) * (GRAVITY_M_S2 + peak_accel)
+        if force > cfg.waypoint_force_max_n:
+            return Ack.TOO_FAST, None
+        return Ack.ACCEPTED, strokes
+
+
+class HexapodCheck:
+    """The target and the joint-space path to it, pose by pose: reachable, away from
+    singularities, a bounded joint speed and static-plus-inertial actuator force. Compiled
+    per pose (about 10 us each): a commit runs after a cycle's write, within its slack."""
+
+    def __init__(self, cfg: ControllerConfig, geometry):
+        from firmware_py.mechanics.dynamics import InverseDynamics
+        from firmware_py.mechanics.kinematics import DirectKinematics
+        from firmware_py.mechanics.workspace import PoseChecker
+        self.cfg, self.geometry = cfg, geometry
+        self.dk = DirectKinematics(geometry, cfg.dk_tolerance_m, 50)
+        self.dynamics = InverseDynamics(geometry)
+        self.poses = PoseChecker(geometry)
+        self.fractions = np.linspace(1.0, 0.0, cfg.waypoint_path_samples)
+        self.zero_velocity, self.accel = np.zeros(6), np.zeros(6)
+
+    def __call__(self, previous, pos, rot, segment_time, accel_time, step: bool, load_kg: float):
+        from firmware_py.mechanics.rotation import rpy_to_quat
+        from firmware_py.mechanics.workspace import MIN_CONDITION_INDEX, OUT_CONDITION, OUT_REACHABLE
+
+        g, cfg = self.geometry, self.cfg
+        target, quat = np.array(pos, dtype=float), rpy_to_quat(*rot)
+        report = self.poses.check(target, quat)
+        if not report[OUT_REACHABLE]:
+            return Ack.OUTSIDE_WORKSPACE, None
+        if report[OUT_CONDITION] < MIN_CONDITION_INDEX:
+            return Ack.SINGULAR, None
+        strokes = self.poses.lengths - g.leg_min_m
+        if not peak_velocity_ok(cfg, previous, strokes, segment_time, accel_time, step):
+            return Ack.TOO_FAST, None
+        # the joint-space path between the waypoints, back from the target
+        dk = self.dk
+        dk.pose[0:3], dk.pose[3:7] = target, quat
+        singular = False
+        for s in self.fractions:
+            dk.solve(g.leg_min_m + previous + s * (strokes - previous))
+            if not dk.converged:
+                return Ack.OUTSIDE_WORKSPACE, None
+            report = self.poses.check(dk.pose[0:3], dk.pose[3:7])
+            if not report[OUT_REACHABLE]:
+                return Ack.OUTSIDE_WORKSPACE, None
+            singular |= report[OUT_CONDITION] < MIN_CONDITION_INDEX
+        if singular:
+            return Ack.SINGULAR, None
+        # static load plus the peak SLS acceleration of the segment's translation (dk.pose: its start)
+        self.accel[0:3] = (target - dk.pose[0:3]) / (segment_time - accel_time) * math.pi / (2.0 * accel_time)
+        if not self.dynamics.forces(target, quat, self.zero_velocity, self.accel):
+            return Ack.SINGULAR, None
+        if np.max(np.abs(self.dynamics.force_n)) > cfg.waypoint_force_max_n:
+            return Ack.TOO_FAST, None
+        return Ack.ACCEPTED, strokes
+
+
+def peak_velocity_ok(cfg: ControllerConfig, previous, strokes, segment_time, accel_time, step: bool) -> bool:
+    """A step is bounded by its size; a segment by its peak joint velocity."""
+    distance = float(np.max(np.abs(strokes - previous)))
+    if step:
+        return distance <= cfg.waypoint_step_max_m
+    return distance / (segment_time - accel_time) <= cfg.waypoint_velocity_max_m_s
+
+
+class WaypointQueue:
+    def __init__(self, cfg: ControllerConfig, check):
+        self.cfg, self.check = cfg, check
+        self.queue: list[Waypoint] = []
+        self.expected_seq: int | None = None       # None: the next SEQ is free
+        self._staged_pos: dict[int, tuple] = {}
+        self._staged_rot: dict[int, tuple] = {}
+
+    def stage_position(self, tag: int, x: float, y: float, z: float) -> None:
+        self._staged_pos[tag & 0x0F] = (x, y, z)
+
+    def stage_rotation(self, tag: int, roll: float, pitch: float, yaw: float) -> None:
+        self._staged_rot[tag & 0x0F] = (roll, pitch, yaw)
+
+    def free(self) -> int:
+        return max(self.cfg.waypoint_queue - len(self.queue), 0)
+
+    def clear(self) -> None:
+        self.queue.clear()
+        self.expected_seq = None
+
+    def commit(self, tag: int, seq: int, segment_time: float, accel_time: float, flags: int, state: State,
+               previous, load_kg: float) -> Ack:
+        """Check the staged pose with this TAG and queue it, or say why not; `previous` is the
+        joint position the segment starts from."""
+        tag &= 0x0F
+        pos = self._staged_pos.pop(tag, None)
+        rot = self._staged_rot.pop(tag, None)
+        if pos is None or rot is None or (seq & 0x0F) != tag:
+            return Ack.INCOMPLETE
+        if self.expected_seq is not None and seq != self.expected_seq:
+            return Ack.SEQUENCE_GAP
+        if state not in COMMIT_STATES:
+            return Ack.BAD_STATE
+        if len(self.queue) >= self.cfg.waypoint_queue:
+            return Ack.QUEUE_FULL
+        if not all(math.isfinite(v) for v in pos + rot + (segment_time, accel_time)):
+            return Ack.NOT_FINITE
+        if not (accel_time > 0.0 and segment_time >= 2.0 * accel_time):
+            return Ack.BAD_ARGUMENT
+        flags = WaypointFlag(flags & KNOWN_FLAGS)
+        step = bool(flags & WaypointFlag.STEP)
+        if step and (not flags & WaypointFlag.LAST or (self.queue and not self.queue[-1].flags & WaypointFlag.LAST)):
+            return Ack.BAD_ARGUMENT                         # a step is a trajectory of its own
+        if self.queue:
+            previous = self.queue[-1].strokes
+        result, strokes = self.check(previous, pos, rot, segment_time, accel_time, step, load_kg)
+        if result is not Ack.ACCEPTED:
+            return result
+        self.queue.append(Waypoint(seq, strokes, segment_time, accel_time, flags, pos + rot))
+        self.expected_seq = (seq + 1) % 256
+        return Ack.ACCEPTED
+
+    def head_starts_now(self) -> bool:
+        """The queue's first waypoint asks to start as soon as the running motion ends."""
+        return bool(self.queue) and bool(self.queue[0].flags & WaypointFlag.START)
+
+    def take(self, start) -> tuple[JointTrajectory, list[int]] | None:
+        """The trajectory of the queue's head (through its LAST waypoint) from `start`, and the
+        SEQ of each segment; None when the queue is empty."""
+        if not self.queue:
+            return None
+        take = next((k + 1 for k, w in enumerate(self.queue) if w.flags & WaypointFlag.LAST), len(self.queue))
+        chosen, self.queue = self.queue[:take], self.queue[take:]
+        if chosen[0].flags & WaypointFlag.STEP:           # a step reference (chapters 5.4, 7.6.1)
+            return hold_at(chosen[0].strokes, chosen[0].segment_time_s), [chosen[0].seq]
+        points = np.array([start] + [w.strokes for w in chosen])
+        return (through_points(points, [w.accel_time_s for w in chosen], [w.segment_time_s for w in chosen]),
+                [w.seq for w in chosen])

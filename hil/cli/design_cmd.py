@@ -1,0 +1,310 @@
+"""`hydrapod design ...`: the thesis's design work as commands (chapters 7.3-7.5.1).
+
+    hydrapod design robustness [--plants SRC] [--nominal MM,KG] [--kp --ki] [--out DIR] [--json]
+    hydrapod design schedule [--plants SRC] [--out FILE] [--ki-scale] [--kp-fraction] [--ti-fraction] [--json]
+    hydrapod design modes [--pose X,Y,Z,ROLL,PITCH,YAW] [--payload-kg M] [--supply-bar P] [--along] [--sealed]
+                          [--closed-loop] [--json] [--plot DIR]
+    hydrapod design computed-torque [--out FILE] [--supply-bar P] [--rigs LIST] [--samples N] [--refine N]
+                                    [--seed S] [--min-damping Z] [--workers N] [--bandwidth-hz] [--damping]
+                                    [--integral-fraction] [--velocity-gain] [--testbench-velocity-gain]
+                                    [--force-bandwidth-hz] [--velocity-filter-hz] [--json]
+
+SRC: `table-a3` (the thesis's plants), `emulator` (the emulator's linearisation) or the
+metrics.json of a `hil run sha-identification`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from physics.constants import BAR
+from program.cliutil import number_in_range, output_file
+from program.errors import UserInputError
+
+THESIS_KP_V_MM, THESIS_KI_V_MM_S = 0.085, 0.46      # chapter 7.4.2
+
+
+def _plants(text: str) -> str:
+    """argparse `type=`: a known source, or a file that exists (read later, errors one line)."""
+    from hil.design.plants import SOURCES
+    if text in SOURCES or Path(text).is_file():
+        return text
+    raise argparse.ArgumentTypeError(f"{text!r} is neither {' nor '.join(SOURCES)} nor an existing file")
+
+
+def _rigs(text: str) -> tuple[str, ...]:
+    """argparse `type=`: a comma-separated subset of hexapod, testbench."""
+    rigs = tuple(r.strip() for r in text.split(",") if r.strip())
+    unknown = [r for r in rigs if r not in ("hexapod", "testbench")]
+    if unknown or not rigs:
+        raise argparse.ArgumentTypeError(f"{text!r}: rigs are hexapod and testbench")
+    return rigs
+
+
+def _nominal(text: str) -> tuple[float, float]:
+    """argparse `type=`: POSITION_MM,LOAD_KG."""
+    try:
+        position, load = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not POSITION_MM,LOAD_KG (e.g. 120,6)") from None
+    return position, load
+
+
+def _out_dir(text: str | None, default: str) -> Path:
+    out = Path(text) if text else Path(default)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise UserInputError(f"--out {out}: cannot create the directory ({error.strerror})") from None
+    return out
+
+
+def _robustness(args) -> int:
+    from hil.design.plants import plant_set
+    from hil.design.reports import find_plant, format_robustness, plot_uncertainty, robustness_doc
+    out = _out_dir(args.out, "hil-out/design-robustness")
+    plants = plant_set(args.plants)
+    if args.nominal is not None and find_plant(plants, *args.nominal) is None:
+        raise UserInputError(f"--nominal {args.nominal[0]:g},{args.nominal[1]:g}: no such plant in {args.plants} "
+                             f"(positions {sorted({round(p.position_m * 1e3, 3) for p in plants})} mm, "
+                             f"loads {sorted({p.load_kg for p in plants})} kg)")
+    doc, arrays = robustness_doc(plants, args.plants, args.kp, args.ki, args.nominal)
+    plot_uncertainty(arrays, out / "uncertainty.png")
+    doc["figures"] = ["uncertainty.png"]
+    (out / "robustness.json").write_text(json.dumps(doc, indent=1))
+    text = format_robustness(doc)
+    (out / "robustness.md").write_text(text + "\n![Multiplicative uncertainty](uncertainty.png)\n")
+    print(json.dumps(doc, indent=1) if args.json else text + f"\n(written to {out})")
+    # the verdict: the nominal loop internally stable and the small-gain test met
+    return 0 if doc["pi"]["internally_stable"] and doc["uncertainty"]["robustly_stable"] else 1
+
+
+def _schedule(args) -> int:
+    from hil.design.plants import plant_set
+    from hil.design.reports import format_schedule, schedule_doc
+    from hil.design.schedule import schedule_toml, write_schedule
+    out = Path(args.out)
+    plants = plant_set(args.plants)
+    doc, tunings = schedule_doc(plants, args.plants, args.kp_fraction, args.ti_fraction, args.ki_scale)
+    write_schedule(out, schedule_toml(tunings, args.plants, args.ki_scale))
+    doc["file"] = str(out)
+    print(json.dumps(doc, indent=1) if args.json else format_schedule(doc, str(out)))
+    return 0 if doc["every_loop_stable_with_detuned_ki"] else 1
+
+
+def _pose(text: str) -> tuple[np.ndarray, np.ndarray]:
+    """argparse `type=`: X,Y,Z,ROLL,PITCH,YAW in mm and degrees."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 6 or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r} is not X,Y,Z,ROLL,PITCH,YAW (mm, deg; e.g. 0,0,631,0,0,0)")
+    return np.array(values[:3]) * 1e-3, np.radians(values[3:])
+
+
+def _modes(args) -> int:
+    from firmware_py.mechanics.geometry import default_geometry
+    from firmware_py.mechanics.workspace import check_poses
+    from hil.design.closed_loop import format_closed
+    from hil.design.modes import (
+        along_movements,
+        format_along,
+        format_modes,
+        format_sealed,
+        modal_model,
+        model_doc,
+        plot_modes,
+        pose_quaternion,
+        sealed_doc,
+        sealed_modes,
+    )
+    from plant_emulator.params import load_config
+    geometry = default_geometry()
+    position, rpy = args.pose if args.pose is not None else (geometry.home_position_m, np.zeros(3))
+    report = check_poses(geometry, position, pose_quaternion(rpy))
+    if not report.reachable[0]:
+        raise UserInputError(f"--pose {', '.join(f'{v:g}' for v in np.r_[position * 1e3, np.degrees(rpy)])}: "
+                             f"outside the hexapod's workspace")
+    out = _out_dir(args.plot, args.plot) if args.plot is not None else None
+    cfg = load_config()
+    supply = None if args.supply_bar is None else args.supply_bar * 1e5
+    doc = model_doc(modal_model(cfg, position, rpy, args.payload_kg, supply))
+    along = along_movements(cfg, args.payload_kg, supply) if args.along else None
+    if along is not None:
+        doc["along"] = along
+    if args.sealed:
+        doc["sealed"] = sealed_doc(sealed_modes(cfg, position, rpy, args.payload_kg, supply_pa=supply))
+    if args.closed_loop:
+        from hil.design.closed_loop import hexapod_closed_loop
+        loop = hexapod_closed_loop(cfg, position, rpy, args.payload_kg, supply)
+        doc["closed_loop"] = [m.as_dict() for m in loop.modes() if m.frequency_hz > 0.0]
+    if out is not None:
+        doc["figures"] = [str(out / name) for name in plot_modes(doc, along, out)]
+    if args.json:
+        print(json.dumps(doc, indent=1))
+    else:
+        print(format_modes(doc) + ("\n" + format_along(along) if along is not None else "")
+              + ("\n" + format_sealed(doc["sealed"]) if args.sealed else "")
+              + ("\n" + format_closed(doc["closed_loop"]) if args.closed_loop else ""))
+    return 0 if doc["converged"] else 1
+
+
+def _computed_torque(args) -> int:
+    from firmware_py.config import load_config as load_controller_config
+    from hil.design.ct_gains import (
+        GAIN_RANGES,
+        HEXAPOD_SEARCH,
+        TESTBENCH_RANGES,
+        TESTBENCH_SEARCH,
+        design_gains,
+        design_testbench_gains,
+        operating_set,
+    )
+    from hil.design.valve_map import computed_torque_toml, force_rate_floor, valve_map
+    from plant_emulator.params import load_config
+    supply = {} if args.supply_bar is None else {"actuator": {"supply_pressure_bar": args.supply_bar}}
+    cfg = load_config(overrides=supply or None)     # the map holds at the supply it was made at
+    spool, pressure_a, pressure_b, unreachable = valve_map(cfg)
+    models = operating_set(cfg)
+    floor = force_rate_floor(cfg, spool, pressure_a, pressure_b, models)
+    packaged = load_controller_config().raw["computed_torque"]       # an option not given keeps its value
+    given = {"bandwidth_hz": args.bandwidth_hz, "damping": args.damping, "integral_fraction": args.integral_fraction,
+             "velocity_gain_per_s": args.velocity_gain, "force_bandwidth_hz": args.force_bandwidth_hz,
+             "velocity_filter_hz": args.velocity_filter_hz}
+    gains = {key: packaged[key] if value is None else value for key, value in given.items()}
+    gains |= {key: packaged[key] for key in TESTBENCH_RANGES}
+    if args.testbench_velocity_gain is not None:
+        gains["testbench_velocity_gain_per_s"] = args.testbench_velocity_gain
+    gains["force_rate_floor_n_s_pct"] = round(floor / 100.0, 3)
+
+    def progress(count, candidate):
+        if not args.json:
+            print(f"  {count:3d}: worst damping {candidate.damping:6.3f}, score {candidate.score:8.3f}", flush=True)
+    design = {}
+    def search(defaults):                          # an option given overrides the rig's default
+        return tuple(default if value is None else value
+                     for value, default in zip((args.samples, args.refine, args.seed), defaults))
+    searching = args.samples != 0 and not any(value is not None for value in given.values())
+    if searching and "hexapod" in args.rigs:       # derived from the models (ct_gains)
+        samples, refine, seed = search(HEXAPOD_SEARCH)
+        best, tried = design_gains(cfg, samples, refine, seed, args.min_damping, args.workers, progress, models,
+                                   floor)
+        design["hexapod"] = {**best.as_dict(), "candidates": len(tried)}
+        gains |= {key: round(best.gains[key], 4) for key in GAIN_RANGES}
+    if searching and "testbench" in args.rigs and args.testbench_velocity_gain is None:
+        best, tried = design_testbench_gains(cfg, *search(TESTBENCH_SEARCH), args.workers, progress)
+        design["testbench"] = {**best.as_dict(), "candidates": len(tried)}
+        gains |= {key: round(best.gains[key], 4) for key in TESTBENCH_RANGES}
+    source = f"the emulator's configuration at {cfg.supply_pressure_pa / BAR:g} bar"
+    text = computed_torque_toml(spool, pressure_a, pressure_b, gains, source)
+    if supply:                                     # the residuals' model and the supply check at it too
+        text += f"\n[hydraulic_model]\nsupply_pressure_bar = {args.supply_bar:g}\n"
+    out = Path(args.out)
+    try:
+        out.write_text(text)
+    except OSError as error:
+        raise UserInputError(f"--out {out}: cannot write ({error.strerror})") from None
+    doc = {"file": str(out), "map_points": int(spool.size), "map_points_beyond_supply": unreachable,
+           "gains": gains, "design": design}
+    if args.json:
+        print(json.dumps(doc, indent=1))
+    else:
+        how = "; ".join(f"{rig} derived from {d['candidates']} candidates (score {d['score']:.3f})"
+                        for rig, d in design.items()) or "as given"
+        print(f"computed-torque config written to {out}: valve map {spool.shape[0]} forces x {spool.shape[1]} "
+              f"velocities ({unreachable} beyond the supply, held at the nearest reachable point); gains {how}: "
+              + ", ".join(f"{k} {v:g}" for k, v in gains.items()) + "; load it with --controller-config or --config")
+    return 0
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    design = sub.add_parser("design", help="design tools: robustness of the PI, gain schedule (chapter 7), "
+                                           "the hexapod's modes")
+    design_sub = design.add_subparsers(dest="design_command", required=True, metavar="TOOL")
+    plants_help = "table-a3 (default), emulator, or a sha-identification metrics.json"
+
+    p = design_sub.add_parser("robustness", help="nominal plant, well-posedness, PI poles, W1, ||W1 T||inf, "
+                                                 "robust performance (chapters 7.3-7.4)")
+    p.add_argument("--plants", type=_plants, default="table-a3", help=plants_help)
+    p.add_argument("--nominal", type=_nominal, default=None, metavar="MM,KG",
+                   help="the nominal plant's set point (default: chosen by eq. 7.10)")
+    p.add_argument("--kp", type=number_in_range(float, 0.0, 100.0, low_open=True), default=THESIS_KP_V_MM,
+                   help="PI proportional gain, V/mm (default: the thesis's 0.085)")
+    p.add_argument("--ki", type=number_in_range(float, 0.0, 1000.0), default=THESIS_KI_V_MM_S,
+                   help="PI integral gain, V/(mm s) (default: the thesis's 0.46)")
+    p.add_argument("--out", metavar="DIR", help="robustness.json, robustness.md, uncertainty.png "
+                                                "(default: hil-out/design-robustness)")
+    p.add_argument("--json", action="store_true", help="print robustness.json")
+    p.set_defaults(handler=_robustness)
+
+    p = design_sub.add_parser("schedule", help="Ziegler-Nichols PI per plant, 0.2 Ki, the [adaptive] table "
+                                               "the controller loads (chapter 7.5.1.1)")
+    p.add_argument("--plants", type=_plants, default="table-a3", help=plants_help)
+    p.add_argument("--out", type=output_file, default="hil-out/schedule.toml", metavar="FILE",
+                   help="the controller config file to write (default: hil-out/schedule.toml)")
+    p.add_argument("--ki-scale", type=number_in_range(float, 0.0, 1.0, low_open=True), default=0.2,
+                   help="the Ki detuning (thesis: 0.2)")
+    p.add_argument("--kp-fraction", type=number_in_range(float, 0.0, 1.0, low_open=True), default=0.45,
+                   help="Kp = this x Ku (Ziegler-Nichols PI: 0.45)")
+    p.add_argument("--ti-fraction", type=number_in_range(float, 0.0, 10.0, low_open=True), default=1.0 / 1.2,
+                   help="Ti = this x Tu (Ziegler-Nichols PI: 1/1.2)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_schedule)
+
+    p = design_sub.add_parser("modes", help="the emulated hexapod's linearised modes at a pose: joint-space "
+                                            "inertia, leg stiffness, flow gain, frequencies, damping, shapes")
+    p.add_argument("--pose", type=_pose, default=None, metavar="X,Y,Z,ROLL,PITCH,YAW",
+                   help="platform pose in mm and degrees (default: home)")
+    p.add_argument("--payload-kg", type=number_in_range(float, 0.0, 65.0), default=0.0,
+                   help="mass on the platform (default 0)")
+    p.add_argument("--supply-bar", type=number_in_range(float, 1.0, 40.0), default=None,
+                   help="supply pressure (default: the emulator's, 25 bar)")
+    p.add_argument("--along", action="store_true", help="also at every waypoint of both movements (11.3)")
+    p.add_argument("--sealed", action="store_true",
+                   help="also with the valves in HOLD (chambers sealed, seals in pre-sliding): what hex-kick measures")
+    p.add_argument("--closed-loop", action="store_true",
+                   help="also the closed loop's modes with the packaged computed-torque controller")
+    p.add_argument("--plot", metavar="DIR", default=None, help="write modes.png (and modes_along.png) here")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_modes)
+
+    p = design_sub.add_parser("computed-torque", help="the computed-torque controller: its valve map "
+                                                      "from the emulator's model, and its gains")
+    p.add_argument("--out", type=output_file, default="hil-out/computed_torque.toml", metavar="FILE",
+                   help="the controller config file to write (default: hil-out/computed_torque.toml)")
+    p.add_argument("--supply-bar", type=number_in_range(float, 1.0, 40.0), default=None,
+                   help="the power unit's pressure to make the map at (default: the emulator's, 25 bar); "
+                        "the file then sets [hydraulic_model] supply_pressure_bar to it")
+    # a gain given is used as given (the others: the packaged controller.toml's); none: the search
+    p.add_argument("--bandwidth-hz", type=number_in_range(float, 0.1, 50.0),
+                   help="task-space loop: Kp = w^2, Kd = 2 zeta w")
+    p.add_argument("--damping", type=number_in_range(float, 0.1, 5.0), help="zeta")
+    p.add_argument("--integral-fraction", type=number_in_range(float, 0.0, 5.0), help="Ki = this x w^3")
+    p.add_argument("--velocity-gain", type=number_in_range(float, 0.0, 1000.0),
+                   help="joint error to commanded piston velocity, 1/s")
+    p.add_argument("--testbench-velocity-gain", type=number_in_range(float, 0.0, 1000.0),
+                   help="the same on the test bench's leg, 1/s (given: no search for the test bench)")
+    p.add_argument("--force-bandwidth-hz", type=number_in_range(float, 0.0, 100.0),
+                   help="each leg's force loop on its load cell (its gain scheduled on the leg's operating point)")
+    p.add_argument("--samples", type=number_in_range(int, 0, 10000), default=None,
+                   help="the gain search's random candidates (default: 64 hexapod, 256 test bench; 0: keep the "
+                        "packaged gains; any gain given: no search)")
+    p.add_argument("--refine", type=number_in_range(int, 0, 10000), default=None,
+                   help="Nelder-Mead evaluations from the best candidate (default: 40 hexapod, 60 test bench)")
+    p.add_argument("--seed", type=number_in_range(int, 0, 2**31 - 1), default=None,
+                   help="the searches' seed (default: 1 hexapod, 3 test bench)")
+    p.add_argument("--min-damping", type=number_in_range(float, 0.0, 1.0), default=0.15,
+                   help="every closed-loop mode at least this damped over the operating set")
+    p.add_argument("--workers", type=number_in_range(int, 1, 64), default=2, help="processes for the search")
+    p.add_argument("--rigs", type=_rigs, default=("hexapod", "testbench"),
+                   help="whose gains to derive: hexapod,testbench (default both; the other keeps the packaged)")
+    p.add_argument("--velocity-filter-hz", type=number_in_range(float, 0.5, 200.0),
+                   help="low-pass of the measured twist")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_computed_torque)

@@ -1,0 +1,85 @@
+"""`hydrapod bus-load`, `hydrapod protocol dump` and `hydrapod protocol bench`."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import asdict
+
+from hil.tools.protocol_bench import format_bench, run_bench
+from program.cliutil import number_in_range
+from protocol.busload import MAX_LOAD, MIN_COMPUTE_WINDOW_US, bus_budget, format_budget
+from protocol.codec import CODECS
+from protocol.dbc import dbc_path
+
+CLASSIC_CAN_MAX_BITRATE = 1_000_000
+
+
+def add_parsers(sub) -> None:
+    p = sub.add_parser("bus-load", help="worst-case bus load and cycle timeline from the DBC",
+                       description="Bus load and cycle timeline of the DBC's schedule on classic CAN. "
+                                   "Exit 0 if it fits the limits, 1 if not.")
+    p.add_argument("--rate-hz", type=number_in_range(float, 0, 10_000, low_open=True), default=500.0,
+                   help="SYNC rate (default 500)")
+    p.add_argument("--bitrate", type=number_in_range(int, 10_000, CLASSIC_CAN_MAX_BITRATE), default=1_000_000,
+                   help="classic CAN bit rate in bit/s (default 1000000)")
+    p.add_argument("--max-load", type=number_in_range(float, 0, 1, low_open=True), default=MAX_LOAD,
+                   help=f"worst-case load limit (default {MAX_LOAD})")
+    p.add_argument("--min-compute-us", type=number_in_range(float, 0), default=MIN_COMPUTE_WINDOW_US,
+                   help=f"required compute window in us (default {MIN_COMPUTE_WINDOW_US:g})")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(handler=cmd_bus_load)
+
+    proto = sub.add_parser("protocol", help="protocol tools")
+    psub = proto.add_subparsers(dest="protocol_command", required=True, metavar="{dump,bench}")
+    d = psub.add_parser("dump", help="messages, schedule, E2E and signal scaling as compiled from the DBC")
+    d.add_argument("--json", action="store_true", help="print JSON")
+    d.set_defaults(handler=cmd_protocol_dump)
+    b = psub.add_parser("bench", help="time the codec hot path (receive, encode, one cycle of frames)")
+    b.add_argument("--iterations", type=number_in_range(int, 100, 10_000_000), default=20_000,
+                   help="timed iterations per case (default 20000)")
+    b.add_argument("--json", action="store_true", help="print JSON")
+    b.set_defaults(handler=cmd_protocol_bench)
+
+
+def cmd_bus_load(args: argparse.Namespace) -> int:
+    budget = bus_budget(args.rate_hz, args.bitrate, max_load=args.max_load, min_compute_us=args.min_compute_us)
+    print(json.dumps(budget, indent=2) if args.json else format_budget(budget))
+    return 0 if budget["fits"] else 1
+
+
+def _describe() -> list[dict]:
+    out = []
+    for codec in CODECS.values():
+        sched = codec.schedule
+        out.append({
+            "name": codec.name, "id": codec.frame_id, "dlc": codec.dlc, "sender": sched.sender,
+            "kind": sched.kind, "sync_period": sched.sync_period, "sync_phase": sched.sync_phase,
+            "cycle_time_ms": sched.cycle_time_ms, "e2e_data_id": codec.data_id,
+            "signals": [asdict(s) for s in codec.signals],
+        })
+    return out
+
+
+def cmd_protocol_dump(args: argparse.Namespace) -> int:
+    messages = _describe()
+    if args.json:
+        print(json.dumps({"dbc": str(dbc_path()), "messages": messages}, indent=2))
+        return 0
+    print(f"# {dbc_path()}")
+    for m in messages:
+        when = {"cyclic": "every SYNC", "every_nth_sync": f"every {m['sync_period']}th SYNC, phase {m['sync_phase']}",
+                "timer": f"every {m['cycle_time_ms']} ms", "event": "on event"}[m["kind"]]
+        e2e = f"E2E P01 data id {m['e2e_data_id']:#06x}" if m["e2e_data_id"] is not None else "no E2E"
+        print(f"\n{m['name']}  id {m['id']:#05x}  dlc {m['dlc']}  from {m['sender']}  {when}  {e2e}")
+        for s in m["signals"]:
+            kind = f"{'s' if s['signed'] else 'u'}{s['length']}@{s['start']}"
+            print(f"  {s['name']:<18} {kind:<8} x{s['scale']:g}{s['offset']:+g} "
+                  f"[{s['minimum']:g}, {s['maximum']:g}] {s['unit'] or '-':<6} {s['comment']}")
+    return 0
+
+
+def cmd_protocol_bench(args: argparse.Namespace) -> int:
+    result = run_bench(args.iterations)
+    print(json.dumps(result, indent=2) if args.json else format_bench(result))
+    return 0
