@@ -1,103 +1,44 @@
 """The controller's configuration: `data/controller.toml` (thesis units) plus an optional
-user file with the same sections and keys, validated against the ranges below and
-converted to SI once (`load_config`). Errors are one line naming the file, the key, the
-value and the allowed range (`ConfigError`; the CLI exits 2).
+user file with the same sections and keys, one frozen section per TOML table, each key
+declared once with its range and converted to SI at load (`program.sections`). Keys the
+emulator reads too are declared once in `physics` and `protocol`. Errors are one line
+naming the file, the key, the value and the allowed range (`ConfigError`; the CLI exits 2).
+
+Each component takes its own section: the loop [timing], the supervisor [supervisor], the
+waypoint queue [waypoints], the limit monitors [limits], and so on.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
 from physics import hydraulics as hy
-from physics import lugre
-from physics.actuator import cylinder_areas
+from physics.actuator import (
+    ENCODER_RESOLUTION,
+    GUIDE_COULOMB,
+    GUIDE_VISCOUS,
+    LOAD_CELL_NOISE,
+    PAYLOAD,
+    PRESSURE_NOISE,
+    SLIDE_MASS,
+    VALVE_FULL_SCALE,
+    CylinderSection,
+)
 from physics.constants import BAR, MM
+from physics.lugre import LugreSection
 from program.errors import UserInputError
-from program.tomlconfig import TABLE, load_layered
+from program.realtime import CPU_LATENCY, REALTIME_PRIORITY
+from program.sections import ConfigFile, Section, flag, frozen, key, load_file, numbers, table
+from protocol.nodes import HEARTBEAT
 
-RANGES: dict[str, dict[str, object]] = {
-    "timing": {
-        "sync_window_fraction": (0.1, 0.95), "spin_us": (0.0, 5000.0),
-        "commit_room_us": (0.0, 100000.0), "lockstep_timeout_ms": (1.0, 10000.0),
-        "activation_timeout_s": (0.1, 600.0), "hold_cycles": (1, 10000), "shutdown_hold_cycles": (1, 10000),
-        "shutdown_disable_cycles": (1, 10000), "heartbeat_ms": (10.0, 10000.0),
-        "heartbeat_timeout_ms": (10.0, 60000.0), "realtime_priority": (1, 99),
-        "cpu": (-1, 1023), "cpu_latency_us": (-1, 100000), "stall_fault_periods": (1.0, 10000.0),
-    },
-    "actuator": {
-        "bore_radius_mm": (0.5, 100.0), "rod_radius_mm": (0.1, 99.0), "stroke_mm": (10.0, 2000.0),
-        "moving_mass_kg": (0.0, 50.0), "valve_full_scale_v": (0.01, 24.0), "encoder_resolution_mm": (1e-4, 10.0),
-    },
-    "testbench": {"slide_mass_kg": (0.0, 100.0), "home_mm": (0.0, 2000.0), "park_mm": (0.0, 2000.0),
-                  "plausibility_spool_pct": (1.0, 100.0), "plausibility_cycles": (1, 100000),
-                  "guide_coulomb_n": (0.0, 1000.0), "guide_viscous_ns_mm": (0.0, 100.0)},
-    "identification": {"force_gain_v_n": (0.0, 10.0), "force_filter_hz": (0.01, 100.0),
-                       "stroke_guard_mm": (0.0, 500.0)},
-    "hexapod": {"park_stroke_mm": (0.0, 2000.0), "kp_factor": (0.01, 10.0), "ki_factor": (0.0, 10.0),
-                "payload_kg": (0.0, 500.0)},
-    "friction": {
-        "alpha0_pos_n": (-1000.0, 1000.0), "alpha1_pos_n": (-1000.0, 1000.0), "vs_pos_mm_s": (0.01, 1e4),
-        "sigma2_pos_ns_mm": (0.0, 100.0), "alpha0_neg_n": (-1000.0, 1000.0), "alpha1_neg_n": (-1000.0, 1000.0),
-        "vs_neg_mm_s": (-1e4, -0.01), "sigma2_neg_ns_mm": (0.0, 100.0), "sigma0_pos_n_mm": (1e-3, 1e6),
-        "sigma1_pos_ns_mm": (0.0, 1e3), "sigma0_neg_n_mm": (1e-3, 1e6), "sigma1_neg_ns_mm": (0.0, 1e3),
-        "observer_gain_per_s": (0.0, 1e4),
-    },
-    "kalman": {"jerk_psd_mm2_s5": (1e-3, 1e15), "adaptive_gain": (0.01, 1e4),
-               "adaptive_velocity_ref_mm_s": (1e-3, 1e4)},
-    "mass_estimator": {
-        "forgetting": (0.9, 1.0), "filter_hz": (0.01, 200.0), "filter_zeta": (0.1, 5.0), "initial_kg": (0.0, 100.0),
-        "covariance_initial": (1e-9, 1e6), "covariance_max": (1e-9, 1e9), "mass_max_kg": (0.1, 1000.0),
-    },
-    "load_pressure": {"differentiator_hz": (0.1, 240.0), "differentiator_zeta": (0.1, 5.0)},
-    "pi": {"kp_v_mm": (0.0, 100.0), "ki_v_mm_s": (0.0, 1000.0), "saturation_v": (0.01, 24.0)},
-    "adaptive": {
-        "kpl_v_bar": (0.0, 100.0), "ki_scale": (0.0, 10.0), "table_position_mm": None, "table_load_kg": None,
-        "kp_0kg_v_mm": None, "ki_0kg_v_mm_s": None, "kp_3kg_v_mm": None, "ki_3kg_v_mm_s": None,
-        "kp_6kg_v_mm": None, "ki_6kg_v_mm_s": None,
-    },
-    "model_based": {"feedforward_scale": (0.0, 10.0)},
-    "computed_torque": {
-        "bandwidth_hz": (0.1, 50.0), "damping": (0.1, 5.0), "integral_fraction": (0.0, 5.0),
-        "velocity_gain_per_s": (0.0, 1000.0),
-        "force_bandwidth_hz": (0.0, 100.0), "force_rate_floor_n_s_pct": (1.0, 1e6),
-        "testbench_bandwidth_hz": (0.1, 50.0), "testbench_damping": (0.1, 5.0),
-        "testbench_integral_fraction": (0.0, 5.0), "testbench_velocity_gain_per_s": (0.0, 1000.0),
-        "testbench_force_bandwidth_hz": (0.0, 100.0), "testbench_velocity_filter_hz": (0.5, 200.0),
-        "velocity_filter_hz": (0.5, 200.0),
-    },
-    "valve_map": {"force_n": None, "velocity_mm_s": None, "spool_pct": TABLE, "pressure_a_bar": TABLE,
-                  "pressure_b_bar": TABLE},
-    "hydraulic_model": {**hy.VALVE_RANGES, **hy.CHAMBER_RANGES, "supply_pressure_bar": (1.0, 400.0),
-                        "tank_pressure_bar": (0.0, 10.0)},
-    "residuals": {"enabled": bool, "correction_gain": (0.001, 1.0), "filter_ms": (0.1, 1000.0),
-                  "persistence_cycles": (1, 10000), "flow_spread_pct": (0.0, 100.0), "supply_legs": (2, 6),
-                  "load_cell_noise_n": (0.0, 100.0), "spool_check": bool, "spool_floor_pct": (0.1, 100.0),
-                  "spool_lag_spread_pct": (0.0, 99.0), "spool_persistence_cycles": (1, 10000),
-                  "column_stiffness_n_mm": (0.1, 1e6), "leakage_spread_pct": (0.0, 100.0),
-                  "stiffness_spread_pct": (0.0, 99.0), "pressure_noise_bar": (0.0, 10.0),
-                  "pressure_persistence_samples": (1, 100)},
-    "limits": {
-        "stroke_margin_mm": (0.0, 100.0), "velocity_max_mm_s": (1.0, 1e4), "force_max_n": (1.0, 1e6),
-        "tracking_error_max_mm": (0.1, 1000.0), "spool_max_pct": (1.0, 100.0),
-    },
-    "supervisor": {
-        "missing_frames_fault": (1, 10000), "e2e_errors_fault": (1, 10000), "overruns_fault": (1, 10000),
-        "dk_failures_fault": (1, 10000), "dk_tolerance_um": (0.001, 1000.0), "dk_max_iterations": (1, 100),
-        "singularity_ratio_min": (0.0, 1.0), "auto_enable": bool, "homing_speed_mm_s": (0.1, 1000.0),
-        "homing_accel_time_s": (0.001, 10.0), "waypoint_queue": (1, 255),
-        "waypoint_velocity_max_mm_s": (0.1, 1e4), "waypoint_step_max_mm": (0.0, 300.0),
-        "waypoint_force_max_n": (1.0, 1e6),
-        "waypoint_path_samples": (2, 1000), "plausibility_spool_pct": (1.0, 100.0),
-        "plausibility_cycles": (1, 100000), "plausibility_travel_mm": (0.0, 1000.0),
-        "attitude_mismatch_deg": (0.01, 90.0), "attitude_mismatch_samples": (1, 10000),
-        "controlled_stop_ms": (0.0, 5000.0),
-    },
-}
+US, MS = 1e-6, 1e-3
+PCT = 100.0                         # a percentage is divided by it
 SCHEDULE_LOADS = ("0kg", "3kg", "6kg")
 
 
@@ -107,6 +48,153 @@ class ConfigError(UserInputError):
 
 def default_config_path() -> Path:
     return Path(str(resources.files("firmware_py").joinpath("data/controller.toml")))
+
+
+@frozen
+class Timing(Section):
+    """The loop on the bus (runtime/loop.py, daemon.py)."""
+    sync_window_fraction: float = key("sync_window_fraction", 0.1, 0.95)
+    spin_s: float = key("spin_us", 0.0, 5000.0, si=US)
+    commit_room_s: float = key("commit_room_us", 0.0, 100000.0, si=US)
+    lockstep_timeout_s: float = key("lockstep_timeout_ms", 1.0, 10000.0, si=MS)
+    activation_timeout_s: float = key("activation_timeout_s", 0.1, 600.0)
+    hold_cycles: int = key("hold_cycles", 1, 10000)
+    shutdown_hold_cycles: int = key("shutdown_hold_cycles", 1, 10000)
+    shutdown_disable_cycles: int = key("shutdown_disable_cycles", 1, 10000)
+    heartbeat_s: float = key(HEARTBEAT)
+    heartbeat_timeout_s: float = key("heartbeat_timeout_ms", 10.0, 60000.0, si=MS)
+    realtime_priority: int = key(REALTIME_PRIORITY)
+    cpu: int = key("cpu", -1, 1023)
+    cpu_latency_us: int = key(CPU_LATENCY)
+    stall_fault_periods: float = key("stall_fault_periods", 1.0, 10000.0)
+
+
+@frozen
+class Actuator(CylinderSection):
+    """Each leg's cylinder, valve input and encoder (chapter 4.2)."""
+    moving_mass_kg: float = key("moving_mass_kg", 0.0, 50.0)
+    valve_full_scale_v: float = key(VALVE_FULL_SCALE)
+    encoder_resolution_m: float = key(ENCODER_RESOLUTION)
+
+
+@frozen
+class Testbench(Section):
+    """The single-actuator rig: its slide, its positions, its own motion window."""
+    slide_mass_kg: float = key(SLIDE_MASS)
+    home_m: float = key("home_mm", 0.0, 2000.0, si=MM)
+    park_m: float = key("park_mm", 0.0, 2000.0, si=MM)
+    plausibility_spool: float = key("plausibility_spool_pct", 1.0, 100.0, per=PCT)
+    plausibility_cycles: int = key("plausibility_cycles", 1, 100000)
+    guide_coulomb_n: float = key(GUIDE_COULOMB, name="guide_coulomb_n")
+    guide_viscous_ns_m: float = key(GUIDE_VISCOUS, name="guide_viscous_ns_mm")
+
+
+@frozen
+class Identification(Section):
+    """HOST_TEST on the test bench (chapter 6.4's experiments)."""
+    force_gain_v_n: float = key("force_gain_v_n", 0.0, 10.0)
+    force_filter_hz: float = key("force_filter_hz", 0.01, 100.0)
+    stroke_guard_m: float = key("stroke_guard_mm", 0.0, 500.0, si=MM)
+
+
+@frozen
+class Hexapod(Section):
+    """The platform: its park position, the thesis's gains scaled for it, its payload."""
+    park_stroke_m: float = key("park_stroke_mm", 0.0, 2000.0, si=MM)
+    kp_factor: float = key("kp_factor", 0.01, 10.0)
+    ki_factor: float = key("ki_factor", 0.0, 10.0)
+    payload_kg: float = key(PAYLOAD)
+
+
+@frozen
+class Friction(LugreSection):
+    """The seals' LuGre law and its observer's gain (eq. 7.30-7.32)."""
+    observer_gain_per_s: float = key("observer_gain_per_s", 0.0, 1e4)
+
+
+@frozen
+class Kalman(Section):
+    """Each leg's adaptive Kalman filter (eq. 7.41-7.50)."""
+    jerk_psd_m2_s5: float = key("jerk_psd_mm2_s5", 1e-3, 1e15, si=MM ** 2)
+    adaptive_gain: float = key("adaptive_gain", 0.01, 1e4)
+    adaptive_velocity_ref_m_s: float = key("adaptive_velocity_ref_mm_s", 1e-3, 1e4, si=MM)
+
+
+@frozen
+class MassEstimator(Section):
+    """The load's mass by RLS (eq. 7.33-7.37)."""
+    forgetting: float = key("forgetting", 0.9, 1.0)
+    filter_hz: float = key("filter_hz", 0.01, 200.0)
+    filter_zeta: float = key("filter_zeta", 0.1, 5.0)
+    initial_kg: float = key("initial_kg", 0.0, 100.0)
+    covariance_initial: float = key("covariance_initial", 1e-9, 1e6)
+    covariance_max: float = key("covariance_max", 1e-9, 1e9)
+    mass_max_kg: float = key("mass_max_kg", 0.1, 1000.0)
+
+    def validate(self, where, error) -> None:
+        if self.covariance_initial > self.covariance_max:
+            raise error(f"{where}.covariance_initial = {self.covariance_initial} exceeds covariance_max = "
+                        f"{self.covariance_max}")
+
+
+@frozen
+class LoadPressure(Section):
+    """The load pressure's filtered differentiator (eq. 7.38-7.39)."""
+    differentiator_hz: float = key("differentiator_hz", 0.1, 240.0)
+    differentiator_zeta: float = key("differentiator_zeta", 0.1, 5.0)
+
+
+@frozen
+class Pi(Section):
+    """The robust PI (chapter 7.4), gains in V/m and V/(m s)."""
+    kp_v_m: float = key("kp_v_mm", 0.0, 100.0, per=MM)
+    ki_v_m_s: float = key("ki_v_mm_s", 0.0, 1000.0, per=MM)
+    saturation_v: float = key("saturation_v", 0.01, 24.0)
+
+
+@frozen
+class Adaptive(Section):
+    """PI+P scheduled over (position, load) (chapter 7.5, Table 7.2)."""
+    kpl_v_pa: float = key("kpl_v_bar", 0.0, 100.0, per=BAR)
+    ki_scale: float = key("ki_scale", 0.0, 10.0)
+    table_position_m: np.ndarray = numbers("table_position_mm", si=MM)
+    table_load_kg: np.ndarray = numbers("table_load_kg")
+    kp_0kg_v_m: np.ndarray = numbers("kp_0kg_v_mm", si=1.0 / MM)
+    ki_0kg_v_m_s: np.ndarray = numbers("ki_0kg_v_mm_s", si=1.0 / MM)
+    kp_3kg_v_m: np.ndarray = numbers("kp_3kg_v_mm", si=1.0 / MM)
+    ki_3kg_v_m_s: np.ndarray = numbers("ki_3kg_v_mm_s", si=1.0 / MM)
+    kp_6kg_v_m: np.ndarray = numbers("kp_6kg_v_mm", si=1.0 / MM)
+    ki_6kg_v_m_s: np.ndarray = numbers("ki_6kg_v_mm_s", si=1.0 / MM)
+
+    @property
+    def table_kp(self) -> np.ndarray:
+        """(3, n_positions) V/m, the rows the loads of `table_load_kg`."""
+        return np.array([self.kp_0kg_v_m, self.kp_3kg_v_m, self.kp_6kg_v_m])
+
+    @property
+    def table_ki(self) -> np.ndarray:
+        """(3, n_positions) V/(m s), as printed (`ki_scale` applied by the schedule)."""
+        return np.array([self.ki_0kg_v_m_s, self.ki_3kg_v_m_s, self.ki_6kg_v_m_s])
+
+    def validate(self, where, error) -> None:
+        positions, loads = self.table_position_m, self.table_load_kg
+        if len(positions) < 4 or np.any(np.diff(positions) <= 0):
+            raise error(f"{where}.table_position_mm must hold >= 4 strictly increasing values")
+        if len(loads) != len(SCHEDULE_LOADS) or np.any(np.diff(loads) <= 0) or loads[0] < 0:
+            raise error(f"{where}.table_load_kg must hold 3 increasing non-negative masses, got {list(loads)}")
+        for load in SCHEDULE_LOADS:
+            for name in (f"kp_{load}_v_mm", f"ki_{load}_v_mm_s"):
+                values = getattr(self, name.replace("_mm", "_m"))
+                if len(values) != len(positions):
+                    raise error(f"{where}.{name} has {len(values)} values, table_position_mm has {len(positions)}")
+                if values.min() < 0:
+                    raise error(f"{where}.{name} has a negative gain {values.min() * MM:g}")
+
+
+@frozen
+class ModelBased(Section):
+    """The virtual-work forces along the reference (chapter 11.4.2)."""
+    feedforward_scale: float = key("feedforward_scale", 0.0, 10.0)
 
 
 @dataclass(frozen=True)
@@ -119,265 +207,180 @@ class ComputedTorqueGains:
     force_bandwidth_rad_s: float      # each leg's force loop on its load cell, scheduled on its operating point
     velocity_filter_hz: float         # low-pass of the measured twist / velocity (the D term)
 
-    @classmethod
-    def of(cls, section: dict, prefix: str = "") -> ComputedTorqueGains:
-        return cls(2 * math.pi * section[prefix + "bandwidth_hz"], section[prefix + "damping"],
-                   section[prefix + "integral_fraction"], section[prefix + "velocity_gain_per_s"],
-                   2 * math.pi * section[prefix + "force_bandwidth_hz"], section[prefix + "velocity_filter_hz"])
+
+@frozen
+class ComputedTorque(Section):
+    """The hexapod's task-space PID through the inverse dynamics and the test bench's one-leg
+    law, each rig's gains; the force loops' schedule floor."""
+    bandwidth_hz: float = key("bandwidth_hz", 0.1, 50.0)
+    damping: float = key("damping", 0.1, 5.0)
+    integral_fraction: float = key("integral_fraction", 0.0, 5.0)
+    velocity_gain_per_s: float = key("velocity_gain_per_s", 0.0, 1000.0)
+    force_bandwidth_hz: float = key("force_bandwidth_hz", 0.0, 100.0)
+    force_rate_floor: float = key("force_rate_floor_n_s_pct", 1.0, 1e6, si=100.0)   # N/s per unit spool
+    velocity_filter_hz: float = key("velocity_filter_hz", 0.5, 200.0)
+    testbench_bandwidth_hz: float = key("testbench_bandwidth_hz", 0.1, 50.0)
+    testbench_damping: float = key("testbench_damping", 0.1, 5.0)
+    testbench_integral_fraction: float = key("testbench_integral_fraction", 0.0, 5.0)
+    testbench_velocity_gain_per_s: float = key("testbench_velocity_gain_per_s", 0.0, 1000.0)
+    testbench_force_bandwidth_hz: float = key("testbench_force_bandwidth_hz", 0.0, 100.0)
+    testbench_velocity_filter_hz: float = key("testbench_velocity_filter_hz", 0.5, 200.0)
+
+    @cached_property
+    def hexapod(self) -> ComputedTorqueGains:
+        return ComputedTorqueGains(2 * math.pi * self.bandwidth_hz, self.damping, self.integral_fraction,
+                                   self.velocity_gain_per_s, 2 * math.pi * self.force_bandwidth_hz,
+                                   self.velocity_filter_hz)
+
+    @cached_property
+    def testbench(self) -> ComputedTorqueGains:
+        return ComputedTorqueGains(2 * math.pi * self.testbench_bandwidth_hz, self.testbench_damping,
+                                   self.testbench_integral_fraction, self.testbench_velocity_gain_per_s,
+                                   2 * math.pi * self.testbench_force_bandwidth_hz, self.testbench_velocity_filter_hz)
 
 
-@dataclass(frozen=True)
-class ControllerConfig:
-    raw: dict                         # thesis units, as loaded
-    # timing
-    sync_window_fraction: float
-    commit_room_s: float
-    spin_s: float
-    lockstep_timeout_s: float
-    activation_timeout_s: float
-    hold_cycles: int
-    shutdown_hold_cycles: int
-    shutdown_disable_cycles: int
-    heartbeat_s: float
-    heartbeat_timeout_s: float
-    realtime_priority: int
-    cpu_latency_us: int               # realtime: PM QoS wake-up latency asked of the CPUs (-1: none)
-    cpu: int
-    # actuator
-    piston_area_m2: float             # A_A, the bore: PL = pA - alpha pB acts on it
-    area_ratio: float                 # alpha = A_B / A_A
-    stroke_m: float
-    moving_mass_kg: float
-    valve_full_scale_v: float
-    encoder_resolution_m: float
-    slide_mass_kg: float
-    testbench_home_m: float
-    testbench_park_m: float
-    testbench_plausibility_spool: float   # the test bench's own motion window (fraction of full input) ...
-    testbench_plausibility_cycles: int    # ... and length: its slide carries no static load
-    guide_coulomb_n: float            # the test bench guide's friction (Table D.1, eq. D.3's gross
-    guide_viscous_ns_m: float         # motion): eq. 6.5's Ffg in the friction identification
-    test_force_gain_v_n: float        # HOST_TEST FORCE_SINE: P gain of the piston-force loop
-    test_force_filter_hz: float       # ... and the cut-off of its low-pass on the measured F_p
-    test_stroke_guard_m: float        # HOST_TEST VALVE_STEP: ends this close to an end stop
-    hexapod_park_stroke_m: float
-    hexapod_kp_factor: float          # every controller's Kp on the hexapod (see controller.toml)
-    hexapod_ki_factor: float          # every controller's Ki on the hexapod
-    hexapod_payload_kg: float         # carried at the platform's centre of mass (the dynamics' model)
-    # estimation
-    friction: np.ndarray              # LuGre vector of the seals (physics.lugre layout)
-    observer_gain_per_s: float        # k of the friction observer (eq. 7.30)
-    jerk_psd: float                   # m^2/s^5
-    kalman_adaptive_gain: float
-    kalman_velocity_ref_m_s: float
-    rls_forgetting: float
-    rls_filter_hz: float
-    rls_filter_zeta: float
-    rls_initial_kg: float
-    rls_p0: float
-    rls_p_max: float
-    mass_max_kg: float
-    differentiator_hz: float
-    differentiator_zeta: float
-    # control, gains in SI (V/m, V/(m s), V/Pa)
-    pi_kp: float
-    pi_ki: float
-    saturation_v: float
-    kpl_v_pa: float
-    ki_scale: float
-    table_position_m: np.ndarray      # (n_pos,)
-    table_load_kg: np.ndarray         # (3,)
-    table_kp: np.ndarray              # (3, n_pos) V/m
-    table_ki: np.ndarray              # (3, n_pos) V/(m s), as printed (ki_scale applied by the schedule)
-    feedforward_scale: float
-    # computed torque (hexapod): task-space PID through the inverse dynamics, a valve map
-    ct_hexapod: ComputedTorqueGains
-    ct_testbench: ComputedTorqueGains
-    ct_force_rate_floor: float        # N/s per unit spool: the force loops' schedule takes it no lower
-    valve_map_force_n: np.ndarray     # (n_f,)
-    valve_map_velocity_m_s: np.ndarray    # (n_v,)
-    valve_map_spool: np.ndarray       # (n_f, n_v) steady-state spool, fraction of full input
-    valve_map_pressure_a_pa: np.ndarray   # (n_f, n_v) the chamber pressures there
-    valve_map_pressure_b_pa: np.ndarray
-    # the actuators' hydraulic model and its residuals
-    hydraulics: np.ndarray            # physics.hydraulics HP_* vector (the [actuator] stroke)
-    supply_pressure_pa: float
-    residuals_enabled: bool
-    residual_gain: float              # chamber correction per cycle, fraction of the force error
-    residual_filter_s: float
-    residual_persistence: int
-    residual_flow_spread: float       # relative
-    residual_stiffness_n_m: float     # a leg's oil column in the thresholds (the median along the movements)
-    residual_supply_legs: int
-    load_cell_noise_n: float          # 1-sigma: the frozen load-cell check's limit follows from it
-    spool_check: bool                 # the valves report their spool (LEG_STATE's SPOOL): judge it
-    spool_floor: float                # the spool residual's floor, fraction of full input
-    spool_lag_spread: float           # the spool's time constant known to within this, relative
-    spool_persistence: int
-    residual_leakage_spread: float    # relative: the leakage's and the stiffness's known spread
-    residual_stiffness_spread: float
-    pressure_noise_pa: float          # 1-sigma of the chamber transducers (LEG_PRESSURE's PA, PB)
-    pressure_persistence: int         # samples beyond the prediction's threshold in a row: the leg is faulty
-    # limits and supervisor
-    stroke_margin_m: float
-    velocity_max_m_s: float
-    force_max_n: float
-    tracking_error_max_m: float
-    spool_max: float                  # fraction of full input
-    missing_frames_fault: int
-    e2e_errors_fault: int
-    overruns_fault: int
-    dk_failures_fault: int
-    dk_tolerance_m: float
-    dk_max_iterations: int
-    singularity_ratio_min: float
-    auto_enable: bool
-    homing_speed_m_s: float
-    homing_accel_time_s: float
-    waypoint_queue: int
-    waypoint_velocity_max_m_s: float
-    waypoint_step_max_m: float
-    waypoint_force_max_n: float
-    waypoint_path_samples: int
-    plausibility_spool: float         # fraction of full input
-    plausibility_cycles: int
-    plausibility_travel_m: float
-    attitude_mismatch_rad: float      # encoders' DK attitude against the IMU's
-    attitude_mismatch_samples: int
-    controlled_stop_s: float          # hexapod: after a one-leg fault the others move this long (stopping.py)
-    stall_fault_periods: float        # realtime: a SYNC this many periods after the previous one -> OVERRUN
+@frozen
+class ValveMap(Section):
+    """The steady state that holds a leg at hydraulic force F and piston velocity v: its spool
+    (fraction of full input) and chamber pressures; rows force_n, columns velocity."""
+    force_n: np.ndarray = numbers("force_n")
+    velocity_m_s: np.ndarray = numbers("velocity_mm_s", si=MM)
+    spool: np.ndarray = table("spool_pct", si=0.01)
+    pressure_a_pa: np.ndarray = table("pressure_a_bar", si=BAR)
+    pressure_b_pa: np.ndarray = table("pressure_b_bar", si=BAR)
+
+    def validate(self, where, error) -> None:
+        for name, axis in (("force_n", self.force_n), ("velocity_mm_s", self.velocity_m_s)):
+            if axis.ndim != 1 or len(axis) < 2 or np.any(np.diff(axis) <= 0):
+                raise error(f"{where}.{name} must hold >= 2 strictly increasing numbers")
+        shape = (len(self.force_n), len(self.velocity_m_s))
+        for name, values, low, high in (("spool_pct", self.spool, -1.0, 1.0),
+                                        ("pressure_a_bar", self.pressure_a_pa, -BAR, 1e3 * BAR),
+                                        ("pressure_b_bar", self.pressure_b_pa, -BAR, 1e3 * BAR)):
+            if values.ndim != 2 or values.shape != shape:
+                raise error(f"{where}.{name} is {'x'.join(map(str, values.shape))}, force_n x velocity_mm_s is "
+                            f"{shape[0]}x{shape[1]}")
+            scale = 0.01 if name == "spool_pct" else BAR
+            if not np.all((values >= low) & (values <= high)):
+                raise error(f"{where}.{name} holds a value outside [{low / scale:g}, {high / scale:g}]")
 
 
-def _schedule_tables(a: dict, source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    positions = np.array(a["table_position_mm"]) * MM
-    loads = np.array(a["table_load_kg"])
-    where = f"config {source}: [adaptive]"
-    if len(positions) < 4 or np.any(np.diff(positions) <= 0):
-        raise ConfigError(f"{where}.table_position_mm must hold >= 4 strictly increasing values")
-    if len(loads) != len(SCHEDULE_LOADS) or np.any(np.diff(loads) <= 0) or loads[0] < 0:
-        raise ConfigError(f"{where}.table_load_kg must hold 3 increasing non-negative masses, got {list(loads)}")
-    kp = np.empty((3, len(positions)))
-    ki = np.empty((3, len(positions)))
-    for j, load in enumerate(SCHEDULE_LOADS):
-        for name, out, scale in ((f"kp_{load}_v_mm", kp, 1.0 / MM), (f"ki_{load}_v_mm_s", ki, 1.0 / MM)):
-            values = a[name]
-            if len(values) != len(positions):
-                raise ConfigError(f"{where}.{name} has {len(values)} values, table_position_mm has {len(positions)}")
-            if min(values) < 0:
-                raise ConfigError(f"{where}.{name} has a negative gain {min(values)}")
-            out[j] = np.array(values) * scale
-    return positions, loads, kp, ki
+@frozen
+class HydraulicModel(hy.ValveSection, hy.ChamberSection):
+    """The controller's model of each actuator's valve and chambers (the emulator's [valve]
+    and [chambers] keys) and the power unit's pressures: what the residuals run."""
+    supply_pressure_pa: float = key(hy.SUPPLY_PRESSURE)
+    tank_pressure_pa: float = key(hy.TANK_PRESSURE)
+
+    def validate(self, where, error) -> None:
+        if self.tank_pressure_pa >= self.supply_pressure_pa:
+            raise error(f"{where}.tank_pressure_bar = {self.tank_pressure_pa / BAR:g} must be below "
+                        f"supply_pressure_bar = {self.supply_pressure_pa / BAR:g}")
 
 
-def _valve_map(vm: dict, source: str) -> tuple[np.ndarray, ...]:
-    where = f"config {source}: [valve_map]"
-    forces, velocities = np.array(vm["force_n"], dtype=float), np.array(vm["velocity_mm_s"], dtype=float) * MM
-    for name, axis in (("force_n", forces), ("velocity_mm_s", velocities)):
-        if axis.ndim != 1 or len(axis) < 2 or np.any(np.diff(axis) <= 0) or not np.all(np.isfinite(axis)):
-            raise ConfigError(f"{where}.{name} must hold >= 2 strictly increasing numbers")
-    tables = []
-    for name, scale, low, high in (("spool_pct", 0.01, -1.0, 1.0), ("pressure_a_bar", BAR, -BAR, 1e3 * BAR),
-                                   ("pressure_b_bar", BAR, -BAR, 1e3 * BAR)):
-        try:
-            table = np.array(vm[name], dtype=float) * scale
-        except ValueError:
-            raise ConfigError(f"{where}.{name} must be a table of numbers, one row per force") from None
-        if table.shape != (len(forces), len(velocities)):
-            raise ConfigError(f"{where}.{name} is {'x'.join(map(str, table.shape))}, force_n x velocity_mm_s "
-                              f"is {len(forces)}x{len(velocities)}")
-        if not np.all((table >= low) & (table <= high)):
-            raise ConfigError(f"{where}.{name} holds a value outside [{low / scale:g}, {high / scale:g}] "
-                              f"(or not a number)")
-        tables.append(np.ascontiguousarray(table))
-    return (forces, velocities, *tables)
+@frozen
+class Residuals(Section):
+    """Each actuator's chamber model against its load cell, its spool and its pressures."""
+    enabled: bool = flag("enabled")
+    correction_gain: float = key("correction_gain", 0.001, 1.0)
+    filter_s: float = key("filter_ms", 0.1, 1000.0, si=MS)
+    persistence_cycles: int = key("persistence_cycles", 1, 10000)
+    flow_spread: float = key("flow_spread_pct", 0.0, 100.0, per=PCT)
+    supply_legs: int = key("supply_legs", 2, 6)
+    load_cell_noise_n: float = key(LOAD_CELL_NOISE)
+    spool_check: bool = flag("spool_check")
+    spool_floor: float = key("spool_floor_pct", 0.1, 100.0, per=PCT)
+    spool_lag_spread: float = key("spool_lag_spread_pct", 0.0, 99.0, per=PCT)
+    spool_persistence_cycles: int = key("spool_persistence_cycles", 1, 10000)
+    column_stiffness_n_m: float = key("column_stiffness_n_mm", 0.1, 1e6, per=MM)
+    leakage_spread: float = key("leakage_spread_pct", 0.0, 100.0, per=PCT)
+    stiffness_spread: float = key("stiffness_spread_pct", 0.0, 99.0, per=PCT)
+    pressure_noise_pa: float = key(PRESSURE_NOISE)
+    pressure_persistence_samples: int = key("pressure_persistence_samples", 1, 100)
 
 
-def build(raw: dict, source: str = "config") -> ControllerConfig:
-    t, a, tb, f, k, m = (raw[s] for s in ("timing", "actuator", "testbench", "friction", "kalman", "mass_estimator"))
-    ident = raw["identification"]
-    lp, pi, ad, lim, sv = (raw[s] for s in ("load_pressure", "pi", "adaptive", "limits", "supervisor"))
-    if a["rod_radius_mm"] >= a["bore_radius_mm"]:
-        raise ConfigError(f"config {source}: [actuator].rod_radius_mm = {a['rod_radius_mm']} must be smaller "
-                          f"than bore_radius_mm = {a['bore_radius_mm']}")
-    if m["covariance_initial"] > m["covariance_max"]:
-        raise ConfigError(f"config {source}: [mass_estimator].covariance_initial = {m['covariance_initial']} "
-                          f"exceeds covariance_max = {m['covariance_max']}")
-    positions, loads, kp, ki = _schedule_tables(ad, source)
-    ct = raw["computed_torque"]
-    map_forces, map_velocities, map_spool, map_pa, map_pb = _valve_map(raw["valve_map"], source)
-    hm, rs = raw["hydraulic_model"], raw["residuals"]
-    if hm["tank_pressure_bar"] >= hm["supply_pressure_bar"]:
-        raise ConfigError(f"config {source}: [hydraulic_model].tank_pressure_bar = {hm['tank_pressure_bar']} must "
-                          f"be below supply_pressure_bar = {hm['supply_pressure_bar']}")
-    hydraulics = hy.pack({**a, "tank_pressure_bar": hm["tank_pressure_bar"]}, hm, hm)
-    area, ratio = cylinder_areas(a["bore_radius_mm"] * MM, a["rod_radius_mm"] * MM)
-    try:
-        friction = lugre.from_table(f)
-    except ValueError as error:
-        raise ConfigError(f"config {source}: [friction]: {error}") from None
-    return ControllerConfig(
-        raw=raw,
-        sync_window_fraction=t["sync_window_fraction"], spin_s=t["spin_us"] * 1e-6,
-        commit_room_s=t["commit_room_us"] * 1e-6,
-        lockstep_timeout_s=t["lockstep_timeout_ms"] * 1e-3, activation_timeout_s=t["activation_timeout_s"],
-        hold_cycles=t["hold_cycles"], shutdown_hold_cycles=t["shutdown_hold_cycles"],
-        shutdown_disable_cycles=t["shutdown_disable_cycles"], heartbeat_s=t["heartbeat_ms"] * 1e-3,
-        heartbeat_timeout_s=t["heartbeat_timeout_ms"] * 1e-3,
-        realtime_priority=t["realtime_priority"], cpu=t["cpu"], cpu_latency_us=t["cpu_latency_us"],
-        piston_area_m2=area, area_ratio=ratio, stroke_m=a["stroke_mm"] * MM, moving_mass_kg=a["moving_mass_kg"],
-        valve_full_scale_v=a["valve_full_scale_v"], encoder_resolution_m=a["encoder_resolution_mm"] * MM,
-        slide_mass_kg=tb["slide_mass_kg"], testbench_home_m=tb["home_mm"] * MM, testbench_park_m=tb["park_mm"] * MM,
-        testbench_plausibility_spool=tb["plausibility_spool_pct"] / 100.0,
-        testbench_plausibility_cycles=tb["plausibility_cycles"],
-        guide_coulomb_n=tb["guide_coulomb_n"], guide_viscous_ns_m=tb["guide_viscous_ns_mm"] / MM,
-        test_force_gain_v_n=ident["force_gain_v_n"],
-        test_force_filter_hz=ident["force_filter_hz"], test_stroke_guard_m=ident["stroke_guard_mm"] * MM,
-        hexapod_park_stroke_m=raw["hexapod"]["park_stroke_mm"] * MM, hexapod_kp_factor=raw["hexapod"]["kp_factor"],
-        hexapod_ki_factor=raw["hexapod"]["ki_factor"], hexapod_payload_kg=raw["hexapod"]["payload_kg"],
-        friction=friction, observer_gain_per_s=f["observer_gain_per_s"], jerk_psd=k["jerk_psd_mm2_s5"] * MM ** 2,
-        kalman_adaptive_gain=k["adaptive_gain"],
-        kalman_velocity_ref_m_s=k["adaptive_velocity_ref_mm_s"] * MM,
-        rls_forgetting=m["forgetting"], rls_filter_hz=m["filter_hz"], rls_filter_zeta=m["filter_zeta"],
-        rls_initial_kg=m["initial_kg"], rls_p0=m["covariance_initial"], rls_p_max=m["covariance_max"],
-        mass_max_kg=m["mass_max_kg"], differentiator_hz=lp["differentiator_hz"],
-        differentiator_zeta=lp["differentiator_zeta"],
-        pi_kp=pi["kp_v_mm"] / MM, pi_ki=pi["ki_v_mm_s"] / MM, saturation_v=pi["saturation_v"],
-        kpl_v_pa=ad["kpl_v_bar"] / BAR, ki_scale=ad["ki_scale"], table_position_m=positions, table_load_kg=loads,
-        table_kp=kp, table_ki=ki, feedforward_scale=raw["model_based"]["feedforward_scale"],
-        ct_hexapod=ComputedTorqueGains.of(ct), ct_testbench=ComputedTorqueGains.of(ct, "testbench_"),
-        ct_force_rate_floor=ct["force_rate_floor_n_s_pct"] * 100.0,
+@frozen
+class Limits(Section):
+    """The legs' limits while the valves follow the controller."""
+    stroke_margin_m: float = key("stroke_margin_mm", 0.0, 100.0, si=MM)
+    velocity_max_m_s: float = key("velocity_max_mm_s", 1.0, 1e4, si=MM)
+    force_max_n: float = key("force_max_n", 1.0, 1e6)
+    tracking_error_max_m: float = key("tracking_error_max_mm", 0.1, 1000.0, si=MM)
+    spool_max: float = key("spool_max_pct", 1.0, 100.0, per=PCT)
 
-        valve_map_force_n=map_forces, valve_map_velocity_m_s=map_velocities, valve_map_spool=map_spool,
-        valve_map_pressure_a_pa=map_pa, valve_map_pressure_b_pa=map_pb,
-        hydraulics=hydraulics, supply_pressure_pa=hm["supply_pressure_bar"] * BAR, residuals_enabled=rs["enabled"],
-        residual_gain=rs["correction_gain"], residual_filter_s=rs["filter_ms"] * 1e-3,
-        residual_persistence=rs["persistence_cycles"], residual_flow_spread=rs["flow_spread_pct"] / 100.0,
-        residual_stiffness_n_m=rs["column_stiffness_n_mm"] / MM,
-        residual_supply_legs=rs["supply_legs"], load_cell_noise_n=rs["load_cell_noise_n"],
-        spool_check=rs["spool_check"], spool_floor=rs["spool_floor_pct"] / 100.0,
-        spool_lag_spread=rs["spool_lag_spread_pct"] / 100.0, spool_persistence=rs["spool_persistence_cycles"],
-        residual_leakage_spread=rs["leakage_spread_pct"] / 100.0,
-        residual_stiffness_spread=rs["stiffness_spread_pct"] / 100.0, pressure_noise_pa=rs["pressure_noise_bar"] * BAR,
-        pressure_persistence=rs["pressure_persistence_samples"],
-        stroke_margin_m=lim["stroke_margin_mm"] * MM, velocity_max_m_s=lim["velocity_max_mm_s"] * MM,
-        force_max_n=lim["force_max_n"], tracking_error_max_m=lim["tracking_error_max_mm"] * MM,
-        spool_max=lim["spool_max_pct"] / 100.0,
-        missing_frames_fault=sv["missing_frames_fault"], e2e_errors_fault=sv["e2e_errors_fault"],
-        overruns_fault=sv["overruns_fault"], dk_failures_fault=sv["dk_failures_fault"],
-        dk_tolerance_m=sv["dk_tolerance_um"] * 1e-6, dk_max_iterations=sv["dk_max_iterations"],
-        singularity_ratio_min=sv["singularity_ratio_min"], auto_enable=sv["auto_enable"],
-        homing_speed_m_s=sv["homing_speed_mm_s"] * MM, homing_accel_time_s=sv["homing_accel_time_s"],
-        waypoint_queue=sv["waypoint_queue"], waypoint_velocity_max_m_s=sv["waypoint_velocity_max_mm_s"] * MM,
-        waypoint_step_max_m=sv["waypoint_step_max_mm"] * MM,
-        waypoint_force_max_n=sv["waypoint_force_max_n"], waypoint_path_samples=sv["waypoint_path_samples"],
-        plausibility_spool=sv["plausibility_spool_pct"] / 100.0, plausibility_cycles=sv["plausibility_cycles"],
-        plausibility_travel_m=sv["plausibility_travel_mm"] * MM,
-        attitude_mismatch_rad=math.radians(sv["attitude_mismatch_deg"]),
-        attitude_mismatch_samples=sv["attitude_mismatch_samples"], controlled_stop_s=sv["controlled_stop_ms"] * 1e-3,
-        stall_fault_periods=t["stall_fault_periods"],
-    )
+
+@frozen
+class Supervisor(Section):
+    """The state machine's own settings and the loop's and frames' fault counts."""
+    auto_enable: bool = flag("auto_enable")
+    homing_speed_m_s: float = key("homing_speed_mm_s", 0.1, 1000.0, si=MM)
+    homing_accel_time_s: float = key("homing_accel_time_s", 0.001, 10.0)
+    missing_frames_fault: int = key("missing_frames_fault", 1, 10000)
+    e2e_errors_fault: int = key("e2e_errors_fault", 1, 10000)
+    overruns_fault: int = key("overruns_fault", 1, 10000)
+    controlled_stop_s: float = key("controlled_stop_ms", 0.0, 5000.0, si=MS)
+
+
+@frozen
+class Kinematics(Section):
+    """The hexapod's direct kinematics every cycle and its singularity check."""
+    dk_tolerance_m: float = key("dk_tolerance_um", 0.001, 1000.0, si=US)
+    dk_max_iterations: int = key("dk_max_iterations", 1, 100)
+    dk_failures_fault: int = key("dk_failures_fault", 1, 10000)
+    singularity_ratio_min: float = key("singularity_ratio_min", 0.0, 1.0)
+
+
+@frozen
+class Waypoints(Section):
+    """The host's waypoint queue and each waypoint's admission check."""
+    queue: int = key("queue", 1, 255)
+    velocity_max_m_s: float = key("velocity_max_mm_s", 0.1, 1e4, si=MM)
+    step_max_m: float = key("step_max_mm", 0.0, 300.0, si=MM)
+    force_max_n: float = key("force_max_n", 1.0, 1e6)
+    path_samples: int = key("path_samples", 2, 1000)
+
+
+@frozen
+class Plausibility(Section):
+    """The legs' motion against their valve input, the encoders' attitude against the IMU's."""
+    spool: float = key("spool_pct", 1.0, 100.0, per=PCT)
+    cycles: int = key("cycles", 1, 100000)
+    travel_m: float = key("travel_mm", 0.0, 1000.0, si=MM)
+    attitude_mismatch_rad: float = key("attitude_mismatch_deg", 0.01, 90.0, si=math.pi / 180.0)
+    attitude_mismatch_samples: int = key("attitude_mismatch_samples", 1, 10000)
+
+
+@frozen
+class ControllerConfig(ConfigFile):
+    timing: Timing
+    actuator: Actuator
+    testbench: Testbench
+    identification: Identification
+    hexapod: Hexapod
+    friction: Friction
+    kalman: Kalman
+    mass_estimator: MassEstimator
+    load_pressure: LoadPressure
+    pi: Pi
+    adaptive: Adaptive
+    model_based: ModelBased
+    computed_torque: ComputedTorque
+    valve_map: ValveMap
+    hydraulic_model: HydraulicModel
+    residuals: Residuals
+    limits: Limits
+    supervisor: Supervisor
+    kinematics: Kinematics
+    waypoints: Waypoints
+    plausibility: Plausibility
+
+    @cached_property
+    def hydraulics(self) -> np.ndarray:
+        """The actuators' parameter vector (physics.hydraulics HP_*) from [actuator] and
+        [hydraulic_model]: what the residuals and the computed torque's force loops run."""
+        return hy.pack(self.actuator, self.hydraulic_model, self.hydraulic_model,
+                       self.hydraulic_model.tank_pressure_pa)
 
 
 def load_config(path: str | Path | None = None, overrides: dict | None = None) -> ControllerConfig:
-    raw = load_layered(RANGES, default_config_path(), path, overrides, ConfigError)
-    return build(raw, str(path) if path is not None else str(default_config_path()))
+    return load_file(ControllerConfig, default_config_path(), path, overrides, ConfigError)

@@ -53,26 +53,28 @@ class Controller:
         self.n = n = 6 if self.hexapod else 1
         if self.hexapod:
             from firmware_py.mechanics.platform import PlatformModel
-            self.geometry = (geometry or default_geometry()).with_payload(cfg.hexapod_payload_kg)
-            self.platform = PlatformModel(self.geometry, cfg.dk_tolerance_m, cfg.dk_max_iterations, period_s)
+            self.geometry = (geometry or default_geometry()).with_payload(cfg.hexapod.payload_kg)
+            kin = cfg.kinematics
+            self.platform = PlatformModel(self.geometry, kin.dk_tolerance_m, kin.dk_max_iterations, period_s)
             self.stroke_m = self.geometry.stroke_m
             self.home_strokes = self.platform.lengths - self.geometry.leg_min_m     # lengths at home
-            self.park_strokes = np.full(n, cfg.hexapod_park_stroke_m)
+            self.park_strokes = np.full(n, cfg.hexapod.park_stroke_m)
             moving_mass, mass_offset = self.geometry.rod.mass_kg, 0.0
-            kp_factor, ki_factor = cfg.hexapod_kp_factor, cfg.hexapod_ki_factor
-            check = HexapodCheck(cfg, self.geometry)
+            kp_factor, ki_factor = cfg.hexapod.kp_factor, cfg.hexapod.ki_factor
+            check = HexapodCheck(cfg.waypoints, cfg.kinematics.dk_tolerance_m, self.geometry)
             self.gravity_axial = self.platform.gravity_axial
             self.tau_n = self.platform.force_n
             self.computed_torque = ComputedTorque(cfg, self.geometry, period_s)
         else:
             self.geometry = None
             self.platform = None
-            self.stroke_m = cfg.stroke_m
-            self.home_strokes = np.full(n, cfg.testbench_home_m)
-            self.park_strokes = np.full(n, cfg.testbench_park_m)
-            moving_mass, mass_offset = cfg.moving_mass_kg, cfg.slide_mass_kg
+            self.stroke_m = cfg.actuator.stroke_m
+            self.home_strokes = np.full(n, cfg.testbench.home_m)
+            self.park_strokes = np.full(n, cfg.testbench.park_m)
+            moving_mass, mass_offset = cfg.actuator.moving_mass_kg, cfg.testbench.slide_mass_kg
             kp_factor, ki_factor = 1.0, 1.0
-            check = TestbenchCheck(cfg, cfg.stroke_m)
+            check = TestbenchCheck(cfg.waypoints, cfg.limits.stroke_margin_m, cfg.actuator.moving_mass_kg,
+                                   cfg.actuator.stroke_m)
             self.gravity_axial = np.full(n, GRAVITY_M_S2)
             self.tau_n = np.zeros(n)
             self.computed_torque = LegComputedTorque(cfg, n, period_s)
@@ -80,41 +82,41 @@ class Controller:
                                      kp_factor=kp_factor, ki_factor=ki_factor)
         self.sup = Supervisor(controller)
         self.joint.set_mode(controller)
-        self.reference = Reference(n, period_s, cfg.waypoint_queue + 2)
-        self.waypoints = WaypointQueue(cfg, check)
+        self.reference = Reference(n, period_s, cfg.waypoints.queue + 2)
+        self.waypoints = WaypointQueue(cfg.waypoints, check)
         self.host = HostLink()
         # supervision
-        self.loop_monitor = LoopMonitor(cfg)
-        self.node_monitor = NodeMonitor(cfg)
-        self.frames = FrameMonitor(cfg, n)
-        self.limits = LimitMonitor(cfg, n, self.stroke_m)
+        self.loop_monitor = LoopMonitor(cfg.supervisor)
+        self.node_monitor = NodeMonitor(cfg.timing.heartbeat_timeout_s)
+        self.frames = FrameMonitor(cfg.supervisor, n)
+        self.limits = LimitMonitor(cfg.limits, n, self.stroke_m)
         # the test bench's tight window stands in for the residuals when they are off; with them
         # on it is the supervisor's backstop (at 20 bar the slide creeps out of a stick at 5 %)
-        tight = not self.hexapod and not cfg.residuals_enabled
-        spool, cycles = ((cfg.testbench_plausibility_spool, cfg.testbench_plausibility_cycles) if tight else
-                         (cfg.plausibility_spool, cfg.plausibility_cycles))
-        self.plausibility = MotionPlausibility(n, spool * cfg.valve_full_scale_v, cycles, cfg.plausibility_travel_m)
-        self.attitude_check = AttitudeCrossCheck(cfg.attitude_mismatch_rad, cfg.attitude_mismatch_samples)
-        self.load_cells = FrozenLoadCells(n, cfg.load_cell_noise_n, signal_scale("LEG_STATE_1", "FORCE"))
+        tight = not self.hexapod and not cfg.residuals.enabled
+        spool, cycles = ((cfg.testbench.plausibility_spool, cfg.testbench.plausibility_cycles) if tight else
+                         (cfg.plausibility.spool, cfg.plausibility.cycles))
+        plausible = cfg.plausibility
+        self.plausibility = MotionPlausibility(n, spool * cfg.actuator.valve_full_scale_v, cycles, plausible.travel_m)
+        self.attitude_check = AttitudeCrossCheck(plausible.attitude_mismatch_rad, plausible.attitude_mismatch_samples)
+        res, encoder_m = cfg.residuals, cfg.actuator.encoder_resolution_m
+        supply_pa = cfg.hydraulic_model.supply_pressure_pa
+        self.load_cells = FrozenLoadCells(n, res.load_cell_noise_n, signal_scale("LEG_STATE_1", "FORCE"))
         # each actuator's chamber model against its load cell, while the valves are ACTIVE; the
         # cylinder's own stroke sets its chamber volumes
         self.residuals = ActuatorResiduals(
-            n, cfg.hydraulics, cfg.friction, cfg.supply_pressure_pa, period_s,
-            self.geometry.rod.mass_kg if self.hexapod else cfg.moving_mass_kg, cfg.residual_stiffness_n_m,
-            cfg.encoder_resolution_m, cfg.residual_gain, cfg.residual_filter_s, cfg.residual_persistence,
-            cfg.residual_flow_spread)
-        self.spool_check = SpoolResidual(n, cfg.hydraulics, period_s, cfg.spool_floor, cfg.spool_lag_spread,
-                                         cfg.spool_persistence, int(ValveState.ACTIVE))
+            n, cfg.hydraulics, cfg.friction.vector, supply_pa, period_s,
+            self.geometry.rod.mass_kg if self.hexapod else cfg.actuator.moving_mass_kg, res.column_stiffness_n_m,
+            encoder_m, res.correction_gain, res.filter_s, res.persistence_cycles, res.flow_spread)
+        self.spool_check = SpoolResidual(n, cfg.hydraulics, period_s, res.spool_floor, res.spool_lag_spread,
+                                         res.spool_persistence_cycles, int(ValveState.ACTIVE))
         # each leg's chambers from one LEG_PRESSURE sample to the next
-        floor_pa = sample_floor_pa(cfg.pressure_noise_pa, signal_scale("LEG_PRESSURE_1", "PA") * BAR)
-        self.chambers = ChamberPrediction(n, cfg.hydraulics, cfg.supply_pressure_pa, period_s,
-                                          cfg.encoder_resolution_m, cfg.residual_flow_spread,
-                                          cfg.residual_leakage_spread, cfg.residual_stiffness_spread, floor_pa,
-                                          cfg.pressure_persistence, int(ValveState.ACTIVE))
+        floor_pa = sample_floor_pa(res.pressure_noise_pa, signal_scale("LEG_PRESSURE_1", "PA") * BAR)
+        self.chambers = ChamberPrediction(n, cfg.hydraulics, supply_pa, period_s, encoder_m, res.flow_spread,
+                                          res.leakage_spread, res.stiffness_spread, floor_pa,
+                                          res.pressure_persistence_samples, int(ValveState.ACTIVE))
         self.residuals_running = False
         # the valves' P-port transducers against the supply the model assumes
-        self.supply = SupplyPressure(n, cfg.supply_pressure_pa, cfg.hydraulics[hy.HP_TANK], cfg.residual_flow_spread,
-                                     cfg.residual_supply_legs)
+        self.supply = SupplyPressure(n, supply_pa, cfg.hydraulics[hy.HP_TANK], res.flow_spread, res.supply_legs)
         # spool setpoints sent: the last cycle's (applied at this SYNC), the one before (applied
         # over the period this cycle's measurements close) and the one before that (applied
         # then when the other came late)
@@ -129,11 +131,12 @@ class Controller:
         self.pressure_peak = 0.0                 # ... for the chambers' samples
         self.attitude_peak = 0.0                 # ... and for the IMU against the encoders
         self._peaks = np.zeros((PEAK_DELAY, 5))
-        self.stop = ControlledStop(n, round(cfg.controlled_stop_s / period_s) if self.hexapod else 0)
+        self.stop = ControlledStop(n, round(cfg.supervisor.controlled_stop_s / period_s) if self.hexapod else 0)
         # identification tests (HOST_TEST, test bench only: chapter 6.4)
+        ident = cfg.identification
         self.test = None if self.hexapod else IdentificationSignal(
-            cfg.test_force_gain_v_n, cfg.test_force_filter_hz, cfg.test_stroke_guard_m, cfg.stroke_m,
-            cfg.saturation_v, period_s)
+            ident.force_gain_v_n, ident.force_filter_hz, ident.stroke_guard_m, cfg.actuator.stroke_m,
+            cfg.pi.saturation_v, period_s)
         self.meas, _ = self.new_interfaces()            # the last cycle's measurements (events read them)
         self.dk_failures = 0
         self.reset_cycles = 0
@@ -228,7 +231,8 @@ class Controller:
 
     def piston_force_n(self) -> float:
         """Leg 1's F_p from its latest chamber pressures (eq. 6.5)."""
-        return piston_force(self.meas.pa_pa[0], self.meas.pb_pa[0], self.cfg.piston_area_m2, self.cfg.area_ratio)
+        actuator = self.cfg.actuator
+        return piston_force(self.meas.pa_pa[0], self.meas.pb_pa[0], actuator.piston_area_m2, actuator.area_ratio)
 
     def test_command(self, mode: int, valve_v: float, force_n: float, duration_s: float) -> Ack:
         """HOST_TEST (test bench): start an identification test from READY, or ABORT the one
@@ -241,7 +245,7 @@ class Controller:
                 return Ack.BAD_STATE
             self._end_test()
             return Ack.ACCEPTED
-        if duration_s <= 0.0 or abs(valve_v) > self.cfg.saturation_v:
+        if duration_s <= 0.0 or abs(valve_v) > self.cfg.pi.saturation_v:
             return Ack.BAD_ARGUMENT
         if (self.state is not State.READY or self.reference.moving or self.reinitialise
                 or not self.meas.pressure_valid[0]):
@@ -268,11 +272,11 @@ class Controller:
             target = self.park_strokes if action is Action.PARK else self.home_strokes
             if not self.initialised:
                 ref.yr[:] = self.meas.position_m
-            ref.move(ref.yr, target, cfg.homing_speed_m_s, cfg.homing_accel_time_s, self.cycles)
+            ref.move(ref.yr, target, cfg.supervisor.homing_speed_m_s, cfg.supervisor.homing_accel_time_s, self.cycles)
         elif action is Action.START:
             self._start_queue()
         elif action is Action.STOP:
-            ref.stop(cfg.homing_accel_time_s, self.cycles)
+            ref.stop(cfg.supervisor.homing_accel_time_s, self.cycles)
         elif action is Action.RESET:
             self.reset_cycles = RESET_GRACE_CYCLES
             self.frames.reset()
@@ -299,7 +303,7 @@ class Controller:
     def after_write(self, time_left_s: float = math.inf) -> None:
         """Host work that must not delay the cycle's VALVE_CMD: one waypoint commit, when
         `time_left_s` before the next SYNC leaves room for it."""
-        self.host.run_after_write(self, time_left_s >= self.cfg.commit_room_s)
+        self.host.run_after_write(self, time_left_s >= self.cfg.timing.commit_room_s)
 
     # -- lifecycle ----------------------------------------------------------------------------
     def activated(self, auto_enable: bool) -> None:
@@ -421,7 +425,7 @@ class Controller:
         when they become ACTIVE; one leg beyond its threshold is that leg's fault, several at
         once the supply's."""
         res = self.residuals
-        if not (active and self.cfg.residuals_enabled):
+        if not (active and self.cfg.residuals.enabled):
             self.residuals_running = False
             return
         if not self.residuals_running:
@@ -435,7 +439,7 @@ class Controller:
         faulty = res.update(self.spool_applied, meas.fresh, meas.position_m, meas.force_n, self.gravity_axial,
                             self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
         spools = self.spool_check.update(self.spool_applied, self.spool_late, meas.spool, meas.fresh,
-                                         meas.valve_state) if self.cfg.spool_check else 0
+                                         meas.valve_state) if self.cfg.residuals.spool_check else 0
         chambers = self.chambers.update(self.spool_applied, self.spool_late, meas.fresh, meas.position_m,
                                         meas.valve_state, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
         slot = self.cycles % PEAK_DELAY
@@ -456,7 +460,7 @@ class Controller:
             self.sup.fault(Fault.SENSOR_FAULT, lone_leg + 1)
         elif spools:
             self._leg_fault(Fault.SPOOL_MISMATCH, self.spool_check.worst_leg)
-        elif faulty >= self.cfg.residual_supply_legs or chambers >= self.cfg.residual_supply_legs:
+        elif faulty >= self.cfg.residuals.supply_legs or chambers >= self.cfg.residuals.supply_legs:
             self.sup.fault(Fault.SUPPLY_PRESSURE)
         elif faulty:
             self._leg_fault(Fault.ACTUATOR_RESIDUAL, res.worst_leg)
@@ -484,7 +488,7 @@ class Controller:
         sup, cfg = self.sup, self.cfg
         if self.platform.estimate(meas.position_m):
             self.dk_failures = 0
-            if self.platform.det_ratio < cfg.singularity_ratio_min:
+            if self.platform.det_ratio < cfg.kinematics.singularity_ratio_min:
                 sup.fault(Fault.SINGULARITY)
             # the IMU's sample against the DK of the same SYNC: every leg's frame of this cycle
             if meas.attitude_fresh and meas.fresh.all() and self.attitude_check.update(
@@ -492,7 +496,7 @@ class Controller:
                 sup.fault(Fault.ATTITUDE_MISMATCH)
         else:
             self.dk_failures += 1
-            if self.dk_failures >= cfg.dk_failures_fault:
+            if self.dk_failures >= cfg.kinematics.dk_failures_fault:
                 sup.fault(Fault.DK_FAILURE)
 
     def _limits(self, meas: Measurements, active: bool) -> None:
@@ -510,7 +514,7 @@ class Controller:
         state = self.sup.state
         mode = (VALVES_DISABLED if state is State.ESTOP else
                 VALVES_ACTIVE if state in ACTIVE or self.stop.active else VALVES_HOLD)
-        valve_commands(mode, self.joint.u_v, self.cfg.valve_full_scale_v, self._reset_pulse, self.stop.leg,
+        valve_commands(mode, self.joint.u_v, self.cfg.actuator.valve_full_scale_v, self._reset_pulse, self.stop.leg,
                        cmd.enable, cmd.hold, cmd.active, cmd.reset, cmd.spool)
         np.copyto(self.spool_late, self.spool_applied)
         np.copyto(self.spool_applied, self.spool_sent)

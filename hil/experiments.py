@@ -95,7 +95,7 @@ MOTIONS = {"diagonal": diagonal_motion, "circle": circle_motion}
 # -- the platform's movements (chapter 11.5) ------------------------------------------------
 # the thesis ran these timings on the rig; the packaged waypoint limits are a safe default
 # for operators, set for this experiment to what the actuators can do (~2.5 m/s at 10 V)
-MOVEMENT_OVERRIDES = {"supervisor": {"waypoint_velocity_max_mm_s": 1200.0},
+MOVEMENT_OVERRIDES = {"waypoints": {"velocity_max_mm_s": 1200.0},
                       "limits": {"velocity_max_mm_s": 1500.0}}
 APPROACH_SPEED_M_S = 0.2
 IAE_FACTOR_MAX = 2.0                   # computed torque: IAE <= this x the thesis's model-based, every axis
@@ -123,5 +123,5 @@ SINE_CENTRE_MM, SINE_AMPLITUDE_MM = 150.0, 125.0
 SINE_POINTS_PER_PERIOD = 16
 # The waypoint guards are for operators; this experiment asks up to 1.25 m/s (w = 10 rad/s),
 # and the SLS's blend-time acceleration bound overestimates a sine's by ~10x.
-TRACKING_OVERRIDES = {"supervisor": {"waypoint_velocity_max_mm_s": 3000.0, "waypoint_force_max_n": 6000.0},
+TRACKING_OVERRIDES = {"waypoints": {"velocity_max_mm_s": 3000.0, "force_max_n": 6000.0},
                       "limits": {"velocity_max_mm_s": 2500.0, "tracking_error_max_mm": 100.0}}

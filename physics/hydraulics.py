@@ -41,7 +41,8 @@ import numba
 import numpy as np
 
 from physics import actuator
-from physics.constants import ATMOSPHERE_PA, BAR, CM3, L_MIN, MM
+from physics.constants import ATMOSPHERE_PA, BAR, CM3, L_MIN
+from program.sections import Key, Section, frozen, key
 
 # -- parameter vector (filled by `pack`) ---------------------------------------------------
 HP_AREA_A = 0          # piston area Ap [m^2]
@@ -202,43 +203,56 @@ def chamber_step(state: np.ndarray, y: float, v: float, ps: float, h: float, hp:
     state[S_PB] = max(pb + h * rate_b / (1.0 - h * slope_b), p_min)
 
 
-# (low, high) of the thesis-unit keys `pack` reads from a [valve] and a [chambers] table
-VALVE_RANGES = {
-    "edge_flow_l_min": (0.01, 100.0), "edge_drop_bar": (1.0, 350.0), "supply_lap_pct": (0.0, 50.0),
-    "return_lap_pct": (0.0, 50.0), "spool_time_constant_ms": (0.05, 100.0), "laminar_bar": (1e-4, 1.0),
-}
-CHAMBER_RANGES = {
-    "dead_volume_a_cm3": (0.1, 5000.0), "dead_volume_b_cm3": (0.1, 5000.0),
-    "oil_bulk_modulus_bar": (1000.0, 30000.0), "air_fraction_pct": (0.0, 50.0),
-    "air_polytropic_index": (1.0, 1.4), "hose_bulk_modulus_bar": (10.0, 1e6),
-    "cross_leakage_l_min_per_bar": (0.0, 10.0), "seal_leakage_l_min_per_bar": (0.0, 10.0),
-    "min_pressure_bar": (-1.0, 0.0),
-}
+SUPPLY_PRESSURE = Key("supply_pressure_bar", 1.0, 400.0, BAR)     # the power unit's, above the atmosphere
+TANK_PRESSURE = Key("tank_pressure_bar", 0.0, 10.0, BAR)
 
 
-def pack(actuator_section: dict, valve: dict, chambers: dict) -> np.ndarray:
-    """The parameter vector from thesis-unit tables: `actuator_section` bore_radius_mm,
-    rod_radius_mm, stroke_mm, tank_pressure_bar; `valve` and `chambers` the emulator's
-    [valve] and [chambers] keys."""
-    a, v, c = actuator_section, valve, chambers
+@frozen
+class ValveSection(Section):
+    """The servo-valve's orifices and spool (eq. 4.2-4.6): a [valve] table's keys."""
+    edge_flow_m3_s: float = key("edge_flow_l_min", 0.01, 100.0, si=L_MIN)   # per edge, fully open, at edge_drop
+    edge_drop_pa: float = key("edge_drop_bar", 1.0, 350.0, si=BAR)
+    supply_lap: float = key("supply_lap_pct", 0.0, 50.0, per=100.0)            # underlaps, fraction of the stroke
+    return_lap: float = key("return_lap_pct", 0.0, 50.0, per=100.0)
+    spool_time_constant_s: float = key("spool_time_constant_ms", 0.05, 100.0, si=1e-3)
+    laminar_pa: float = key("laminar_bar", 1e-4, 1.0, si=BAR)
+
+
+@frozen
+class ChamberSection(Section):
+    """The cylinder's chambers and hoses (eq. 4.7-4.14): a [chambers] table's keys."""
+    dead_volume_a_m3: float = key("dead_volume_a_cm3", 0.1, 5000.0, si=CM3)
+    dead_volume_b_m3: float = key("dead_volume_b_cm3", 0.1, 5000.0, si=CM3)
+    oil_bulk_modulus_pa: float = key("oil_bulk_modulus_bar", 1000.0, 30000.0, si=BAR)
+    air_fraction: float = key("air_fraction_pct", 0.0, 50.0, per=100.0)
+    air_polytropic_index: float = key("air_polytropic_index", 1.0, 1.4)
+    hose_bulk_modulus_pa: float = key("hose_bulk_modulus_bar", 10.0, 1e6, si=BAR)
+    cross_leakage_m3_s_pa: float = key("cross_leakage_l_min_per_bar", 0.0, 10.0, si=L_MIN, per=BAR)
+    seal_leakage_m3_s_pa: float = key("seal_leakage_l_min_per_bar", 0.0, 10.0, si=L_MIN, per=BAR)
+    min_pressure_pa: float = key("min_pressure_bar", -1.0, 0.0, si=BAR)
+
+
+def pack(cylinder, valve: ValveSection, chambers: ChamberSection, tank_pa: float) -> np.ndarray:
+    """The parameter vector of one actuator: its cylinder (`physics.actuator.CylinderSection`),
+    valve and chambers, and the return line's pressure."""
     hp = np.zeros(HP_SIZE)
-    hp[HP_AREA_A], hp[HP_ALPHA] = actuator.cylinder_areas(a["bore_radius_mm"] * MM, a["rod_radius_mm"] * MM)
-    hp[HP_STROKE] = a["stroke_mm"] * MM
-    hp[HP_VA0] = c["dead_volume_a_cm3"] * CM3
-    hp[HP_VB0] = c["dead_volume_b_cm3"] * CM3
-    hp[HP_BETA_OIL] = c["oil_bulk_modulus_bar"] * BAR
-    hp[HP_AIR0] = c["air_fraction_pct"] / 100.0
-    hp[HP_POLY_N] = c["air_polytropic_index"]
-    hp[HP_BETA_WALL] = c["hose_bulk_modulus_bar"] * BAR
-    hp[HP_KV] = v["edge_flow_l_min"] * L_MIN / math.sqrt(v["edge_drop_bar"] * BAR)
-    hp[HP_LAP_P] = v["supply_lap_pct"] / 100.0
-    hp[HP_LAP_T] = v["return_lap_pct"] / 100.0
-    hp[HP_LEAK] = c["cross_leakage_l_min_per_bar"] * L_MIN / BAR
-    hp[HP_SEAL_LEAK] = c["seal_leakage_l_min_per_bar"] * L_MIN / BAR
-    hp[HP_TANK] = a["tank_pressure_bar"] * BAR
-    hp[HP_LAMINAR] = v["laminar_bar"] * BAR
-    hp[HP_TAU_SPOOL] = v["spool_time_constant_ms"] * 1e-3
-    hp[HP_P_MIN] = c["min_pressure_bar"] * BAR
+    hp[HP_AREA_A], hp[HP_ALPHA] = cylinder.piston_area_m2, cylinder.area_ratio
+    hp[HP_STROKE] = cylinder.stroke_m
+    hp[HP_VA0] = chambers.dead_volume_a_m3
+    hp[HP_VB0] = chambers.dead_volume_b_m3
+    hp[HP_BETA_OIL] = chambers.oil_bulk_modulus_pa
+    hp[HP_AIR0] = chambers.air_fraction
+    hp[HP_POLY_N] = chambers.air_polytropic_index
+    hp[HP_BETA_WALL] = chambers.hose_bulk_modulus_pa
+    hp[HP_KV] = valve.edge_flow_m3_s / math.sqrt(valve.edge_drop_pa)
+    hp[HP_LAP_P] = valve.supply_lap
+    hp[HP_LAP_T] = valve.return_lap
+    hp[HP_LEAK] = chambers.cross_leakage_m3_s_pa
+    hp[HP_SEAL_LEAK] = chambers.seal_leakage_m3_s_pa
+    hp[HP_TANK] = tank_pa
+    hp[HP_LAMINAR] = valve.laminar_pa
+    hp[HP_TAU_SPOOL] = valve.spool_time_constant_s
+    hp[HP_P_MIN] = chambers.min_pressure_pa
     return hp
 
 

@@ -18,11 +18,13 @@ a displacement (`bristle_relax`): along a path dz/dx = sign(dx) - sigma0 z / |g|
 from __future__ import annotations
 
 import math
+from functools import cached_property
 
 import numba
 import numpy as np
 
 from physics.constants import MM
+from program.sections import Section, frozen, key
 
 # parameter vector, SI
 A0_POS = 0      # alpha0+ [N]
@@ -40,13 +42,6 @@ S1_NEG = 11     # sigma1 for z < 0 [N s/m]
 DELTA = 12      # Stribeck exponent (2 in eq. 6.3; delta_s of the guide's eq. D.3)
 SIZE = 13
 
-# a [friction] section's keys in Table 6.1/6.2 units, in the vector's order
-TABLE_KEYS = ("alpha0_pos_n", "alpha1_pos_n", "vs_pos_mm_s", "sigma2_pos_ns_mm",
-              "alpha0_neg_n", "alpha1_neg_n", "vs_neg_mm_s", "sigma2_neg_ns_mm",
-              "sigma0_pos_n_mm", "sigma1_pos_ns_mm", "sigma0_neg_n_mm", "sigma1_neg_ns_mm")
-TABLE_TO_SI = (1.0, 1.0, MM, 1.0 / MM, 1.0, 1.0, MM, 1.0 / MM, 1.0 / MM, 1.0 / MM, 1.0 / MM, 1.0 / MM)
-
-
 def pack(alpha0_pos, alpha1_pos, vs_pos, sigma2_pos, alpha0_neg, alpha1_neg, vs_neg, sigma2_neg,
          sigma0_pos, sigma1_pos, sigma0_neg, sigma1_neg, delta=2.0) -> np.ndarray:
     """The parameter vector (SI); ValueError for parameters the law cannot use."""
@@ -60,9 +55,44 @@ def pack(alpha0_pos, alpha1_pos, vs_pos, sigma2_pos, alpha0_neg, alpha1_neg, vs_
     return fp
 
 
+@frozen
+class LugreSection(Section):
+    """A [friction] table: the seals' LuGre law in Table 6.1/6.2 units (both sides of the bus)."""
+    alpha0_pos_n: float = key("alpha0_pos_n", -1000.0, 1000.0)
+    alpha1_pos_n: float = key("alpha1_pos_n", -1000.0, 1000.0)
+    vs_pos_m_s: float = key("vs_pos_mm_s", 0.01, 1e4, si=MM)
+    sigma2_pos_ns_m: float = key("sigma2_pos_ns_mm", 0.0, 100.0, si=1.0 / MM)
+    alpha0_neg_n: float = key("alpha0_neg_n", -1000.0, 1000.0)
+    alpha1_neg_n: float = key("alpha1_neg_n", -1000.0, 1000.0)
+    vs_neg_m_s: float = key("vs_neg_mm_s", -1e4, -0.01, si=MM)
+    sigma2_neg_ns_m: float = key("sigma2_neg_ns_mm", 0.0, 100.0, si=1.0 / MM)
+    sigma0_pos_n_m: float = key("sigma0_pos_n_mm", 1e-3, 1e6, si=1.0 / MM)
+    sigma1_pos_ns_m: float = key("sigma1_pos_ns_mm", 0.0, 1e3, si=1.0 / MM)
+    sigma0_neg_n_m: float = key("sigma0_neg_n_mm", 1e-3, 1e6, si=1.0 / MM)
+    sigma1_neg_ns_m: float = key("sigma1_neg_ns_mm", 0.0, 1e3, si=1.0 / MM)
+
+    def validate(self, where, error) -> None:
+        try:
+            _ = self.vector
+        except ValueError as failure:
+            raise error(f"{where}: {failure}") from None
+
+    @cached_property
+    def vector(self) -> np.ndarray:
+        """The parameter vector (SI) the kernels take."""
+        return pack(self.alpha0_pos_n, self.alpha1_pos_n, self.vs_pos_m_s, self.sigma2_pos_ns_m, self.alpha0_neg_n,
+                    self.alpha1_neg_n, self.vs_neg_m_s, self.sigma2_neg_ns_m, self.sigma0_pos_n_m,
+                    self.sigma1_pos_ns_m, self.sigma0_neg_n_m, self.sigma1_neg_ns_m)
+
+
+# a [friction] table's keys in the vector's order (Table 6.1/6.2 units) and each one's factor to SI
+TABLE_KEYS = tuple(LugreSection.keys())
+TABLE_TO_SI = tuple(k.si for k in LugreSection.keys().values())
+
+
 def from_table(section: dict) -> np.ndarray:
-    """The vector from a [friction] section in Table 6.1/6.2 units (N, mm/s, N s/mm, N/mm)."""
-    return pack(*(section[key] * scale for key, scale in zip(TABLE_KEYS, TABLE_TO_SI)))
+    """The vector from a [friction] table's values in Table 6.1/6.2 units (N, mm/s, N s/mm, N/mm)."""
+    return pack(*(section[name] * scale for name, scale in zip(TABLE_KEYS, TABLE_TO_SI)))
 
 
 @numba.njit(cache=True)

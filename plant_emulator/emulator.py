@@ -112,8 +112,7 @@ class Emulator:
         self.legs = range(1, rig.n_legs + 1)
         self.has_imu = rig.n_legs == 6
         self.nodes = rig_nodes(rig.n_legs)
-        self.valves = {n: ValveDriver(cfg.command_timeout_syncs, cfg.spool_jam_threshold, cfg.spool_jam_syncs)
-                       for n in self.legs}
+        self.valves = {n: self._new_valve() for n in self.legs}
         self.spool_demand = np.zeros(rig.n_legs)    # each valve's own demand over the last period
         self.nmt = {n: NmtState.BOOTUP for n in self.nodes}
         names = ["NMT", "SYNC", "EMU_CTRL", "EMU_KICK"] + [f"VALVE_CMD_{n}" for n in self.legs]
@@ -122,7 +121,7 @@ class Emulator:
         self._ids = {name: CODECS[name].frame_id for name in names}
         self.out = {name: Outbox(name) for name in self._tx_names()}
         self.counters = Counters()
-        self.rng = np.random.default_rng(cfg.seed)
+        self.rng = np.random.default_rng(cfg.sensors.seed)
         self.sync_counter = 0
         self.last_sync_time: float | None = None
         self.last_sync_waited_s = 0.0          # how long that SYNC sat in the socket first
@@ -138,8 +137,8 @@ class Emulator:
         self._onset_values: dict[tuple[int, int], object] = {}
         self._onsets: list[dict] = []                      # injected since the last SYNC
         self._ignore_commands = 0
-        divisors = {"LEG_PRESSURE": cfg.leg_pressure_divisor, "VALVE_STATUS": cfg.valve_status_divisor,
-                    "IMU": cfg.imu_divisor}
+        divisors = {"LEG_PRESSURE": cfg.nodes.leg_pressure_divisor, "VALVE_STATUS": cfg.nodes.valve_status_divisor,
+                    "IMU": cfg.nodes.imu_divisor}
         self._period = {}                                   # SYNC-driven frames: send every n-th SYNC
         for name in self.out:
             dbc_period = CODECS[name].schedule.sync_period
@@ -148,6 +147,10 @@ class Emulator:
                 self._period[name] = override or dbc_period
         self._overflow = sync_counter_overflow()
         self.phase_s = np.zeros((SYNC_HISTORY, len(SYNC_PHASES)))     # per SYNC, seconds
+
+    def _new_valve(self) -> ValveDriver:
+        nodes = self.cfg.nodes
+        return ValveDriver(nodes.command_timeout_syncs, nodes.spool_jam_threshold, nodes.spool_jam_syncs)
 
     def _tx_names(self) -> list[str]:
         names = []
@@ -240,17 +243,17 @@ class Emulator:
             self.nmt[n] = NmtState.BOOTUP
         self._heartbeats()
         for n in self.nodes:
-            self.nmt[n] = NmtState.OPERATIONAL if self.cfg.nmt_autostart else NmtState.PRE_OPERATIONAL
-        self.next_heartbeat = self.clock() + self.cfg.heartbeat_s
+            self.nmt[n] = NmtState.OPERATIONAL if self.cfg.nodes.nmt_autostart else NmtState.PRE_OPERATIONAL
+        self.next_heartbeat = self.clock() + self.cfg.nodes.heartbeat_s
 
     def poll(self, now: float | None = None) -> float:
         """Timers: heartbeats and the SYNC watchdog. Returns seconds until the next timer."""
         now = self.clock() if now is None else now
         if now >= self.next_heartbeat:
             self._heartbeats()
-            self.next_heartbeat = now + self.cfg.heartbeat_s
-        period = self.cfg.sync_period_s
-        limit = self.cfg.sync_timeout_periods * period
+            self.next_heartbeat = now + self.cfg.nodes.heartbeat_s
+        period = self.cfg.nodes.sync_period_s
+        limit = self.cfg.nodes.sync_timeout_periods * period
         if self.last_sync_time is not None and not self.sync_lost_reported and now - self.last_sync_time > limit:
             self.sync_lost_reported = True
             woke_late = now - self.last_sync_time - limit
@@ -288,7 +291,7 @@ class Emulator:
         for _ in range(max(steps, 0)):
             if apply_valves:
                 self._apply_valves()
-            self.rig.advance(self.cfg.sync_period_s)
+            self.rig.advance(self.cfg.nodes.sync_period_s)
             self._check_plant()
             self.counters.free_run_steps += 1
             self._send_truth(self.sync_counter)
@@ -309,7 +312,7 @@ class Emulator:
                 # watchdog from it trips the valves whenever this process falls behind (babble)
                 waited = time.time() - msg.timestamp if msg.timestamp else 0.0
                 self.on_sync(int(self.decoder.values["SYNC"][0]),
-                             waited_s=min(max(waited, 0.0), self.cfg.sync_period_s))
+                             waited_s=min(max(waited, 0.0), self.cfg.nodes.sync_period_s))
             return
         if frame_id == self._ids["NMT"]:
             if status is RxStatus.OK:
@@ -354,8 +357,7 @@ class Emulator:
                 self.nmt[n] = NmtState.PRE_OPERATIONAL
             elif command in (NmtCommand.RESET_NODE, NmtCommand.RESET_COMMUNICATION):
                 if command == NmtCommand.RESET_NODE and n in self.valves:
-                    self.valves[n] = ValveDriver(self.cfg.command_timeout_syncs, self.cfg.spool_jam_threshold,
-                                                 self.cfg.spool_jam_syncs)
+                    self.valves[n] = self._new_valve()
                     self.valves[n].boot()
                 self.nmt[n] = NmtState.BOOTUP
                 self._heartbeat(n)
@@ -436,7 +438,7 @@ class Emulator:
         self._sample_and_send(counter)
         sent = self.clock()
         self._apply_valves()
-        self.rig.advance(self.cfg.sync_period_s)
+        self.rig.advance(self.cfg.nodes.sync_period_s)
         stepped = self.clock()
         self._check_plant()
         self._count_down_faults()
@@ -465,7 +467,7 @@ class Emulator:
 
     def _apply_valves(self) -> None:
         """Spool commands to the rig, and the load-holding valves open only while ACTIVE."""
-        blocks = self.cfg.hold_blocks_ports
+        blocks = self.cfg.nodes.hold_blocks_ports
         for n, valve in self.valves.items():
             stuck = self._fault(n, EmuFault.SPOOL_STUCK)        # the spool goes there whatever its demand
             self.spool_demand[n - 1] = valve.spool_command
@@ -497,11 +499,11 @@ class Emulator:
                 _, quat = rig.platform_pose()
                 box = self.out["IMU_ATTITUDE"]
                 box.values[box.index["ROLL"]:box.index["YAW"] + 1] = (
-                    attitude_rpy(quat) + cfg.imu_angle_noise_rad * rng.standard_normal(3))
+                    attitude_rpy(quat) + cfg.sensors.imu_angle_noise_rad * rng.standard_normal(3))
                 self._emit(IMU_NODE, "IMU_ATTITUDE")
             if self._due("IMU_RATE", counter):
                 box = self.out["IMU_RATE"]
-                rate = rig.platform_body_rate() + cfg.imu_rate_noise_rad_s * rng.standard_normal(3)
+                rate = rig.platform_body_rate() + cfg.sensors.imu_rate_noise_rad_s * rng.standard_normal(3)
                 box.values[box.index["RATE_X"]:box.index["RATE_Z"] + 1] = rate
                 self._emit(IMU_NODE, "IMU_RATE")
         for n in self.legs:
@@ -514,8 +516,8 @@ class Emulator:
             if drift is not None:                      # um/s since the fault's onset, read in counts too
                 start = self._onset_values.setdefault((n, EmuFault.ENCODER_DRIFT), rig.time_s)
                 measured += drift[1] * 1e-6 * (rig.time_s - start)
-            position = round(measured / cfg.encoder_resolution_m) * cfg.encoder_resolution_m
-            force = rig.rod_force_n[i] + cfg.load_cell_noise_n * rng.standard_normal()
+            position = round(measured / cfg.sensors.encoder_resolution_m) * cfg.sensors.encoder_resolution_m
+            force = rig.rod_force_n[i] + cfg.sensors.load_cell_noise_n * rng.standard_normal()
             if self._fault(n, EmuFault.STUCK):
                 position, force = self._onset_values.setdefault((n, EmuFault.STUCK), (position, force))
             if self._fault(n, EmuFault.FORCE_STUCK):
@@ -528,9 +530,10 @@ class Emulator:
             name = f"LEG_PRESSURE_{n}"
             if self._due(name, counter):
                 box = self.out[name]
-                box.values[box.index["PA"]] = rig.state[i, hy.S_PA] + cfg.pressure_noise_pa * rng.standard_normal()
-                box.values[box.index["PB"]] = rig.state[i, hy.S_PB] + cfg.pressure_noise_pa * rng.standard_normal()
-                box.values[box.index["PS"]] = rig.supply_pressure_pa + cfg.pressure_noise_pa * rng.standard_normal()
+                noise = cfg.sensors.pressure_noise_pa
+                box.values[box.index["PA"]] = rig.state[i, hy.S_PA] + noise * rng.standard_normal()
+                box.values[box.index["PB"]] = rig.state[i, hy.S_PB] + noise * rng.standard_normal()
+                box.values[box.index["PS"]] = rig.supply_pressure_pa + noise * rng.standard_normal()
                 self._emit(n, name)
             name = f"VALVE_STATUS_{n}"
             if self._due(name, counter):
@@ -588,12 +591,12 @@ class Emulator:
             wake = self.clock() + timeout
             msg = self.bus.recv(timeout=timeout)
             received = self.clock()
-            if received - wake > self.cfg.sync_period_s:         # woken this late: not scheduled
+            if received - wake > self.cfg.nodes.sync_period_s:         # woken this late: not scheduled
                 self.pause_node_clocks(received - wake)
             if msg is not None:
                 self.handle(msg)
                 busy = self.clock() - received
-                if busy > self.cfg.sync_period_s:                # a stall inside the handling
+                if busy > self.cfg.nodes.sync_period_s:                # a stall inside the handling
                     self.pause_node_clocks(busy)
             wait = self.poll()
 

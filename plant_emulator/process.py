@@ -34,8 +34,8 @@ def realtime_setup(cfg) -> list[str]:
     """Memory locked, SCHED_FIFO at the config's priority and the CPUs' wake-up latency;
     returns what was applied and logs each measure that is not permitted (never fatal)."""
     measures = {"mlockall": lock_memory(),
-                f"SCHED_FIFO priority {cfg.realtime_priority}": set_fifo(cfg.realtime_priority),
-                **cpu_latency_measure(cfg.cpu_latency_us)}
+                f"SCHED_FIFO priority {cfg.nodes.realtime_priority}": set_fifo(cfg.nodes.realtime_priority),
+                **cpu_latency_measure(cfg.nodes.cpu_latency_us)}
     return applied(measures, _log)
 
 
@@ -60,7 +60,7 @@ def run_emulator(args) -> int:
     if args.realtime:
         realtime_setup(cfg)
     else:                                   # lockstep: its SYNC handling waits on the controller's frames
-        applied(cpu_latency_measure(cfg.cpu_latency_us), _log)
+        applied(cpu_latency_measure(cfg.nodes.cpu_latency_us), _log)
     try:
         emulator.run(stop)
     finally:

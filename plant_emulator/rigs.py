@@ -159,7 +159,7 @@ class _RigBase:
         self.ports_open = np.ones(self.n_legs)     # 0: the load-holding valves block the chambers
         self.seal_leak = np.full(self.n_legs, cfg.hp[hy.HP_SEAL_LEAK])    # each piston seal's leakage
         self.rod_force_n = np.zeros(self.n_legs)
-        self.supply_pressure_pa = cfg.supply_pressure_pa
+        self.supply_pressure_pa = cfg.actuator.supply_pressure_pa
         self.supply_fraction = 1.0
         self.time_s = 0.0
         self.unstable_periods = 0                  # advances after which the physics was not finite
@@ -177,7 +177,7 @@ class _RigBase:
         if self.supply_fraction >= 1.0:
             return self.supply_pressure_pa
         # the power unit delivers part of its pressure (0: it stopped, to the tank's)
-        target = tank + self.supply_fraction * (self.cfg.supply_pressure_pa - tank)
+        target = tank + self.supply_fraction * (self.cfg.actuator.supply_pressure_pa - tank)
         self.supply_pressure_pa = target + (self.supply_pressure_pa - target) * math.exp(
             -period_s / SUPPLY_LOSS_TIME_CONSTANT_S)
         return self.supply_pressure_pa
@@ -196,7 +196,7 @@ class _RigBase:
         stopped); the supply falls to it with the supply-loss time constant, 1 restores it at once."""
         self.supply_fraction = fraction
         if fraction >= 1.0:
-            self.supply_pressure_pa = self.cfg.supply_pressure_pa
+            self.supply_pressure_pa = self.cfg.actuator.supply_pressure_pa
 
     @property
     def stroke_m(self) -> np.ndarray:
@@ -213,11 +213,11 @@ class TestbenchRig(_RigBase):
     def __init__(self, cfg: EmulatorConfig, load_kg: float | None = None, start_mm: float = 150.0):
         super().__init__(cfg)
         self.out = np.zeros(3)
-        self.set_load(cfg.load_kg if load_kg is None else load_kg)
+        self.set_load(cfg.testbench.load_kg if load_kg is None else load_kg)
         self.state[0, hy.S_Y] = min(max(start_mm * 1e-3, 0.0), cfg.stroke_m)
-        hold = (cfg.piston_rod_mass_kg + self.load_mass_kg) * GRAVITY_M_S2
+        hold = (cfg.actuator.piston_rod_mass_kg + self.load_mass_kg) * GRAVITY_M_S2
         self.state[0, hy.S_PA], self.state[0, hy.S_PB] = hy.resting_pressures(float(self.state[0, hy.S_Y]), hold,
-                                                                              cfg.supply_pressure_pa, cfg.hp)
+                                                                              cfg.actuator.supply_pressure_pa, cfg.hp)
         self.rod_force_n[0] = self.load_mass_kg * GRAVITY_M_S2          # at rest
 
     def set_load(self, load_kg: float) -> None:
@@ -226,12 +226,12 @@ class TestbenchRig(_RigBase):
         self.guide_friction = self.cfg.guide.lugre_vector(self.load_kg)
 
     def advance(self, period_s: float) -> None:
-        n = max(1, round(period_s / self.cfg.substep_s))
+        n = max(1, round(period_s / self.cfg.testbench.substep_s))
         ps = self._supply_for(period_s)
         testbench_advance(self.state[0], float(self.command[0]), bool(self.jammed[0]), bool(self.seized[0]),
                           float(self.ports_open[0]), float(self.seal_leak[0]), n, period_s / n, ps,
-                          self.cfg.hp, self.cfg.friction, self.guide_friction, self.cfg.piston_rod_mass_kg,
-                          self.load_mass_kg, self.out)
+                          self.cfg.hp, self.cfg.friction.vector, self.guide_friction,
+                          self.cfg.actuator.piston_rod_mass_kg, self.load_mass_kg, self.out)
         # the rod carries the load's weight, inertia and guide friction
         self.rod_force_n[0] = self.load_mass_kg * (self.out[0] + GRAVITY_M_S2) + self.out[2]
         self.time_s += period_s
@@ -241,10 +241,10 @@ class TestbenchRig(_RigBase):
         """Load the compiled kernels now: their first call costs 0.2-0.25 s (numba's cache),
         which in the first SYNC made the nodes miss ~45 realtime cycles. Scratch copies only."""
         testbench_advance(self.state[0].copy(), 0.0, False, False, 1.0, float(self.seal_leak[0]), 1,
-                          self.cfg.substep_s,
-                          self.cfg.supply_pressure_pa,
-                          self.cfg.hp, self.cfg.friction, self.guide_friction, self.cfg.piston_rod_mass_kg,
-                          self.load_mass_kg, np.zeros(3))
+                          self.cfg.testbench.substep_s,
+                          self.cfg.actuator.supply_pressure_pa,
+                          self.cfg.hp, self.cfg.friction.vector, self.guide_friction,
+                          self.cfg.actuator.piston_rod_mass_kg, self.load_mass_kg, np.zeros(3))
 
     @property
     def acceleration_m_s2(self) -> float:
@@ -264,14 +264,14 @@ class HexapodRig(_RigBase):
     def __init__(self, cfg: EmulatorConfig, geometry: RigGeometry | None = None):
         super().__init__(cfg)
         self.geometry = geometry or read_rig_geometry()
-        self.mechanism = Mechanism(self.geometry, timestep_s=cfg.mujoco_timestep_s, stroke_limits=True)
+        self.mechanism = Mechanism(self.geometry, timestep_s=cfg.hexapod.mujoco_timestep_s, stroke_limits=True)
         mech, model = self.mechanism, self.mechanism.model
         self.home_length_m = np.array([leg.length_m for leg in mech.legs_home])
         self._cylinder_body = model.body_parentid[model.site_bodyid[mech.rod_site]]
         self._platform_mass0 = float(model.body_mass[mech.platform_body])
         self._solref_default = model.dof_solref[mech.slide_dof].copy()
         self._solimp_default = model.dof_solimp[mech.slide_dof].copy()
-        self.set_load(cfg.payload_kg)
+        self.set_load(cfg.hexapod.payload_kg)
         self._wrench = np.zeros(6)                # an external push on the platform (EMU_KICK)
         self._wrench_applied = False              # MuJoCo holds a push until it is cleared
         self._kick_left_s = 0.0
@@ -282,9 +282,8 @@ class HexapodRig(_RigBase):
         self.state[:, hy.S_Y] = self._stroke
         static, _ = mech.inverse_forces(mech.data.qpos.copy(), np.zeros(model.nv), np.zeros(model.nv))
         for i in range(6):
-            self.state[i, hy.S_PA], self.state[i, hy.S_PB] = hy.resting_pressures(float(self._stroke[i]),
-                                                                                   float(static[i]),
-                                                                                   cfg.supply_pressure_pa, cfg.hp)
+            self.state[i, hy.S_PA], self.state[i, hy.S_PB] = hy.resting_pressures(
+                float(self._stroke[i]), float(static[i]), cfg.actuator.supply_pressure_pa, cfg.hp)
         mech.set_pose(self.geometry.home_position_m, self.geometry.home_quaternion)
         self._measure_rod_forces()
 
@@ -321,7 +320,7 @@ class HexapodRig(_RigBase):
         model, data = mech.model, mech.data
         steps = max(1, round(period_s / model.opt.timestep))
         ps = self._supply_for(period_s)
-        sub = cfg.hydraulic_substeps
+        sub = cfg.hexapod.hydraulic_substeps
         h = model.opt.timestep / sub
         for _ in range(steps):
             if self._kick_left_s > 0.0 or self._wrench_applied:
@@ -331,13 +330,13 @@ class HexapodRig(_RigBase):
                 if self._kick_left_s <= 0.0:
                     self._wrench[:] = 0.0         # the next step runs without it
             # one kernel call each side of the step (the Python between them cost as much as MuJoCo)
-            legs_drive_mujoco(self.state, self._velocity, cfg.hp, cfg.friction, mech.slide_dof, data.ctrl,
+            legs_drive_mujoco(self.state, self._velocity, cfg.hp, cfg.friction.vector, mech.slide_dof, data.ctrl,
                               model.dof_damping)
             mujoco.mj_step(model, data)
             self._read_legs()
             legs_hydraulics(self.state, self._stroke, self._velocity, self.command, self.jammed, self.ports_open,
                             self.seal_leak, sub, h, ps,
-                            cfg.hp, cfg.friction)
+                            cfg.hp, cfg.friction.vector)
         self._measure_rod_forces()
         self.time_s += steps * model.opt.timestep
         # MuJoCo resets its state where it diverges (and warns on stderr): count it, then clear
@@ -351,13 +350,13 @@ class HexapodRig(_RigBase):
         """As TestbenchRig.warm_up: the kernels loaded on scratch copies, the rig untouched."""
         cfg, state = self.cfg, self.state.copy()
         mech = self.mechanism
-        legs_drive_mujoco(state, self._velocity, cfg.hp, cfg.friction, mech.slide_dof, np.zeros(6),
+        legs_drive_mujoco(state, self._velocity, cfg.hp, cfg.friction.vector, mech.slide_dof, np.zeros(6),
                           np.zeros(mech.model.nv))
         legs_read_mujoco(mech.data.qpos, mech.data.qvel, mech.slide_qpos, mech.slide_dof, self._stroke_offset,
                          np.zeros(6), np.zeros(6))
         legs_hydraulics(state, self._stroke.copy(), self._velocity.copy(), np.zeros(6), self.jammed,
                         self.ports_open, self.seal_leak, 1,
-                        cfg.substep_s, cfg.supply_pressure_pa, cfg.hp, cfg.friction)
+                        cfg.testbench.substep_s, cfg.actuator.supply_pressure_pa, cfg.hp, cfg.friction.vector)
 
     def _measure_rod_forces(self) -> None:
         """Axial force of each connect constraint (rod end -> platform), compression positive.

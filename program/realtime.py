@@ -18,7 +18,12 @@ import struct
 
 import numpy as np
 
+from program.sections import Key
+
 MCL_CURRENT, MCL_FUTURE = 1, 2
+# the keys every process's [timing] or [nodes] table has for these measures
+REALTIME_PRIORITY = Key("realtime_priority", 1, 99)              # SCHED_FIFO, when permitted
+CPU_LATENCY = Key("cpu_latency_us", -1, 100000)                    # PM QoS wake-up latency; -1: ask nothing
 
 
 def freeze_gc(disable: bool) -> None:

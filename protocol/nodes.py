@@ -5,7 +5,10 @@ controller. The host and the emulator's own frames have no node id.
 
 from __future__ import annotations
 
+from program.sections import Key
 from protocol.dbc import load_database
+
+HEARTBEAT = Key("heartbeat_ms", 10.0, 10000.0, 1e-3)               # a node's heartbeat producer time
 
 
 def _node_ids() -> dict[str, int]:

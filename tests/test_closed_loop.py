@@ -97,7 +97,7 @@ def test_the_force_rate_per_spool_is_the_chamber_laws_derivative():
     """`hydraulics.force_rate_per_spool` against central differences of the chamber law
     (`pressure_rates`) at pressures and spools on both sides of the laps."""
     cfg = load_config()
-    hp, ps = cfg.hp, cfg.supply_pressure_pa
+    hp, ps = cfg.hp, cfg.actuator.supply_pressure_pa
     for y, pa, pb, x in ((0.05, 3e5, 9e5, 0.0004), (0.15, 12e5, 6e5, 0.03), (0.25, 2e5, 15e5, -0.05),
                          (0.1, 20e5, 1e5, 0.2)):
         h = 1e-7
@@ -163,6 +163,6 @@ def test_a_sealed_six_kg_platform_does_not_diverge():
     rig.command[:], rig.ports_open[:] = 0.0, 0.0
     start, peak = rig.stroke_m.copy(), 0.0
     for _ in range(150):
-        rig.advance(cfg.sync_period_s)
+        rig.advance(cfg.nodes.sync_period_s)
         peak = max(peak, float(np.max(np.abs(rig.stroke_m - start))))
     assert rig.unstable_periods == 0 and peak < 0.005, (rig.unstable_periods, peak)

@@ -25,7 +25,7 @@ def cfg():
 
 
 def test_the_valve_map_interpolates_as_scipy_does_and_holds_its_edges(cfg):
-    f, v, spool = cfg.valve_map_force_n, cfg.valve_map_velocity_m_s, cfg.valve_map_spool
+    f, v, spool = cfg.valve_map.force_n, cfg.valve_map.velocity_m_s, cfg.valve_map.spool
     oracle = RegularGridInterpolator((f, v), spool)
     rng = np.random.default_rng(3)
     points = np.column_stack([rng.uniform(f[0] - 80, f[-1] + 80, 2000), rng.uniform(v[0] - 0.2, v[-1] + 0.2, 2000)])
@@ -54,13 +54,13 @@ def test_the_packaged_plant_data_is_what_the_design_command_derives(cfg, tmp_pat
     path = tmp_path / "ct.toml"
     assert main(["design", "computed-torque", "--out", str(path), "--bandwidth-hz", "2.5", "--json"]) == 0
     derived = load_config(path)
-    assert derived.ct_hexapod.bandwidth_rad_s == pytest.approx(2 * np.pi * 2.5)
-    np.testing.assert_allclose(cfg.valve_map_spool, derived.valve_map_spool, atol=5e-7)
-    for ours, theirs in ((cfg.valve_map_pressure_a_pa, derived.valve_map_pressure_a_pa),
-                         (cfg.valve_map_pressure_b_pa, derived.valve_map_pressure_b_pa)):
+    assert derived.computed_torque.hexapod.bandwidth_rad_s == pytest.approx(2 * np.pi * 2.5)
+    np.testing.assert_allclose(cfg.valve_map.spool, derived.valve_map.spool, atol=5e-7)
+    for ours, theirs in ((cfg.valve_map.pressure_a_pa, derived.valve_map.pressure_a_pa),
+                         (cfg.valve_map.pressure_b_pa, derived.valve_map.pressure_b_pa)):
         np.testing.assert_allclose(ours, theirs, atol=6.0)                 # the file's 0.0001 bar
-    np.testing.assert_array_equal(cfg.valve_map_force_n, derived.valve_map_force_n)
-    np.testing.assert_allclose(cfg.valve_map_velocity_m_s, derived.valve_map_velocity_m_s, atol=1e-12)
+    np.testing.assert_array_equal(cfg.valve_map.force_n, derived.valve_map.force_n)
+    np.testing.assert_allclose(cfg.valve_map.velocity_m_s, derived.valve_map.velocity_m_s, atol=1e-12)
 
 
 def test_the_residuals_column_stiffness_is_the_median_along_the_movements(cfg):
@@ -71,7 +71,7 @@ def test_the_residuals_column_stiffness_is_the_median_along_the_movements(cfg):
     emulator = load_emulator_config()
     values = [modal_model(emulator, point).stiffness_n_m for points in movement_waypoints().values()
               for point in points]
-    assert cfg.residual_stiffness_n_m == pytest.approx(float(np.median(np.concatenate(values))), rel=1e-3)
+    assert cfg.residuals.column_stiffness_n_m == pytest.approx(float(np.median(np.concatenate(values))), rel=1e-3)
 
 
 def test_the_force_loop_has_the_same_bandwidth_wherever_the_leg_stands(cfg):
@@ -91,7 +91,7 @@ def test_the_force_loop_has_the_same_bandwidth_wherever_the_leg_stands(cfg):
                           model.static_force_n, zeros, zeros, model.strokes_m)
         np.testing.assert_allclose(ct.stiffness, model.stiffness_n_m, rtol=0.05)
         bandwidth = ct.stiffness * model.flow_gain_m_s * ct.force_gain
-        np.testing.assert_allclose(bandwidth, cfg.ct_hexapod.force_bandwidth_rad_s, rtol=0.05)
+        np.testing.assert_allclose(bandwidth, cfg.computed_torque.hexapod.force_bandwidth_rad_s, rtol=0.05)
 
 
 def test_a_map_made_at_another_supply_says_so_and_opens_less(cfg, tmp_path):
@@ -102,9 +102,9 @@ def test_a_map_made_at_another_supply_says_so_and_opens_less(cfg, tmp_path):
     assert main(["design", "computed-torque", "--out", str(path), "--supply-bar", "40", "--samples", "0",
                  "--json"]) == 0
     derived = load_config(path)
-    assert derived.supply_pressure_pa == pytest.approx(40e5)
-    moving = np.abs(cfg.valve_map_velocity_m_s) >= 0.2            # where the flow, not the lap, sets it
-    ratio = np.abs(derived.valve_map_spool[:, moving]) / np.abs(cfg.valve_map_spool[:, moving])
+    assert derived.hydraulic_model.supply_pressure_pa == pytest.approx(40e5)
+    moving = np.abs(cfg.valve_map.velocity_m_s) >= 0.2            # where the flow, not the lap, sets it
+    ratio = np.abs(derived.valve_map.spool[:, moving]) / np.abs(cfg.valve_map.spool[:, moving])
     assert np.percentile(ratio, 90) < 1.0 and np.median(ratio) == pytest.approx(np.sqrt(25 / 40), rel=0.1)
 
 
@@ -125,7 +125,7 @@ def test_at_rest_on_the_reference_the_valves_get_the_maps_holding_spool(cfg):
         meas.force_n[:] = ctl.computed_torque.force_cmd
     ct = ctl.computed_torque
     np.testing.assert_allclose(ct.error, 0.0, atol=1e-9)
-    expected = [valve_map_eval(cfg.valve_map_force_n, cfg.valve_map_velocity_m_s, cfg.valve_map_spool, f, 0.0)
+    expected = [valve_map_eval(cfg.valve_map.force_n, cfg.valve_map.velocity_m_s, cfg.valve_map.spool, f, 0.0)
                 for f in ct.force_cmd]
     np.testing.assert_allclose(cmd.spool, expected, atol=1e-6)
     np.testing.assert_allclose(ct.force_cmd, ctl.tau_n, rtol=1e-6, atol=1e-6)      # a_cmd = 0 at rest
@@ -161,9 +161,9 @@ def test_the_test_benchs_valve_at_rest_gets_the_maps_spool_for_load_and_rod(cfg)
         ctl.update(meas, cmd)
     leg = ctl.computed_torque
     np.testing.assert_allclose(ctl.joint.error_m, 0.0, atol=1e-9)
-    piston_n = load_n + cfg.moving_mass_kg * 9.81
+    piston_n = load_n + cfg.actuator.moving_mass_kg * 9.81
     assert leg.force_map[0] == pytest.approx(piston_n, abs=1e-6)
-    expected = valve_map_eval(cfg.valve_map_force_n, cfg.valve_map_velocity_m_s, cfg.valve_map_spool, piston_n, 0.0)
+    expected = valve_map_eval(cfg.valve_map.force_n, cfg.valve_map.velocity_m_s, cfg.valve_map.spool, piston_n, 0.0)
     assert cmd.spool[0] == pytest.approx(expected, abs=1e-6)
 
 

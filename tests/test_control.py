@@ -28,31 +28,32 @@ def cfg():
 
 
 def test_schedule_is_table_7_2_at_the_nodes(cfg):
-    breaks = cfg.table_position_m
-    coef = spline_coefficients(breaks, cfg.table_kp)
-    for j, load in enumerate(cfg.table_load_kg):
+    breaks = cfg.adaptive.table_position_m
+    coef = spline_coefficients(breaks, cfg.adaptive.table_kp)
+    for j, load in enumerate(cfg.adaptive.table_load_kg):
         for i, y in enumerate(breaks):
-            assert schedule_eval(breaks, coef, cfg.table_load_kg, y, load) == pytest.approx(cfg.table_kp[j, i])
+            expected = cfg.adaptive.table_kp[j, i]
+            assert schedule_eval(breaks, coef, cfg.adaptive.table_load_kg, y, load) == pytest.approx(expected)
     # Table 7.2, 120 mm, 6 kg: Kp = 0.085 V/mm
-    assert schedule_eval(breaks, coef, cfg.table_load_kg, 0.120, 6.0) == pytest.approx(85.0)
+    assert schedule_eval(breaks, coef, cfg.adaptive.table_load_kg, 0.120, 6.0) == pytest.approx(85.0)
 
 
 def test_schedule_between_nodes_matches_scipy(cfg):
-    breaks, loads = cfg.table_position_m, cfg.table_load_kg
-    coef = spline_coefficients(breaks, cfg.table_ki)
+    breaks, loads = cfg.adaptive.table_position_m, cfg.adaptive.table_load_kg
+    coef = spline_coefficients(breaks, cfg.adaptive.table_ki)
     rng = np.random.default_rng(1)
     for y, m in zip(rng.uniform(0.0, 0.31, 200), rng.uniform(-1.0, 7.0, 200)):
         yc, mc = np.clip(y, breaks[0], breaks[-1]), np.clip(m, loads[0], loads[-1])
-        per_load = [CubicSpline(breaks, row, bc_type="natural")(yc) for row in cfg.table_ki]
+        per_load = [CubicSpline(breaks, row, bc_type="natural")(yc) for row in cfg.adaptive.table_ki]
         expected = np.polyval(np.polyfit(loads, per_load, 2), mc)           # the quadratic through 3 loads
         assert schedule_eval(breaks, coef, loads, y, m) == pytest.approx(expected, rel=1e-9)
 
 
 def test_schedule_is_smooth(cfg):
-    breaks = cfg.table_position_m
-    coef = spline_coefficients(breaks, cfg.table_kp)
+    breaks = cfg.adaptive.table_position_m
+    coef = spline_coefficients(breaks, cfg.adaptive.table_kp)
     ys = np.linspace(breaks[0], breaks[-1], 3001)
-    values = np.array([schedule_eval(breaks, coef, cfg.table_load_kg, y, 2.0) for y in ys])
+    values = np.array([schedule_eval(breaks, coef, cfg.adaptive.table_load_kg, y, 2.0) for y in ys])
     slope = np.diff(values) / np.diff(ys)
     assert np.max(np.abs(np.diff(slope))) < 1.0          # no kinks: the slope changes continuously
 
@@ -75,7 +76,8 @@ def closed_loop_step(cfg, mode, position_mm, load_index, step_mm=10.0, seconds=2
     y0 = position_mm * 1e-3
     mass = 1.35 + LOADS[load_index]
     plant = LinearPlant(b0, b1, k01, T, y0, load_mass_kg=mass)
-    jc = JointController(cfg, 1, T, moving_mass_kg=cfg.moving_mass_kg, mass_offset_kg=cfg.slide_mass_kg)
+    jc = JointController(cfg, 1, T, moving_mass_kg=cfg.actuator.moving_mass_kg,
+                         mass_offset_kg=cfg.testbench.slide_mass_kg)
     jc.reset(y0)
     jc.set_mode(mode)
     position, force, fresh = np.zeros(1), np.zeros(1), np.ones(1, dtype=bool)
@@ -118,10 +120,11 @@ def test_adaptive_step_is_stable_and_estimates_the_load(cfg, position_mm, load_i
     assert overshoot < 40.0 and settling < 1.5
     assert jc.st[0, ST_MASS] == pytest.approx(1.35 + LOADS[load_index], abs=0.1)
     # scheduled gains: Table 7.2 at the position and the estimated external load, Ki detuned
-    load = jc.st[0, ST_MASS] - cfg.slide_mass_kg
-    kp = schedule_eval(cfg.table_position_m, spline_coefficients(cfg.table_position_m, cfg.table_kp),
-                       cfg.table_load_kg, y[-1], load)
-    ki = schedule_eval(cfg.table_position_m, spline_coefficients(cfg.table_position_m, cfg.table_ki),
-                       cfg.table_load_kg, y[-1], load)
+    load = jc.st[0, ST_MASS] - cfg.testbench.slide_mass_kg
+    table = cfg.adaptive
+    kp = schedule_eval(table.table_position_m, spline_coefficients(table.table_position_m, table.table_kp),
+                       table.table_load_kg, y[-1], load)
+    ki = schedule_eval(table.table_position_m, spline_coefficients(table.table_position_m, table.table_ki),
+                       table.table_load_kg, y[-1], load)
     assert jc.st[0, ST_KP] == pytest.approx(kp, rel=1e-3)
-    assert jc.st[0, ST_KI] == pytest.approx(cfg.ki_scale * ki, rel=1e-3)
+    assert jc.st[0, ST_KI] == pytest.approx(cfg.adaptive.ki_scale * ki, rel=1e-3)

@@ -58,7 +58,7 @@ def test_user_config_overrides_only_what_it_names(tmp_path):
     path = tmp_path / "gains.toml"
     path.write_text("[pi]\nkp_v_mm = 0.1\n")
     cfg = load_config(path)
-    assert cfg.pi_kp == pytest.approx(100.0) and cfg.pi_ki == pytest.approx(460.0)
+    assert cfg.pi.kp_v_m == pytest.approx(100.0) and cfg.pi.ki_v_m_s == pytest.approx(460.0)
 
 
 def test_bench_prints_every_controller_and_rig_as_json():

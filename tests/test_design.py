@@ -178,14 +178,14 @@ def test_the_schedule_round_trips_through_the_controller_config(tmp_path):
     path = tmp_path / "schedule.toml"
     write_schedule(path, schedule_toml(tunings, "table-a3", ki_scale=0.2))
     cfg = load_config(path)
-    assert cfg.ki_scale == 0.2
-    assert np.allclose(cfg.table_position_m * 1e3, [10, 30, 60, 90, 120, 150, 180, 210, 240, 270, 290])
+    assert cfg.adaptive.ki_scale == 0.2
+    assert np.allclose(cfg.adaptive.table_position_m * 1e3, [10, 30, 60, 90, 120, 150, 180, 210, 240, 270, 290])
     by_cell = {(round(t.plant.position_m, 6), t.plant.load_kg): t for t in tunings}
     for j, load in enumerate((0.0, 3.0, 6.0)):
-        for i, position in enumerate(cfg.table_position_m):
+        for i, position in enumerate(cfg.adaptive.table_position_m):
             t = by_cell[(round(float(position), 6), load)]
-            assert cfg.table_kp[j, i] == pytest.approx(t.kp_v_m, rel=1e-5)
-            assert cfg.table_ki[j, i] == pytest.approx(t.ki_v_m_s, rel=1e-5)
+            assert cfg.adaptive.table_kp[j, i] == pytest.approx(t.kp_v_m, rel=1e-5)
+            assert cfg.adaptive.table_ki[j, i] == pytest.approx(t.ki_v_m_s, rel=1e-5)
     assert len(SCHEDULE_LOADS) == 3
 
 

@@ -84,7 +84,7 @@ def test_encoder_drift_adds_its_rate_since_the_onset_and_stops_when_cleared():
     truth_mm = bench.rig.state[0, hy.S_Y] * 1e3
     assert frames[-1]["POSITION"] - truth_mm == pytest.approx(0.5, abs=0.13)    # +- one encoder count
     # the sensor reads the drifted length in its own counts: every reading on the count grid
-    count_mm = bench.emulator.cfg.encoder_resolution_m * 1e3
+    count_mm = bench.emulator.cfg.sensors.encoder_resolution_m * 1e3
     counts = np.array([f["POSITION"] for f in frames]) / count_mm
     assert np.abs(counts - np.round(counts)).max() < 0.05          # the wire's 0.005 mm steps
     bench.inject(EmuFault.ENCODER_DRIFT, command=EmuCommand.CLEAR_FAULT)
@@ -117,10 +117,10 @@ def test_supply_drop_settles_at_its_fraction_and_clearing_restores_it():
     tank = cfg.hp[hy.HP_TANK]
     bench.inject(EmuFault.SUPPLY_DROP, 60)
     bench.syncs(1000)                                               # 2 s: many time constants
-    assert rig.supply_pressure_pa == pytest.approx(tank + 0.6 * (cfg.supply_pressure_pa - tank), rel=1e-3)
+    assert rig.supply_pressure_pa == pytest.approx(tank + 0.6 * (cfg.actuator.supply_pressure_pa - tank), rel=1e-3)
     bench.inject(EmuFault.SUPPLY_DROP, command=EmuCommand.CLEAR_FAULT)
     bench.syncs(1)
-    assert rig.supply_pressure_pa == cfg.supply_pressure_pa
+    assert rig.supply_pressure_pa == cfg.actuator.supply_pressure_pa
 
 
 def test_a_stuck_spool_drives_the_leg_whatever_the_valve_is_told():
@@ -135,7 +135,7 @@ def test_a_stuck_spool_drives_the_leg_whatever_the_valve_is_told():
     frames = bench.syncs(50, valve_active=True)
     assert bench.rig.command[0] == pytest.approx(0.2)
     assert frames[0]["SPOOL"] == 0 and frames[1]["SPOOL"] >= 14 and frames[3]["SPOOL"] == 20
-    jam = bench.cfg.spool_jam_syncs
+    jam = bench.cfg.nodes.spool_jam_syncs
     assert [f["VALVE_STATE"] for f in frames[jam - 1:jam + 1]] == [int(ValveState.ACTIVE), int(ValveState.FAULT_HOLD)]
     y1 = bench.rig.state[0, hy.S_Y]
     assert y1 > y0 + 1e-3                                          # extending, against a spool-0 command

@@ -41,7 +41,7 @@ def test_open_loop_step_gives_constant_velocity(cfg, load):
     """Fig. 6.3: a constant valve input moves the piston at constant velocity after ~0.5 s."""
     rig = TestbenchRig(cfg, load, start_mm=50.0)
     run(rig, 0.2)
-    rig.command[0] = 0.5 / cfg.valve_full_scale_v * (1 if load == 0 else 2)    # 0.5 V, 1 V
+    rig.command[0] = 0.5 / cfg.actuator.valve_full_scale_v * (1 if load == 0 else 2)    # 0.5 V, 1 V
     positions = []
     for _ in range(500):
         rig.advance(PERIOD)
@@ -56,7 +56,7 @@ def test_steady_friction_follows_table_6_1(cfg):
     for volts in (0.3, 0.5, 1.0, -0.2, -0.5, -1.0):
         rig = TestbenchRig(cfg, 0.0, start_mm=150.0)
         run(rig, 0.1)
-        rig.command[0] = volts / cfg.valve_full_scale_v
+        rig.command[0] = volts / cfg.actuator.valve_full_scale_v
         speeds, forces = [], []
         for k in range(400):
             y0 = rig.state[0, hy.S_Y]
@@ -114,18 +114,18 @@ def _force_controlled_displacement(fp, amplitude_n, seconds=50.0, mass=2.0, h=1e
 def test_presliding_stays_below_stiction(cfg):
     """Below the break-away force (20.4 N on the - side) the contact only strains its
     bristles: displacements stay within Fig. 6.6's +/-0.5 mm; above it, it slides."""
-    assert _force_controlled_displacement(cfg.friction, 15.0) < 5e-4
-    assert _force_controlled_displacement(cfg.friction, 40.0, seconds=15.0) > 5e-3
+    assert _force_controlled_displacement(cfg.friction.vector, 15.0) < 5e-4
+    assert _force_controlled_displacement(cfg.friction.vector, 40.0, seconds=15.0) > 5e-3
 
 
 def test_steady_state_of_lugre_is_its_static_map(cfg):
     for v in (0.002, 0.01, 0.1, -0.005, -0.2):
         z = 0.0
         for _ in range(20000):
-            z = lugre_z_step(z, v, 1e-4, cfg.friction)
-        z_force, damping = lugre_split(z, v, cfg.friction)
+            z = lugre_z_step(z, v, 1e-4, cfg.friction.vector)
+        z_force, damping = lugre_split(z, v, cfg.friction.vector)
         assert z_force + damping * v == pytest.approx(table_6_1_force(v * 1e3), rel=1e-6)
-        assert steady_friction(v, cfg.friction) == pytest.approx(table_6_1_force(v * 1e3), rel=1e-9)
+        assert steady_friction(v, cfg.friction.vector) == pytest.approx(table_6_1_force(v * 1e3), rel=1e-9)
 
 
 def _sink_velocity_m_s(cfg, load, command, seconds=1.0):
@@ -140,7 +140,7 @@ def _sink_velocity_m_s(cfg, load, command, seconds=1.0):
 def test_centred_spool_holds_the_bare_slide(cfg):
     velocity, rig = _sink_velocity_m_s(cfg, 0.0, 0.0, 2.0)
     # the leaky, underlapped valve lets it creep a little, as a real closed-centre valve at null
-    assert abs(velocity) * 2.0 < 4 * cfg.encoder_resolution_m                 # < 0.5 mm in 2 s
+    assert abs(velocity) * 2.0 < 4 * cfg.sensors.encoder_resolution_m                 # < 0.5 mm in 2 s
     assert rig.rod_force_n[0] == pytest.approx(1.35 * 9.81, abs=15)
 
 
@@ -160,7 +160,7 @@ def test_a_load_sinks_at_null_and_a_small_spool_offset_holds_it(cfg, load):
         else:
             low = mid
     velocity, rig = _sink_velocity_m_s(cfg, load, 0.5 * (low + high), 2.0)
-    assert abs(velocity) * 2.0 < 4 * cfg.encoder_resolution_m                 # held: < 0.5 mm in 2 s
+    assert abs(velocity) * 2.0 < 4 * cfg.sensors.encoder_resolution_m                 # held: < 0.5 mm in 2 s
     assert rig.rod_force_n[0] == pytest.approx((1.35 + load) * 9.81, abs=15)
 
 
@@ -199,8 +199,8 @@ def test_the_rigs_start_where_their_valves_held_them(supply_bar):
     for rig in (HexapodRig(cfg), TestbenchRig(cfg, 6.0)):
         for i in range(rig.n_legs):
             force = hy.piston_force(rig.state[i, hy.S_PA], rig.state[i, hy.S_PB], cfg.hp)
-            *_, rig.command[i], ok = hy.steady_state(float(rig.state[i, hy.S_Y]), force, cfg.supply_pressure_pa,
-                                                     cfg.hp)
+            *_, rig.command[i], ok = hy.steady_state(float(rig.state[i, hy.S_Y]), force,
+                                                     cfg.actuator.supply_pressure_pa, cfg.hp)
             assert ok
         rig.ports_open[:] = 1.0
         start = rig.state[:, hy.S_Y].copy()

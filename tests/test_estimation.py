@@ -62,7 +62,7 @@ def test_kalman_equals_filterpy_step_by_step():
 def test_kalman_tracks_velocity_from_the_quantised_encoder():
     """With the shipped tuning (config [kalman])."""
     cfg = load_config()
-    a, q = kalman_model(T, cfg.jerk_psd)
+    a, q = kalman_model(T, cfg.kalman.jerk_psd_m2_s5)
     r_base = quantisation_variance(0.125e-3)
     t, y, z = quantised_motion()
     x = np.array([z[0], 0.0, 0.0])
@@ -70,7 +70,7 @@ def test_kalman_tracks_velocity_from_the_quantised_encoder():
     xp, pp = np.zeros(3), np.zeros((3, 3))
     velocity_error = []
     for k, zk in enumerate(z):
-        r = adaptive_r(r_base, cfg.kalman_adaptive_gain, x[1], cfg.kalman_velocity_ref_m_s)
+        r = adaptive_r(r_base, cfg.kalman.adaptive_gain, x[1], cfg.kalman.adaptive_velocity_ref_m_s)
         kalman_step_into(x, p, a, q, zk, True, r, xp, pp)
         if k > 500:
             true_v = 0.1 * math.cos(2.0 * t[k]) + 0.09 * math.cos(9.0 * t[k])
@@ -113,7 +113,7 @@ def test_filter_matches_scipy_lsim():
 
 
 def lugre_vector():
-    return load_config().friction.copy()
+    return load_config().friction.vector.copy()
 
 
 def test_lugre_observer_steady_state_is_the_static_map():

@@ -197,9 +197,9 @@ def _presliding_in_process(start_cycles: int, force_filter_hz: float | None = No
         for _ in range(n):
             true_y.append(rig.state[0, hy.S_Y])
             meas.position_m[0] = round(true_y[-1] / res) * res
-            meas.force_n[0] = rig.rod_force_n[0] + emulator.load_cell_noise_n * rng.standard_normal()
-            meas.pa_pa[0] = rig.state[0, hy.S_PA] + emulator.pressure_noise_pa * rng.standard_normal()
-            meas.pb_pa[0] = rig.state[0, hy.S_PB] + emulator.pressure_noise_pa * rng.standard_normal()
+            meas.force_n[0] = rig.rod_force_n[0] + emulator.sensors.load_cell_noise_n * rng.standard_normal()
+            meas.pa_pa[0] = rig.state[0, hy.S_PA] + emulator.sensors.pressure_noise_pa * rng.standard_normal()
+            meas.pb_pa[0] = rig.state[0, hy.S_PB] + emulator.sensors.pressure_noise_pa * rng.standard_normal()
             meas.fresh[:], meas.pressure_valid[:], meas.valve_state[:] = True, True, 3
             y.append(meas.position_m[0])
             pa.append(meas.pa_pa[0])
@@ -224,9 +224,9 @@ def _presliding_in_process(start_cycles: int, force_filter_hz: float | None = No
         ctl.host.test(int(TestMode.FORCE_SINE), seq, 0.0, amplitude, 25.0)
         sines.append(np.arange(len(y) + 1, len(y) + int(25.0 / period)))
         cycles(int(25.5 / period) + 5)
-    fp = piston_force(np.array(pa), np.array(pb), cfg.piston_area_m2, cfg.area_ratio)
-    seal = cylinder_friction(fp - np.array(rod), 0.0, 0.0, cfg.moving_mass_kg, 0.0, 0.0)
-    guide = cylinder_friction(np.array(rod), 0.0, 0.0, cfg.slide_mass_kg + load, 0.0, 0.0)
+    fp = piston_force(np.array(pa), np.array(pb), cfg.actuator.piston_area_m2, cfg.actuator.area_ratio)
+    seal = cylinder_friction(fp - np.array(rod), 0.0, 0.0, cfg.actuator.moving_mass_kg, 0.0, 0.0)
+    guide = cylinder_friction(np.array(rod), 0.0, 0.0, cfg.testbench.slide_mass_kg + load, 0.0, 0.0)
     fits = {}
     cycle = np.arange(len(y))
     for name, record in (("record", displacement_from_crossings(cycle, np.array(y), len(y))),
@@ -235,7 +235,7 @@ def _presliding_in_process(start_cycles: int, force_filter_hz: float | None = No
         rest = _at_rest(dy, period)
         at = np.concatenate([k[rest[k]] for k in sines])
         fits[name] = fit_presliding(dy, dy / period, at, seal[at], at, guide[at],
-                                    steady_sides(cfg.raw["friction"]), cfg.guide_coulomb_n)
+                                    steady_sides(cfg.raw["friction"]), cfg.testbench.guide_coulomb_n)
     return fits
 
 

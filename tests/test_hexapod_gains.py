@@ -52,12 +52,12 @@ def test_gain_factors_scale_every_controllers_gains_on_the_hexapod_only():
     cfg = load_config(overrides={"hexapod": {"kp_factor": 3.0, "ki_factor": 0.25}})
     hexapod = Controller(cfg, "hexapod", PERIOD_S)
     bench = Controller(cfg, "testbench", PERIOD_S)
-    assert hexapod.joint.jp[JP_PI_KP] == pytest.approx(3.0 * cfg.pi_kp)
+    assert hexapod.joint.jp[JP_PI_KP] == pytest.approx(3.0 * cfg.pi.kp_v_m)
     assert hexapod.joint.jp[JP_KP_SCALE] == 3.0
-    assert hexapod.joint.jp[JP_PI_KI] == pytest.approx(0.25 * cfg.pi_ki)
-    assert hexapod.joint.jp[JP_KI_SCALE] == pytest.approx(0.25 * cfg.ki_scale)
-    assert bench.joint.jp[JP_PI_KP] == cfg.pi_kp and bench.joint.jp[JP_KP_SCALE] == 1.0
-    assert bench.joint.jp[JP_PI_KI] == cfg.pi_ki and bench.joint.jp[JP_KI_SCALE] == cfg.ki_scale
+    assert hexapod.joint.jp[JP_PI_KI] == pytest.approx(0.25 * cfg.pi.ki_v_m_s)
+    assert hexapod.joint.jp[JP_KI_SCALE] == pytest.approx(0.25 * cfg.adaptive.ki_scale)
+    assert bench.joint.jp[JP_PI_KP] == cfg.pi.kp_v_m and bench.joint.jp[JP_KP_SCALE] == 1.0
+    assert bench.joint.jp[JP_PI_KI] == cfg.pi.ki_v_m_s and bench.joint.jp[JP_KI_SCALE] == cfg.adaptive.ki_scale
 
 
 def test_scheduled_kp_is_scaled_by_the_hexapod_kp_factor():

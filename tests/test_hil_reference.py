@@ -104,7 +104,7 @@ def test_an_analysis_models_the_plant_its_run_emulated(tmp_path):
     def log_at(path):
         return LogData(str(path), 0, np.zeros(0), {}, [], 0, {}, {}, 0)
     ran = run_emulator_config(log_at(tmp_path / "run" / "run.blf"))
-    assert ran.payload_kg == 6.0 and ran.supply_pressure_pa == 40e5
+    assert ran.hexapod.payload_kg == 6.0 and ran.actuator.supply_pressure_pa == 40e5
     default = run_emulator_config(log_at(tmp_path / "run.blf"))
-    assert default.payload_kg == load_config().payload_kg == 0.0
-    assert default.supply_pressure_pa == load_config().supply_pressure_pa
+    assert default.hexapod.payload_kg == load_config().hexapod.payload_kg == 0.0
+    assert default.actuator.supply_pressure_pa == load_config().actuator.supply_pressure_pa

@@ -33,7 +33,7 @@ def test_one_leg_without_leakage_oscillates_at_the_oil_columns_frequency():
                                               "air_fraction_pct": 0.0}})
     mass, y, pa, pb = 5.0, 0.1, 12e5, 9e5
     a, _, stiffness, _ = state_matrices(cfg, np.array([[mass]]), np.zeros((1, 1)), np.array([y]), np.array([pa]),
-                                        np.array([pb]), np.zeros(1), cfg.supply_pressure_pa, 0.0)
+                                        np.array([pb]), np.zeros(1), cfg.actuator.supply_pressure_pa, 0.0)
     beta = 1.0 / (1.0 / cfg.hp[hy.HP_BETA_OIL] + 1.0 / cfg.hp[hy.HP_BETA_WALL])
     area, alpha = cfg.area_a_m2, cfg.alpha
     va = cfg.hp[hy.HP_VA0] + area * y
@@ -54,8 +54,9 @@ def test_one_sealed_leg_adds_the_seals_bristles_in_parallel_with_its_oil_columns
     cfg = load_config(overrides={"chambers": {"seal_leakage_l_min_per_bar": 0.0, "air_fraction_pct": 0.0}})
     mass, y, pa, pb, sigma0, damping = 5.0, 0.1, 12e5, 9e5, 2e5, 1500.0
     a, _, stiffness, flow_gain = state_matrices(cfg, np.array([[mass]]), np.zeros((1, 1)), np.array([y]),
-                                                np.array([pa]), np.array([pb]), np.zeros(1), cfg.supply_pressure_pa,
-                                                damping, ports=0.0, seal_stiffness=sigma0)
+                                                np.array([pa]), np.array([pb]), np.zeros(1),
+                                                cfg.actuator.supply_pressure_pa, damping, ports=0.0,
+                                                seal_stiffness=sigma0)
     beta = 1.0 / (1.0 / cfg.hp[hy.HP_BETA_OIL] + 1.0 / cfg.hp[hy.HP_BETA_WALL])
     area, alpha = cfg.area_a_m2, cfg.alpha
     va = cfg.hp[hy.HP_VA0] + area * y
@@ -97,7 +98,7 @@ def test_the_sealed_response_is_the_emulators_under_a_push(bristles_n):
     from physics import lugre
     from protocol.enums import KickAxis
     cfg = load_config()
-    fp = cfg.friction
+    fp = cfg.friction.vector
     rig = HexapodRig(cfg)
     rig.ports_open[:] = 0.0
     for _ in range(300):

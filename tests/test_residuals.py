@@ -45,7 +45,7 @@ def run_move(fault: str | None, cycles: int = 700, residuals: bool = True, super
     rig = HexapodRig(load_emulator_config())
     ctl = Controller(cfg, "hexapod", PERIOD_S, CONTROLLER_NAMES["adaptive"])
     meas, cmd = ctl.new_interfaces()
-    encoder_m = cfg.encoder_resolution_m
+    encoder_m = cfg.actuator.encoder_resolution_m
     applied, active = np.zeros(6), np.zeros(6)
     sample_noise = np.random.default_rng(2)
     positions = []
@@ -114,7 +114,7 @@ def run_move(fault: str | None, cycles: int = 700, residuals: bool = True, super
 
 def test_threshold_floor_is_the_seals_breakaway_force():
     cfg = load_config()
-    assert breakaway_force_n(cfg.friction) == pytest.approx(12.1994 + 10.6468)
+    assert breakaway_force_n(cfg.friction.vector) == pytest.approx(12.1994 + 10.6468)
 
 
 def test_quiet_on_a_healthy_move_with_margin():
@@ -142,9 +142,10 @@ def test_a_leg_without_a_pressure_sample_waits_for_its_first():
     transducers have not spoken at activation is judged nothing until its first sample, then
     starts from it; a leg with a sample starts at once."""
     cfg = load_config()
-    res = ActuatorResiduals(2, cfg.hydraulics, cfg.friction, cfg.supply_pressure_pa, PERIOD_S, 0.5,
-                            cfg.residual_stiffness_n_m, cfg.encoder_resolution_m, cfg.residual_gain,
-                            cfg.residual_filter_s, cfg.residual_persistence, cfg.residual_flow_spread)
+    r = cfg.residuals
+    res = ActuatorResiduals(2, cfg.hydraulics, cfg.friction.vector, cfg.hydraulic_model.supply_pressure_pa, PERIOD_S,
+                            0.5, r.column_stiffness_n_m, cfg.actuator.encoder_resolution_m, r.correction_gain,
+                            r.filter_s, r.persistence_cycles, r.flow_spread)
     position, force, zeros = np.array([0.1, 0.1]), np.array([200.0, 200.0]), np.zeros(2)
     pa, pb = np.array([5e5, 0.0]), np.array([4e5, 0.0])
     res.start(position, np.array([True, False]), pa, pb)
@@ -255,10 +256,10 @@ def _ringing_leg(plant_lag: int, known_late: bool, amplitude: float, hz: float) 
     `plant_lag` cycles after it was computed (1: at the next SYNC, as the controller assumes);
     LEG_PRESSURE every 16th cycle. The prediction's largest ratio after its first samples."""
     cfg = load_config(overrides={"hydraulic_model": {"supply_pressure_bar": 40.0}})
-    hp, ps = cfg.hydraulics, cfg.supply_pressure_pa
-    floor = sample_floor_pa(cfg.pressure_noise_pa, signal_scale("LEG_PRESSURE_1", "PA") * BAR)
-    prediction = ChamberPrediction(1, hp, ps, PERIOD_S, cfg.encoder_resolution_m, cfg.residual_flow_spread,
-                                   cfg.residual_leakage_spread, cfg.residual_stiffness_spread, floor, 1,
+    hp, ps = cfg.hydraulics, cfg.hydraulic_model.supply_pressure_pa
+    floor = sample_floor_pa(cfg.residuals.pressure_noise_pa, signal_scale("LEG_PRESSURE_1", "PA") * BAR)
+    prediction = ChamberPrediction(1, hp, ps, PERIOD_S, cfg.actuator.encoder_resolution_m, cfg.residuals.flow_spread,
+                                   cfg.residuals.leakage_spread, cfg.residuals.stiffness_spread, floor, 1,
                                    int(ValveState.ACTIVE))
     y = np.array([0.05])
     plant = np.zeros(hy.S_SIZE)
@@ -364,8 +365,8 @@ def test_the_daemons_shutdown_is_no_fault(told):
 
 def spool_check(persistence: int = 2) -> SpoolResidual:
     cfg = load_config()
-    return SpoolResidual(6, cfg.hydraulics, PERIOD_S, cfg.spool_floor, cfg.spool_lag_spread, persistence,
-                         int(ValveState.ACTIVE))
+    return SpoolResidual(6, cfg.hydraulics, PERIOD_S, cfg.residuals.spool_floor, cfg.residuals.spool_lag_spread,
+                         persistence, int(ValveState.ACTIVE))
 
 
 def test_the_spool_lag_bound_is_the_decays_change_over_the_time_constants_spread():

@@ -86,7 +86,7 @@ def test_missing_sensor_frames_fault_after_the_configured_count_then_reset():
     loop, ctl, bus = make_loop("testbench", "pi")
     cycles(loop, 20)
     bus.silent.add(0)
-    cycles(loop, ctl.cfg.missing_frames_fault - 1)
+    cycles(loop, ctl.cfg.supervisor.missing_frames_fault - 1)
     assert ctl.state is State.READY                          # transient: still running
     loop.cycle()
     assert ctl.state is State.FAULT and ctl.sup.fault_code is Fault.SENSOR_TIMEOUT
@@ -107,8 +107,8 @@ def test_e2e_corrupted_frames_are_counted_and_fault():
     loop, ctl, bus = make_loop("testbench", "pi")
     cycles(loop, 20)
     bus.corrupt.add(0)
-    cycles(loop, ctl.cfg.e2e_errors_fault)
-    assert loop.stats.e2e_errors == ctl.cfg.e2e_errors_fault
+    cycles(loop, ctl.cfg.supervisor.e2e_errors_fault)
+    assert loop.stats.e2e_errors == ctl.cfg.supervisor.e2e_errors_fault
     assert ctl.state is State.FAULT and ctl.sup.fault_code is Fault.E2E_ERROR
 
 
@@ -136,7 +136,7 @@ def test_the_controller_sends_its_emcy_when_it_latches_and_when_a_reset_clears()
     cycles(loop, 20)
     assert controller_emcy(loop, bus)[0] == 0
     bus.silent.add(0)
-    cycles(loop, ctl.cfg.missing_frames_fault + 5)
+    cycles(loop, ctl.cfg.supervisor.missing_frames_fault + 5)
     count, emcy = controller_emcy(loop, bus)
     assert ctl.state is State.FAULT and count == 1             # once per latch, not per cycle
     assert emcy["ERROR_CODE"] == EmcyCode.RPDO_TIMEOUT and emcy["DETAIL"] == Fault.SENSOR_TIMEOUT
@@ -215,10 +215,10 @@ def test_home_and_park_move_and_park_ends_idle():
     loop, ctl, bus = make_loop("testbench", "adaptive")
     assert ctl.host_command(Command.PARK, 0) is Ack.ACCEPTED
     cycles(loop, 4000)
-    assert ctl.state is State.IDLE and abs(bus.y[0] - ctl.cfg.testbench_park_m) < 0.5e-3
+    assert ctl.state is State.IDLE and abs(bus.y[0] - ctl.cfg.testbench.park_m) < 0.5e-3
     assert ctl.host_command(Command.HOME, 0) is Ack.ACCEPTED
     cycles(loop, 4000)
-    assert ctl.state is State.READY and abs(bus.y[0] - ctl.cfg.testbench_home_m) < 0.5e-3
+    assert ctl.state is State.READY and abs(bus.y[0] - ctl.cfg.testbench.home_m) < 0.5e-3
 
 
 def test_a_silent_node_heartbeat_faults():
@@ -263,7 +263,7 @@ def test_a_commit_waits_for_a_cycle_with_room_before_the_next_sync_but_not_forev
     for frame in host_frames(0, z + 0.01):
         loop.dispatch(frame)
     ctl.host.run_before_update(ctl)
-    tight = 0.5 * ctl.cfg.commit_room_s
+    tight = 0.5 * ctl.cfg.timing.commit_room_s
     for _ in range(COMMIT_MAX_WAIT_CYCLES):
         ctl.after_write(tight)                       # the SYNC is near: the commit waits
     assert not ctl.host.acks and len(ctl.host.queue) == 1
@@ -274,7 +274,7 @@ def test_a_commit_waits_for_a_cycle_with_room_before_the_next_sync_but_not_forev
     ctl.host.run_before_update(ctl)
     ctl.after_write(tight)
     assert len(ctl.host.acks) == 1
-    ctl.after_write(ctl.cfg.commit_room_s)           # room enough: at once
+    ctl.after_write(ctl.cfg.timing.commit_room_s)           # room enough: at once
     assert list(ctl.host.acks)[-1] == (AckKind.WAYPOINT, 1, int(Ack.ACCEPTED))
 
 
@@ -332,10 +332,10 @@ def test_reset_and_enable_at_the_end_stop_comes_back_inside_the_guard():
     assert ctl.host_command(Command.RESET, 0) is Ack.ACCEPTED
     cycles(loop, 5)
     assert ctl.host_command(Command.ENABLE, 0) is Ack.ACCEPTED
-    assert ctl.limits.recovering[0] and ctl.reference.hold_position[0] < ctl.stroke_m - ctl.cfg.stroke_margin_m
+    assert ctl.limits.recovering[0] and ctl.reference.hold_position[0] < ctl.stroke_m - ctl.cfg.limits.stroke_margin_m
     cycles(loop, 400)
     assert ctl.state is State.READY and ctl.sup.fault_code is Fault.NONE
-    assert bus.y[0] < ctl.stroke_m - ctl.cfg.stroke_margin_m and not ctl.limits.recovering[0]
+    assert bus.y[0] < ctl.stroke_m - ctl.cfg.limits.stroke_margin_m and not ctl.limits.recovering[0]
 
 
 def test_a_recovering_leg_that_goes_further_out_faults():
@@ -459,7 +459,7 @@ def test_a_stalled_realtime_loop_faults_overrun_and_stays_held_until_reset():
     loop, ctl, bus = make_loop("testbench", "pi")
     now = [0.0]
     loop.clock = lambda: now[0]
-    loop._stall_s = ctl.cfg.stall_fault_periods * loop.period_s        # as in realtime pacing
+    loop._stall_s = ctl.cfg.timing.stall_fault_periods * loop.period_s        # as in realtime pacing
     for _ in range(20):
         now[0] += loop.period_s
         loop.cycle()
@@ -487,7 +487,7 @@ def test_nodes_that_reboot_are_started_again_on_reset():
     loop, ctl, bus = make_loop("testbench", "pi")
     cycles(loop, 20)
     bus.silent.add(0)                                     # the node powers down ...
-    cycles(loop, ctl.cfg.missing_frames_fault)
+    cycles(loop, ctl.cfg.supervisor.missing_frames_fault)
     assert ctl.sup.fault_code is Fault.SENSOR_TIMEOUT
     bus.operational = False                               # ... and boots again, PRE-OPERATIONAL
     bus.valve[0] = 1

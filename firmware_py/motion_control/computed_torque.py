@@ -157,13 +157,13 @@ class _Gains:
         self.kp, self.kd, self.ki = w * w, 2.0 * gains.damping * w, gains.integral_fraction * w ** 3
         self.period_s = period_s
         self.velocity_gain = gains.velocity_gain_per_s
-        self.force_bandwidth, self.rate_floor = gains.force_bandwidth_rad_s, cfg.ct_force_rate_floor
-        self.forces, self.velocities, self.spool = (cfg.valve_map_force_n, cfg.valve_map_velocity_m_s,
-                                                    cfg.valve_map_spool)
-        self.pressure_a, self.pressure_b = cfg.valve_map_pressure_a_pa, cfg.valve_map_pressure_b_pa
-        self.hp, self.supply_pa = cfg.hydraulics, cfg.supply_pressure_pa
-        self.u_max = cfg.spool_max
-        self.full_scale_v = cfg.valve_full_scale_v
+        self.force_bandwidth, self.rate_floor = gains.force_bandwidth_rad_s, cfg.computed_torque.force_rate_floor
+        self.forces, self.velocities, self.spool = (cfg.valve_map.force_n, cfg.valve_map.velocity_m_s,
+                                                    cfg.valve_map.spool)
+        self.pressure_a, self.pressure_b = cfg.valve_map.pressure_a_pa, cfg.valve_map.pressure_b_pa
+        self.hp, self.supply_pa = cfg.hydraulics, cfg.hydraulic_model.supply_pressure_pa
+        self.u_max = cfg.limits.spool_max
+        self.full_scale_v = cfg.actuator.valve_full_scale_v
         self.filter_wn, self.filter_zeta = 2 * math.pi * gains.velocity_filter_hz, FILTER_ZETA
         self.filter_ad, self.filter_bd = second_order_filter(period_s, gains.velocity_filter_hz, FILTER_ZETA)
         self.stiffness = np.zeros(n_legs)         # each leg's oil column at its operating point, N/m
@@ -183,7 +183,7 @@ class ComputedTorque(_Gains):
     """The controller's state and scratch arrays; `update(...)` writes the valve inputs."""
 
     def __init__(self, cfg: ControllerConfig, geometry: Geometry, period_s: float):
-        super().__init__(cfg, cfg.ct_hexapod, N_LEGS, period_s)
+        super().__init__(cfg, cfg.computed_torque.hexapod, N_LEGS, period_s)
         self.dynamics = InverseDynamics(geometry)
         self.error = np.zeros(6)              # pose error: m, rad
         self.integral = np.zeros(6)
@@ -240,9 +240,9 @@ class LegComputedTorque(_Gains):
     hexapod's horizontal modes), so a stiffer velocity loop stays damped there."""
 
     def __init__(self, cfg: ControllerConfig, n_legs: int, period_s: float):
-        super().__init__(cfg, cfg.ct_testbench, n_legs, period_s)
-        self.rod_mass = cfg.moving_mass_kg
-        self.friction = cfg.friction
+        super().__init__(cfg, cfg.computed_torque.testbench, n_legs, period_s)
+        self.rod_mass = cfg.actuator.moving_mass_kg
+        self.friction = cfg.friction.vector
         self.load_alpha = first_order_gain(period_s, LOAD_FILTER_HZ)
         self.integral = np.zeros(n_legs)
         self.velocity = np.zeros(n_legs)      # the estimate, low-passed

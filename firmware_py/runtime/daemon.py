@@ -26,12 +26,12 @@ def realtime_setup(cfg: ControllerConfig, realtime: bool) -> list[str]:
     scheduling, memory locking and affinity for realtime."""
     freeze_gc(disable=True)
     if not realtime:
-        return applied(cpu_latency_measure(cfg.cpu_latency_us), log)
-    measures = {f"SCHED_FIFO priority {cfg.realtime_priority}": set_fifo(cfg.realtime_priority),
+        return applied(cpu_latency_measure(cfg.timing.cpu_latency_us), log)
+    measures = {f"SCHED_FIFO priority {cfg.timing.realtime_priority}": set_fifo(cfg.timing.realtime_priority),
                 "mlockall": lock_memory()}
-    if cfg.cpu >= 0:
-        measures[f"CPU {cfg.cpu}"] = pin_cpu(cfg.cpu)
-    return applied({**measures, **cpu_latency_measure(cfg.cpu_latency_us)}, log)
+    if cfg.timing.cpu >= 0:
+        measures[f"CPU {cfg.timing.cpu}"] = pin_cpu(cfg.timing.cpu)
+    return applied({**measures, **cpu_latency_measure(cfg.timing.cpu_latency_us)}, log)
 
 
 def realtime_teardown() -> None:

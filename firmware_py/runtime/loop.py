@@ -146,7 +146,7 @@ class ControllerLoop:
         self._latched = False                       # the last EMCY_16 said: a fault is latched
         self._attitude_new = False
         self._pressure_new = np.zeros(len(self.legs), dtype=bool)    # LEG_PRESSURE since the last read
-        self._stall_s = self.cfg.stall_fault_periods * self.period_s if pacing == "realtime" else math.inf
+        self._stall_s = self.cfg.timing.stall_fault_periods * self.period_s if pacing == "realtime" else math.inf
         self._forced: bool | None = None            # shutdown: True HOLD, False DISABLED
         self.state_at_stop = None                   # the controller's state when the shutdown began
 
@@ -243,7 +243,7 @@ class ControllerLoop:
 
     def _drain_until(self, deadline: float) -> None:
         """Between cycles: handle host and node frames until `deadline - spin`, then spin."""
-        spin = self.cfg.spin_s
+        spin = self.cfg.timing.spin_s
         while True:
             remaining = deadline - spin - self.clock()
             if remaining <= 0.0:
@@ -344,7 +344,7 @@ class ControllerLoop:
         if now >= self._next_heartbeat:
             self.out_heartbeat.values[0] = NmtState.OPERATIONAL
             self._send(self.out_heartbeat)
-            self._next_heartbeat = now + self.cfg.heartbeat_s
+            self._next_heartbeat = now + self.cfg.timing.heartbeat_s
 
     # -- one cycle ------------------------------------------------------------------------
     def cycle(self) -> None:
@@ -365,8 +365,8 @@ class ControllerLoop:
         sent = self.clock()
         self.decoder.begin_cycle()
         self.meas.rejected[:] = False
-        window = self.cfg.sync_window_fraction * self.period_s if self.pacing == "realtime" \
-            else self.cfg.lockstep_timeout_s
+        window = self.cfg.timing.sync_window_fraction * self.period_s if self.pacing == "realtime" \
+            else self.cfg.timing.lockstep_timeout_s
         self._decode_s = 0.0
         self._collect(now + window)
         self.stats.missing_frames += self.decoder.end_cycle(self.expected)
@@ -429,14 +429,14 @@ class ControllerLoop:
     def activate(self, should_stop=lambda: False) -> None:
         """NMT start until every node reports OPERATIONAL, then HOLD cycles, then IDLE/READY."""
         cfg = self.cfg
-        give_up = self.clock() + cfg.activation_timeout_s
+        give_up = self.clock() + cfg.timing.activation_timeout_s
         next_start = 0.0
         while not all(self.nmt_state[n] == NmtState.OPERATIONAL for n in self.nodes):
             now = self.clock()
             if now > give_up or should_stop():
                 missing = [n for n in self.nodes if self.nmt_state[n] != NmtState.OPERATIONAL]
                 raise ActivationError(f"no OPERATIONAL heartbeat from node(s) {missing} within "
-                                      f"{cfg.activation_timeout_s:g} s")
+                                      f"{cfg.timing.activation_timeout_s:g} s")
             if now >= next_start:
                 self._nmt_start()
                 next_start = now + 0.2
@@ -444,8 +444,8 @@ class ControllerLoop:
             if msg is not None:
                 self.dispatch(msg)
         self.controller.reset_cycles = RESET_GRACE_CYCLES  # one Reset pulse: clears faults left from before
-        self._run_cycles(cfg.hold_cycles, should_stop)
-        self.controller.activated(cfg.auto_enable)
+        self._run_cycles(cfg.timing.hold_cycles, should_stop)
+        self.controller.activated(cfg.supervisor.auto_enable)
         self.log(f"active: rig={self.controller.rig} state={self.controller.state.name} pacing={self.pacing} "
                  f"rate={1.0 / self.period_s:g} Hz")
 
@@ -476,9 +476,9 @@ class ControllerLoop:
         self.state_at_stop = self.controller.state
         self.controller.shut_down()
         self._forced = True
-        self._run_cycles(self.cfg.shutdown_hold_cycles, never)
+        self._run_cycles(self.cfg.timing.shutdown_hold_cycles, never)
         self._forced = False
-        self._run_cycles(self.cfg.shutdown_disable_cycles, never)
+        self._run_cycles(self.cfg.timing.shutdown_disable_cycles, never)
 
     def timing(self) -> dict:
         """Percentiles (us) of the compute time, the period error and each phase of the cycle,

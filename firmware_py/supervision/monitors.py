@@ -19,7 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
-from firmware_py.config import ControllerConfig
+from firmware_py.config import Limits, Supervisor
 from protocol.enums import VALVE_FAULT_STATES, Fault
 
 RECOVERY_INSET_M = 2e-3                # enabled inside the end-stop guard: held this far inside it
@@ -33,8 +33,8 @@ VELOCITY_LIMIT, TRACKING_ERROR = int(Fault.VELOCITY_LIMIT), int(Fault.TRACKING_E
 
 
 class LoopMonitor:
-    def __init__(self, cfg: ControllerConfig):
-        self.cfg = cfg
+    def __init__(self, supervisor: Supervisor):
+        self.overruns_fault = supervisor.overruns_fault
         self.overruns_in_row = 0
 
     def reset(self) -> None:
@@ -44,7 +44,7 @@ class LoopMonitor:
         """A stall: the valves' SYNC watchdog has tripped meanwhile, nothing received late may
         be acted on as if nothing happened. Overruns: too many in a row."""
         self.overruns_in_row = self.overruns_in_row + 1 if overrun else 0
-        if stalled or self.overruns_in_row >= self.cfg.overruns_fault:
+        if stalled or self.overruns_in_row >= self.overruns_fault:
             return Fault.OVERRUN
         return Fault.NONE
 
@@ -68,13 +68,13 @@ def any_in(values, a, b):
 
 
 class NodeMonitor:
-    def __init__(self, cfg: ControllerConfig):
-        self.cfg = cfg
+    def __init__(self, heartbeat_timeout_s: float):
+        self.heartbeat_timeout_s = heartbeat_timeout_s
         self._fault_states = tuple(int(s) for s in VALVE_FAULT_STATES)
 
     def check_heartbeats(self, heartbeat_age_s: np.ndarray) -> Fault:
         """A node whose heartbeat is overdue."""
-        return Fault.HEARTBEAT_LOST if any_above(heartbeat_age_s, self.cfg.heartbeat_timeout_s) else Fault.NONE
+        return Fault.HEARTBEAT_LOST if any_above(heartbeat_age_s, self.heartbeat_timeout_s) else Fault.NONE
 
     @staticmethod
     def check_emergency(valve: bool, imu: bool, in_reset: bool) -> Fault:
@@ -113,8 +113,8 @@ def frames_check(fresh, rejected, sensor_fault, missing, rejected_run, e2e_limit
 
 
 class FrameMonitor:
-    def __init__(self, cfg: ControllerConfig, n_legs: int):
-        self.cfg = cfg
+    def __init__(self, supervisor: Supervisor, n_legs: int):
+        self.e2e_limit, self.missing_limit = supervisor.e2e_errors_fault, supervisor.missing_frames_fault
         self.missing = np.zeros(n_legs, dtype=np.int64)     # cycles in a row without a valid frame
         self.rejected = np.zeros(n_legs, dtype=np.int64)    # ... of which a frame came and was rejected
 
@@ -123,8 +123,8 @@ class FrameMonitor:
         self.rejected[:] = 0
 
     def check(self, fresh: np.ndarray, rejected: np.ndarray, sensor_fault: np.ndarray) -> Fault:
-        code = frames_check(fresh, rejected, sensor_fault, self.missing, self.rejected, self.cfg.e2e_errors_fault,
-                            self.cfg.missing_frames_fault)
+        code = frames_check(fresh, rejected, sensor_fault, self.missing, self.rejected, self.e2e_limit,
+                            self.missing_limit)
         return Fault(code) if code else Fault.NONE
 
     def leg_of(self, code: Fault, sensor_fault: np.ndarray) -> int:
@@ -185,8 +185,8 @@ def active_check(position, velocity, error, margin, stroke, velocity_max, tracki
 
 
 class LimitMonitor:
-    def __init__(self, cfg: ControllerConfig, n_legs: int, stroke_m: float):
-        self.cfg, self.stroke_m = cfg, stroke_m
+    def __init__(self, limits: Limits, n_legs: int, stroke_m: float):
+        self.limits, self.stroke_m = limits, stroke_m
         # enabled with a leg inside the end-stop guard (after a POSITION_LIMIT fault): it is
         # held just inside the guard and may come back, but never go further out
         self.recovering = np.zeros(n_legs, dtype=bool)
@@ -196,7 +196,7 @@ class LimitMonitor:
     def enable_target(self, position_m: np.ndarray) -> np.ndarray:
         """Where to hold legs that are enabled: where they are, or RECOVERY_INSET_M inside the
         end-stop guard for those outside it (marked recovering)."""
-        low = self.cfg.stroke_margin_m + RECOVERY_INSET_M
+        low = self.limits.stroke_margin_m + RECOVERY_INSET_M
         high = self.stroke_m - low
         target = np.clip(position_m, low, high)
         np.not_equal(target, position_m, out=self.recovering)
@@ -206,13 +206,13 @@ class LimitMonitor:
 
     def check_always(self, u_v: np.ndarray, kalman_x: np.ndarray, force_n: np.ndarray) -> Fault:
         """Whatever the state: non-finite control or estimates, the load cell's range."""
-        code = always_check(u_v, kalman_x, force_n, self.cfg.force_max_n)
+        code = always_check(u_v, kalman_x, force_n, self.limits.force_max_n)
         return Fault(code) if code else Fault.NONE
 
     def check_active(self, position_m: np.ndarray, velocity_m_s: np.ndarray, error_m: np.ndarray) -> Fault:
         """While the valves are ACTIVE: end-stop guard, velocity, tracking error."""
-        cfg = self.cfg
-        code = active_check(position_m, velocity_m_s, error_m, cfg.stroke_margin_m, self.stroke_m,
-                            cfg.velocity_max_m_s, cfg.tracking_error_max_m, self.recovering, self.recovery_from,
+        limits = self.limits
+        code = active_check(position_m, velocity_m_s, error_m, limits.stroke_margin_m, self.stroke_m,
+                            limits.velocity_max_m_s, limits.tracking_error_max_m, self.recovering, self.recovery_from,
                             self.recovery_left)
         return Fault(code) if code else Fault.NONE

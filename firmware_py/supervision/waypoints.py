@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from firmware_py.config import ControllerConfig
+from firmware_py.config import Waypoints
 from firmware_py.motion_control.trajectory import JointTrajectory, hold_at, through_points
 from physics.constants import GRAVITY_M_S2
 from protocol.enums import Ack, State, WaypointFlag
@@ -42,23 +42,24 @@ class TestbenchCheck:
 
     __test__ = False             # not a pytest class despite the name
 
-    def __init__(self, cfg: ControllerConfig, stroke_m: float):
-        self.cfg, self.stroke_m = cfg, stroke_m
+    def __init__(self, waypoints: Waypoints, stroke_margin_m: float, moving_mass_kg: float, stroke_m: float):
+        self.waypoints, self.margin_m, self.moving_mass_kg, self.stroke_m = (waypoints, stroke_margin_m,
+                                                                             moving_mass_kg, stroke_m)
 
     def __call__(self, previous, pos, rot, segment_time, accel_time, step: bool, load_kg: float):
-        cfg, margin = self.cfg, self.cfg.stroke_margin_m
+        margin = self.margin_m
         if max(abs(pos[0]), abs(pos[1]), *(abs(r) for r in rot)) > 1e-9 or not (
                 margin <= pos[2] <= self.stroke_m - margin):
             return Ack.OUTSIDE_WORKSPACE, None
         strokes = np.array([pos[2]])
-        if not peak_velocity_ok(cfg, previous, strokes, segment_time, accel_time, step):
+        if not peak_velocity_ok(self.waypoints, previous, strokes, segment_time, accel_time, step):
             return Ack.TOO_FAST, None
         if step:
             return Ack.ACCEPTED, strokes
         # the static load as estimated plus the segment's peak SLS acceleration
         peak_accel = abs(pos[2] - float(previous[0])) / (segment_time - accel_time) * math.pi / (2.0 * accel_time)
-        force = (cfg.moving_mass_kg + load_kg) * (GRAVITY_M_S2 + peak_accel)
-        if force > cfg.waypoint_force_max_n:
+        force = (self.moving_mass_kg + load_kg) * (GRAVITY_M_S2 + peak_accel)
+        if force > self.waypoints.force_max_n:
             return Ack.TOO_FAST, None
         return Ack.ACCEPTED, strokes
 
@@ -68,22 +69,22 @@ class HexapodCheck:
     singularities, a bounded joint speed and static-plus-inertial actuator force. Compiled
     per pose (about 10 us each): a commit runs after a cycle's write, within its slack."""
 
-    def __init__(self, cfg: ControllerConfig, geometry):
+    def __init__(self, waypoints: Waypoints, dk_tolerance_m: float, geometry):
         from firmware_py.mechanics.dynamics import InverseDynamics
         from firmware_py.mechanics.kinematics import DirectKinematics
         from firmware_py.mechanics.workspace import PoseChecker
-        self.cfg, self.geometry = cfg, geometry
-        self.dk = DirectKinematics(geometry, cfg.dk_tolerance_m, 50)
+        self.waypoints, self.geometry = waypoints, geometry
+        self.dk = DirectKinematics(geometry, dk_tolerance_m, 50)
         self.dynamics = InverseDynamics(geometry)
         self.poses = PoseChecker(geometry)
-        self.fractions = np.linspace(1.0, 0.0, cfg.waypoint_path_samples)
+        self.fractions = np.linspace(1.0, 0.0, waypoints.path_samples)
         self.zero_velocity, self.accel = np.zeros(6), np.zeros(6)
 
     def __call__(self, previous, pos, rot, segment_time, accel_time, step: bool, load_kg: float):
         from firmware_py.mechanics.rotation import rpy_to_quat
         from firmware_py.mechanics.workspace import MIN_CONDITION_INDEX, OUT_CONDITION, OUT_REACHABLE
 
-        g, cfg = self.geometry, self.cfg
+        g = self.geometry
         target, quat = np.array(pos, dtype=float), rpy_to_quat(*rot)
         report = self.poses.check(target, quat)
         if not report[OUT_REACHABLE]:
@@ -91,7 +92,7 @@ class HexapodCheck:
         if report[OUT_CONDITION] < MIN_CONDITION_INDEX:
             return Ack.SINGULAR, None
         strokes = self.poses.lengths - g.leg_min_m
-        if not peak_velocity_ok(cfg, previous, strokes, segment_time, accel_time, step):
+        if not peak_velocity_ok(self.waypoints, previous, strokes, segment_time, accel_time, step):
             return Ack.TOO_FAST, None
         # the joint-space path between the waypoints, back from the target
         dk = self.dk
@@ -111,22 +112,22 @@ class HexapodCheck:
         self.accel[0:3] = (target - dk.pose[0:3]) / (segment_time - accel_time) * math.pi / (2.0 * accel_time)
         if not self.dynamics.forces(target, quat, self.zero_velocity, self.accel):
             return Ack.SINGULAR, None
-        if np.max(np.abs(self.dynamics.force_n)) > cfg.waypoint_force_max_n:
+        if np.max(np.abs(self.dynamics.force_n)) > self.waypoints.force_max_n:
             return Ack.TOO_FAST, None
         return Ack.ACCEPTED, strokes
 
 
-def peak_velocity_ok(cfg: ControllerConfig, previous, strokes, segment_time, accel_time, step: bool) -> bool:
+def peak_velocity_ok(waypoints: Waypoints, previous, strokes, segment_time, accel_time, step: bool) -> bool:
     """A step is bounded by its size; a segment by its peak joint velocity."""
     distance = float(np.max(np.abs(strokes - previous)))
     if step:
-        return distance <= cfg.waypoint_step_max_m
-    return distance / (segment_time - accel_time) <= cfg.waypoint_velocity_max_m_s
+        return distance <= waypoints.step_max_m
+    return distance / (segment_time - accel_time) <= waypoints.velocity_max_m_s
 
 
 class WaypointQueue:
-    def __init__(self, cfg: ControllerConfig, check):
-        self.cfg, self.check = cfg, check
+    def __init__(self, waypoints: Waypoints, check):
+        self.capacity, self.check = waypoints.queue, check
         self.queue: list[Waypoint] = []
         self.expected_seq: int | None = None       # None: the next SEQ is free
         self._staged_pos: dict[int, tuple] = {}
@@ -139,7 +140,7 @@ class WaypointQueue:
         self._staged_rot[tag & 0x0F] = (roll, pitch, yaw)
 
     def free(self) -> int:
-        return max(self.cfg.waypoint_queue - len(self.queue), 0)
+        return max(self.capacity - len(self.queue), 0)
 
     def clear(self) -> None:
         self.queue.clear()
@@ -158,7 +159,7 @@ class WaypointQueue:
             return Ack.SEQUENCE_GAP
         if state not in COMMIT_STATES:
             return Ack.BAD_STATE
-        if len(self.queue) >= self.cfg.waypoint_queue:
+        if len(self.queue) >= self.capacity:
             return Ack.QUEUE_FULL
         if not all(math.isfinite(v) for v in pos + rot + (segment_time, accel_time)):
             return Ack.NOT_FINITE

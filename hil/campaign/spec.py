@@ -49,10 +49,13 @@ import numpy as np
 
 from firmware_py.config import load_config as controller_config_load
 from hil.injection import parse_faults
+from physics.actuator import PAYLOAD
 from physics.constants import BAR
+from physics.hydraulics import SUPPLY_PRESSURE
+from plant_emulator.params import Testbench as EmulatorTestbench
 from plant_emulator.params import load_raw as emulator_raw_load
 from program.errors import UserInputError
-from program.tomlconfig import read_toml
+from program.sections import read_toml
 
 # plant parameter groups: the emulator's (section, key) scaled together
 SCALES = {
@@ -66,9 +69,9 @@ SCALES = {
 NOISES = (("sensors", "load_cell_noise_n"), ("sensors", "pressure_noise_bar"), ("sensors", "imu_angle_noise_rad"),
           ("sensors", "imu_rate_noise_rad_s"))
 # grid keys: kind and range
-GRID_KEYS = {"controller": str, "fault": "fault", "load_kg": (0.0, 20.0), "position_mm": (0.0, 304.0),
-             "payload_kg": (0.0, 65.0), "supply_bar": (5.0, 210.0), "noise": (0.0, 100.0), "seed": (0, 2**31 - 1),
-             "time_scale": (0.5, 20.0)}
+GRID_KEYS = {"controller": str, "fault": "fault", "load_kg": EmulatorTestbench.keys()["load_kg"].range,
+             "position_mm": (0.0, 304.0), "payload_kg": PAYLOAD.range, "supply_bar": SUPPLY_PRESSURE.range,
+             "noise": (0.0, 100.0), "seed": (0, 2**31 - 1), "time_scale": (0.5, 20.0)}
 # grid keys that are the controller's to know as well (an operator sets them on the rig)
 TOLD = {"supply_bar": ("hydraulic_model", "supply_pressure_bar"), "payload_kg": ("hexapod", "payload_kg")}
 SCALE_RANGE = (0.1, 10.0)            # a grid scale factor
@@ -140,14 +143,14 @@ class Campaign:
                 sections.setdefault(section, {})[key] = float(params[name])
         known = controller_config_load()
         told = {}
-        for name, key, spread in (("flow_gain", "flow_spread_pct", known.residual_flow_spread),
-                                  ("leakage", "leakage_spread_pct", known.residual_leakage_spread),
-                                  ("stiffness", "stiffness_spread_pct", known.residual_stiffness_spread)):
+        for name, key, spread in (("flow_gain", "flow_spread_pct", known.residuals.flow_spread),
+                                  ("leakage", "leakage_spread_pct", known.residuals.leakage_spread),
+                                  ("stiffness", "stiffness_spread_pct", known.residuals.stiffness_spread)):
             if self.spreads.get(name, 0.0) > spread:
                 told[key] = 100.0 * self.spreads[name]
         if "noise" in params:
-            told["pressure_noise_bar"] = known.pressure_noise_pa / BAR * float(params["noise"])
-            told["load_cell_noise_n"] = known.load_cell_noise_n * float(params["noise"])
+            told["pressure_noise_bar"] = known.residuals.pressure_noise_pa / BAR * float(params["noise"])
+            told["load_cell_noise_n"] = known.residuals.load_cell_noise_n * float(params["noise"])
         residuals = sections.setdefault("residuals", {}) if told else {}
         for key, value in told.items():
             residuals.setdefault(key, round(value, 9))

@@ -66,7 +66,7 @@ def design_robustness(table: dict, controller_config: dict) -> str:
     from hil.design.plants import table_a3_plants
     from hil.design.robustness import steps_on_plants
     cfg = load_config(None, controller_config or None)
-    linear = steps_on_plants(table_a3_plants(), cfg.pi_kp, cfg.pi_ki)
+    linear = steps_on_plants(table_a3_plants(), cfg.pi.kp_v_m, cfg.pi.ki_v_m_s)
     pi_os = table.get("overshoot_pct_max", {}).get("pi", {})
     pi_ts = table.get("settling_s_max", {}).get("pi", {})
     if not pi_os or not pi_ts:

@@ -201,7 +201,7 @@ def _computed_torque(args) -> int:
         best, tried = design_testbench_gains(cfg, *search(TESTBENCH_SEARCH), args.workers, progress)
         design["testbench"] = {**best.as_dict(), "candidates": len(tried)}
         gains |= {key: round(best.gains[key], 4) for key in TESTBENCH_RANGES}
-    source = f"the emulator's configuration at {cfg.supply_pressure_pa / BAR:g} bar"
+    source = f"the emulator's configuration at {cfg.actuator.supply_pressure_pa / BAR:g} bar"
     text = computed_torque_toml(spool, pressure_a, pressure_b, gains, source)
     if supply:                                     # the residuals' model and the supply check at it too
         text += f"\n[hydraulic_model]\nsupply_pressure_bar = {args.supply_bar:g}\n"

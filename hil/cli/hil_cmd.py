@@ -109,7 +109,7 @@ def _emulator_config(path: str | None) -> dict:
 def _config_sections(path: str | None, validate) -> dict:
     if path is None:
         return {}
-    from program.tomlconfig import read_toml
+    from program.sections import read_toml
     validate(path)
     return read_toml(Path(path))
 

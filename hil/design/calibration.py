@@ -81,25 +81,25 @@ class OperatingPoint:
 
 def _rhs(x: np.ndarray, u_v: float, y: float, mass: float, damping: float, cfg: EmulatorConfig) -> np.ndarray:
     v, pa, pb, spool = x
-    rate_a, rate_b, _, _ = hy.pressure_rates(y, v, pa, pb, spool, cfg.supply_pressure_pa, cfg.hp, 1.0,
+    rate_a, rate_b, _, _ = hy.pressure_rates(y, v, pa, pb, spool, cfg.actuator.supply_pressure_pa, cfg.hp, 1.0,
                                          cfg.hp[hy.HP_SEAL_LEAK])
     force = hy.piston_force(pa, pb, cfg.hp) - damping * v - mass * GRAVITY_M_S2
     return np.array([force / mass, rate_a, rate_b,
-                     (u_v / cfg.valve_full_scale_v - spool) / cfg.hp[hy.HP_TAU_SPOOL]])
+                     (u_v / cfg.actuator.valve_full_scale_v - spool) / cfg.hp[hy.HP_TAU_SPOOL]])
 
 
 def moving_mass_kg(cfg: EmulatorConfig, load_kg: float) -> float:
-    return cfg.piston_rod_mass_kg + cfg.guide.slide_mass_kg + load_kg
+    return cfg.actuator.piston_rod_mass_kg + cfg.guide.slide_mass_kg + load_kg
 
 
 def linearise(cfg: EmulatorConfig, position_mm: float, load_kg: float) -> OperatingPoint:
     y = position_mm * MM
     mass = moving_mass_kg(cfg, load_kg)
-    fp = cfg.friction
+    fp = cfg.friction.vector
     damping = 0.5 * (fp[lugre.S2_POS] + fp[lugre.S2_NEG]) + cfg.guide.viscous_ns_m
-    pa, pb, spool, converged = hy.steady_state(y, mass * GRAVITY_M_S2, cfg.supply_pressure_pa, cfg.hp)
+    pa, pb, spool, converged = hy.steady_state(y, mass * GRAVITY_M_S2, cfg.actuator.supply_pressure_pa, cfg.hp)
     x0 = np.array([0.0, pa, pb, spool])
-    u0 = spool * cfg.valve_full_scale_v
+    u0 = spool * cfg.actuator.valve_full_scale_v
     steps = np.array([1e-6, 10.0, 10.0, 1e-7])
     a_mat = np.empty((4, 4))
     for j in range(4):
@@ -107,7 +107,7 @@ def linearise(cfg: EmulatorConfig, position_mm: float, load_kg: float) -> Operat
         dx[j] = steps[j]
         a_mat[:, j] = (_rhs(x0 + dx, u0, y, mass, damping, cfg) - _rhs(x0 - dx, u0, y, mass, damping, cfg)) \
             / (2 * steps[j])
-    du = 1e-6 * cfg.valve_full_scale_v
+    du = 1e-6 * cfg.actuator.valve_full_scale_v
     b_vec = (_rhs(x0, u0 + du, y, mass, damping, cfg) - _rhs(x0, u0 - du, y, mass, damping, cfg)) / (2 * du)
     poles = np.linalg.eigvals(a_mat)
     complex_poles = poles[np.abs(poles.imag) > 1e-9]

@@ -46,7 +46,7 @@ FORCE_STEP = 1e-2
 # what the design model leaves to the plant: the monitors judge a real rig, not this model
 # and its direct kinematics solved to far below the differences' steps
 QUIET = {"residuals": {"enabled": False, "load_cell_noise_n": 0.0, "spool_check": False},
-         "supervisor": {"dk_tolerance_um": 0.001}}
+         "kinematics": {"dk_tolerance_um": 0.001}}
 
 
 def controller_config(overrides: dict | None = None, payload_kg: float = 0.0) -> ControllerConfig:

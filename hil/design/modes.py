@@ -258,7 +258,7 @@ def modal_models(cfg: EmulatorConfig, position_m, rpy_rad, payload_kg: float, su
                  sealed_sides) -> list[ModalModel]:
     """`modal_model` for each of `sealed_sides`, from one linearisation of the mechanism and
     one solve of the holding points (what the sides share)."""
-    supply = cfg.supply_pressure_pa if supply_pa is None else float(supply_pa)
+    supply = cfg.actuator.supply_pressure_pa if supply_pa is None else float(supply_pa)
     rig = HexapodRig(cfg)
     rig.set_load(payload_kg)
     quat = pose_quaternion(rpy_rad)
@@ -271,7 +271,7 @@ def modal_models(cfg: EmulatorConfig, position_m, rpy_rad, payload_kg: float, su
     radius = float(np.linalg.norm(rig.geometry.platform_anchor_m[0]))
     models = []
     for side in sealed_sides:
-        ports, seal_stiffness, friction_slope = _seal_terms(cfg.friction, side)
+        ports, seal_stiffness, friction_slope = _seal_terms(cfg.friction.vector, side)
         a, b, stiffness, flow_gain = state_matrices(cfg, inertia, gravity_stiffness, strokes, pa, pb, spool, supply,
                                                     friction_slope, ports, seal_stiffness)
         model = ModalModel(np.asarray(position_m, dtype=float), np.asarray(rpy_rad, dtype=float), float(payload_kg),
@@ -346,13 +346,13 @@ def sealed_response(cfg: EmulatorConfig, position_m, pressures_pa, axis: int, pu
     pa, pb = (np.asarray(p, dtype=float) for p in pressures_pa)
     rest = cfg.area_a_m2 * (pa - cfg.alpha * pb) - static         # what the bristles hold
     a, _, _, _ = state_matrices(cfg, inertia, gravity_stiffness, strokes, pa, pb, np.zeros(N_LEGS),
-                                cfg.supply_pressure_pa, 0.0, 0.0)   # the seals' force comes from the law below
+                                cfg.actuator.supply_pressure_pa, 0.0, 0.0)   # the seals' force comes from the law below
     n = a.shape[0]
     q, qd = blocks(N_LEGS)[:2]
     b = np.zeros((n, N_LEGS))
     b[qd, :] = np.linalg.inv(inertia)
     phi, gamma, *_ = cont2discrete((a, b, np.eye(n), np.zeros((n, N_LEGS))), step_s, method="zoh")
-    fp = cfg.friction
+    fp = cfg.friction.vector
     z = np.array([f / (fp[lugre.S0_POS] if f >= 0.0 else fp[lugre.S0_NEG]) for f in rest])
     wrench = np.zeros(6)
     wrench[axis] = push

@@ -81,8 +81,8 @@ class RigLoop:
         self.meas, self.cmd = self.ctl.new_interfaces()
         self.applied, self.open = np.zeros(n), np.zeros(n)
         self.ideal = ideal
-        self.encoder_m = emulator_cfg.encoder_resolution_m
-        self.noise_n = 0.0 if ideal else emulator_cfg.load_cell_noise_n
+        self.encoder_m = emulator_cfg.sensors.encoder_resolution_m
+        self.noise_n = 0.0 if ideal else emulator_cfg.sensors.load_cell_noise_n
         self.rng = np.random.default_rng(seed)
         self.seq = 1
 

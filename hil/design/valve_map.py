@@ -43,7 +43,7 @@ def valve_map(cfg: EmulatorConfig, forces_n=MAP_FORCES_N, velocities_m_s=MAP_VEL
     between the cavitation floor and the supply (filled along F)."""
     shape = (len(forces_n), len(velocities_m_s))
     spool, pa_map, pb_map = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
-    ps, low = cfg.supply_pressure_pa, cfg.hp[hy.HP_P_MIN]    # a chamber below the floor cavitates
+    ps, low = cfg.actuator.supply_pressure_pa, cfg.hp[hy.HP_P_MIN]    # a chamber below the floor cavitates
     for j, v in enumerate(velocities_m_s):
         previous = None
         for i, force in enumerate(forces_n):
@@ -102,6 +102,7 @@ def force_rate_floor(cfg: EmulatorConfig, spool: np.ndarray, pressure_a: np.ndar
             pa, pb = valve_map_eval(*args, pressure_a, float(force), 0.0), valve_map_eval(*args, pressure_b,
                                                                                           float(force), 0.0)
             x = valve_map_eval(*args, spool, float(force), 0.0)
-            rate = hy.force_rate_per_spool(float(model.strokes_m[i]), pa, pb, x, cfg.supply_pressure_pa, cfg.hp)
+            rate = hy.force_rate_per_spool(float(model.strokes_m[i]), pa, pb, x, cfg.actuator.supply_pressure_pa,
+                                           cfg.hp)
             floor = min(floor, rate)
     return float(floor)

@@ -29,7 +29,7 @@ from plant_emulator.emulator import FAULT_ONSET_EVENT, SYNC_TIMEOUT_EVENT
 from protocol.enums import AckKind, Command
 
 # a controlled stop (firmware_py/supervision/stopping.py) keeps the healthy legs ACTIVE this long at most
-CONTROLLED_STOP_S = load_config().controlled_stop_s
+CONTROLLED_STOP_S = load_config().supervisor.controlled_stop_s
 
 
 def _mm(value) -> str:

@@ -119,17 +119,17 @@ def _tests(log: LogData, mode: int) -> list[dict]:
 def _pressure_force(log: LogData, cfg) -> tuple[np.ndarray, np.ndarray]:
     """(cycle, F_p) at every LEG_PRESSURE_1 frame (eq. 6.5's F_p)."""
     p = log.get("LEG_PRESSURE_1")
-    return p.cycle, piston_force(p["PA"], p["PB"], cfg.piston_area_m2, cfg.area_ratio)
+    return p.cycle, piston_force(p["PA"], p["PB"], cfg.actuator.piston_area_m2, cfg.actuator.area_ratio)
 
 
 def _moving_mass(cfg, load_kg: float | None) -> float:
     """eq. 6.5's mT: piston and rod, the guide's slide and the external load."""
-    return cfg.moving_mass_kg + _load_mass(cfg, load_kg)
+    return cfg.actuator.moving_mass_kg + _load_mass(cfg, load_kg)
 
 
 def _load_mass(cfg, load_kg: float | None) -> float:
     """What the load cell carries: the guide's slide and the external load."""
-    return cfg.slide_mass_kg + (load_kg or 0.0)
+    return cfg.testbench.slide_mass_kg + (load_kg or 0.0)
 
 
 def _seal_friction(log: LogData, cfg, rod_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -140,7 +140,7 @@ def _seal_friction(log: LogData, cfg, rod_n: np.ndarray) -> tuple[np.ndarray, np
     rod = np.full(len(cycle), np.nan)
     ok = (cycle >= 0) & (cycle < len(rod_n))
     rod[ok] = rod_n[cycle[ok]]
-    return cycle, cylinder_friction(fp - rod, 0.0, 0.0, cfg.moving_mass_kg, 0.0, 0.0)
+    return cycle, cylinder_friction(fp - rod, 0.0, 0.0, cfg.actuator.moving_mass_kg, 0.0, 0.0)
 
 
 def _truth_steady(log: LogData) -> dict[str, SteadySide]:
@@ -209,7 +209,7 @@ class FrictionSteady(Scenario):
         period = 1.0 / rate_hz
         cfg = load_config()
         y = log.leg_positions(1)[:, 0]
-        spool = log.get("VALVE_CMD_1").per_cycle(log.n_cycles, "SPOOL_SETPOINT") * cfg.valve_full_scale_v
+        spool = log.get("VALVE_CMD_1").per_cycle(log.n_cycles, "SPOOL_SETPOINT") * cfg.actuator.valve_full_scale_v
         p_cycle, fp = _pressure_force(log, cfg)
         points, skipped, stuck = [], 0, 0
         for test in _tests(log, TestMode.VALVE_STEP):
@@ -236,7 +236,7 @@ class FrictionSteady(Scenario):
                 continue
             load = load_at(log, start)
             friction = cylinder_friction(float(np.mean(fp[samples])), accel, velocity, _moving_mass(cfg, load),
-                                         cfg.guide_coulomb_n, cfg.guide_viscous_ns_m)
+                                         cfg.testbench.guide_coulomb_n, cfg.testbench.guide_viscous_ns_m)
             points.append({"valve_v": u, "load_kg": load, "velocity_mm_s": velocity / MM, "accel_m_s2": accel,
                            "friction_n": float(friction), "pressure_samples": int(samples.sum()),
                            "window_s": round((hi - lo) * period, 3)})
@@ -473,7 +473,7 @@ class FrictionPresliding(Scenario):
             return None
         fit = fit_presliding(dy, dy / period, np.concatenate(seal_at), np.concatenate(seal),
                              np.concatenate(guide_at), np.concatenate(guide),
-                             steady_sides(cfg.raw["friction"]), cfg.guide_coulomb_n)
+                             steady_sides(cfg.raw["friction"]), cfg.testbench.guide_coulomb_n)
         return {**fit, "samples_in_sines": samples}
 
     def _plot(self, charts, results, out: Path) -> Figure:

@@ -148,7 +148,7 @@ class HexapodKick(Scenario):
             y = truth.per_cycle(log.n_cycles, TRUTH_SIGNALS[axis])[k0 + start:min(k0 + stop, log.n_cycles)]
             main, fit = free_mode(y, period)
             load = load_at(log, k0)
-            load = cfg.payload_kg if load is None else load     # set at start, or by EMU_CTRL
+            load = cfg.hexapod.payload_kg if load is None else load     # set at start, or by EMU_CTRL
             pressures = sealed_pressures(log, k0, period)
             # the model: the same push on the sealed platform in the state the log shows
             model = None if pressures is None else free_mode(sealed_response(

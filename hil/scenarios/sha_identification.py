@@ -86,7 +86,7 @@ class ShaIdentification(Scenario):
     def script(self, run) -> None:
         positions, loads, gains, changes = self.plan(run.short)
         rng = np.random.default_rng(SEED)
-        stroke_mm = load_controller_config(None).stroke_m / MM
+        stroke_mm = load_controller_config(None).actuator.stroke_m / MM
         here = 0.150
         for gain in gains:
             run.stop_controller()
@@ -115,7 +115,7 @@ class ShaIdentification(Scenario):
         y = log.leg_positions(1)[:, 0]
         u = log.get("VALVE_CMD_1").per_cycle(log.n_cycles, "SPOOL_SETPOINT") * FULL_SCALE_V
         pressure = log.get("LEG_PRESSURE_1")
-        pl = pressure.per_cycle(log.n_cycles, "PA") - ccfg.area_ratio * pressure.per_cycle(log.n_cycles, "PB")
+        pl = pressure.per_cycle(log.n_cycles, "PA") - ccfg.actuator.area_ratio * pressure.per_cycle(log.n_cycles, "PB")
         n, pre = int(round(WINDOW_S / period)), int(round(PRE_S / period))
         sequence, previous_step, set_point_mm, out = -1, False, float("nan"), []
         for motion in ref.motions:
@@ -142,7 +142,7 @@ class ShaIdentification(Scenario):
             gcl = ident.fit_closed_loop(t, y[cycles] - y0, step, DELAY_PERIODS * period, k, guess)
             plant = ident.open_loop_from_closed(gcl, k)
             motion_fit = ident.motion_parameters(y[k0 - pre:k0 + n + 1], pl[k0 - pre:k0 + n + 1],
-                                                 ccfg.piston_area_m2, period, FILTER_HZ)
+                                                 ccfg.actuator.piston_area_m2, period, FILTER_HZ)
             out.append({"sequence": sequence, "cycle": k0, "before_m": float(before), "step_m": float(step),
                         "load_kg": load_at(log, k0), "k_v_m": k, "gcl": gcl, "plant": plant,
                         "motion": motion_fit, "t": t, "dy": y[cycles] - y0, "set_point_mm": set_point_mm})

@@ -59,7 +59,7 @@ class ShaStep(Scenario):
 
     def check_positions(self, positions_m: tuple[float, ...]) -> None:
         """Each square wave stays END_CLEARANCE_M away from the bench cylinder's end stops."""
-        stroke_m = load_config().stroke_m
+        stroke_m = load_config().actuator.stroke_m
         lo, hi = END_CLEARANCE_M, stroke_m - STEP_M - END_CLEARANCE_M
         for position_m in positions_m:
             if not lo <= position_m <= hi:

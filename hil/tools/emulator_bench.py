@@ -8,12 +8,11 @@ the bus replaced by nothing, after a warm-up that compiles the numba kernels.
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 
 import numpy as np
 
 from plant_emulator.emulator import Emulator
-from plant_emulator.params import EmulatorConfig
+from plant_emulator.params import EmulatorConfig, build, merge
 from plant_emulator.rigs import make_rig
 from protocol.enums import NmtState
 
@@ -22,7 +21,7 @@ GOALS = {"testbench": 10.0, "hexapod": 3.0}
 
 def bench_rig(name: str, cfg: EmulatorConfig, seconds: float, rate_hz: float) -> dict:
     period = 1.0 / rate_hz
-    cfg = replace(cfg, sync_period_s=period)
+    cfg = build(merge(cfg.raw, {"nodes": {"sync_period_ms": period * 1e3}}, "the bench"))
     rig = make_rig(name, cfg)
     emulator = Emulator(None, rig, cfg)
     emulator.boot()
