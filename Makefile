@@ -29,7 +29,7 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -e '.[test]'
 	touch $(STAMP)
 
-# The SocketCAN test (tests/test_socketcan_vm.py) boots a Debian kernel in qemu: install
+# The SocketCAN test (tests/project/test_socketcan_vm.py) boots a Debian kernel in qemu: install
 # what it needs when missing (root, or sudo).
 VM_DEBS  = qemu-system-x86 linux-image-amd64 busybox-static
 SUDO    := $(shell test "$$(id -u)" = 0 || echo sudo)
@@ -59,7 +59,7 @@ socketcan-check: $(STAMP)
 	@test -n "$(KERNEL)" || { echo "socketcan-check: no /boot/vmlinuz-* (apt-get install linux-image-amd64)"; exit 2; }
 	vng --run $(KERNEL) --disable-kvm --exec "modprobe vcan && ip link add dev vcan0 type vcan && \
 	  ip link set up vcan0 && cd $(CURDIR) && HYDRAPOD_TEST_BUS=socketcan:vcan0 \
-	  $(PY) -m pytest -p no:cacheprovider tests/test_bus.py -k 'socketcan or default or two_processes or virtual'"
+	  $(PY) -m pytest -p no:cacheprovider tests/protocol/test_bus.py -k 'socketcan or default or two_processes or virtual'"
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis .numba-cache *.egg-info

@@ -297,6 +297,7 @@ class Residuals(Section):
     stiffness_spread: float = key("stiffness_spread_pct", 0.0, 99.0, per=PCT)
     pressure_noise_pa: float = key(PRESSURE_NOISE)
     pressure_persistence_samples: int = key("pressure_persistence_samples", 1, 100)
+    pressure_carry: float = key("pressure_carry", 0.0, 1.0)
 
 
 @frozen

@@ -82,9 +82,9 @@ class HostLink:
             command, argument, seq = values
             self.acks.append((AckKind.HOST_CMD, seq, int(controller.host_command(command, argument))))
         elif frame is Frame.POSITION:
-            controller.waypoints.stage_position(*values)
+            controller.stage_position(*values)
         elif frame is Frame.ROTATION:
-            controller.waypoints.stage_rotation(*values)
+            controller.stage_rotation(*values)
         elif frame is Frame.COMMIT:
             tag, seq, segment_time, accel_time, flags = values
             self.acks.append((AckKind.WAYPOINT, seq,

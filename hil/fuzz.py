@@ -13,9 +13,9 @@ Targets:
 - `decoder`: a `FrameDecoder` of the whole DBC; counted = sum of its status counts plus
   its unknown frames;
 - `controller`: the hexapod controller's own `ControllerLoop.dispatch`, the controller
-  updated every 64 frames with steady measurements (so the host frames queued meanwhile
-  are carried out and accepted commands move it through its states); counted as above on
-  the loop's decoder, and the valve setpoints must stay finite.
+  updated every 256 frames against the emulated hexapod in process (so the host frames
+  queued meanwhile are carried out and accepted commands move it through its states);
+  counted as above on the loop's decoder, and the valve setpoints must stay finite.
 """
 
 from __future__ import annotations
@@ -27,15 +27,14 @@ import can
 import numpy as np
 
 from firmware_py.config import load_config
-from firmware_py.controller import Controller
-from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
 from firmware_py.runtime.loop import ControllerLoop
+from hil.in_process import InProcessLoop
+from plant_emulator.params import load_config as load_emulator_config
 from protocol import e2e
 from protocol.codec import CODECS, FrameDecoder, RxStatus
-from protocol.enums import ValveState
 
 VALID_SHARE = 0.25
-CYCLE_EVERY = 64          # controller target: frames per controller update
+CYCLE_EVERY = 256         # controller target: frames per update (~3,900 updates in 10^6 frames)
 TARGETS = ("decoder", "controller")
 
 
@@ -134,33 +133,21 @@ def fuzz_decoder(count: int, seed: int) -> FuzzReport:
 
 
 def fuzz_controller(count: int, seed: int, controller: str = "model-based") -> FuzzReport:
-    cfg = load_config()
-    ctl = Controller(cfg, "hexapod", 0.002, CONTROLLER_NAMES[controller])
+    ctl_cfg, emulator_cfg = load_config(), load_emulator_config()
+    rig = InProcessLoop(ctl_cfg, emulator_cfg, controller)        # the emulated hexapod, in process
+    ctl = rig.ctl
     loop = ControllerLoop(_QuietBus(), ctl, 500.0, "lockstep", log=lambda _: None)
-    home = ctl.home_strokes.copy()
-    meas, cmd = loop.meas, loop.cmd
-
-    def cycle() -> None:
-        meas.position_m[:] = home
-        meas.force_n[:] = 0.0
-        meas.fresh[:] = True
-        meas.valve_state[:] = ValveState.ACTIVE          # the valves follow
-        meas.heartbeat_age_s[:] = 0.0
-        ctl.update(meas, cmd)
-        ctl.after_write()
-        ctl.host.acks.clear()
-
-    cycle()
+    rig.cycle()
     ctl.activated(True)
     names = list(loop.decoder.names)
     exceptions, first, non_finite = 0, "", 0
     start = time.perf_counter()
     for i, msg in enumerate(frames(count, seed, names)):
         try:
-            loop.dispatch(msg)
+            loop.dispatch(msg)                   # host frames reach the controller's HostLink
             if i % CYCLE_EVERY == CYCLE_EVERY - 1:
-                cycle()
-                if not np.isfinite(cmd.spool).all():
+                rig.cycle()
+                if not np.isfinite(rig.cmd.spool).all():
                     non_finite += 1
         except Exception as error:
             exceptions += 1

@@ -10,7 +10,7 @@ makes reproducible (firmware_py/motion_control/reference.py and waypoints.py):
   or the cycle after the one in which the previous trajectory reached its end.
 The same codec decodes the same frames into the same floats and the same trajectory code
 builds the same segments, so the rebuilt reference equals the controller's bit for bit
-(tests/test_hil_reference.py checks it against the controller).
+(tests/hil/test_hil_reference.py checks it against the controller).
 HOME, PARK and STOP moves start from wherever the reference was; cycles after them until
 the next rebuilt trajectory are NaN (unknown), as are cycles after a FAULT or ESTOP.
 """

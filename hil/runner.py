@@ -24,13 +24,13 @@ from hil.metrics import faults_in_windows
 from hil.processes import Child, ChildFailed, describe_status
 from hil.report import write_outputs
 from hil.scenario import Scenario
+from plant_emulator.params import LOCKSTEP_SYNC_TIMEOUT_PERIODS
 from program.errors import UserInputError
 from program.realtime import freeze_gc, thaw_gc
 from protocol.bus import BusSpec, default_bus_spec, open_bus, parse_bus_spec
 from protocol.enums import Ack, Command, EmuCommand, EmuFault, Fault, State
 
 LOG_NAME = "run.blf"
-LOCKSTEP_EMULATOR_SYNC_TIMEOUT_PERIODS = 5000      # wall clock: > the controller's 50 ms lockstep wait
 # Lockstep runs in bus time, as fast as the machine goes; the nodes' heartbeats still come
 # every 100 ms of wall clock. On a slow machine (the SocketCAN VM without KVM) a busy
 # emulator sent one 0.35 s late and the controller faulted HEARTBEAT_LOST. A dead node is
@@ -127,7 +127,7 @@ class Run:
 
     def start_emulator(self) -> None:
         if self.pacing == "lockstep":
-            watchdog = LOCKSTEP_EMULATOR_SYNC_TIMEOUT_PERIODS
+            watchdog = LOCKSTEP_SYNC_TIMEOUT_PERIODS
         else:
             watchdog = self.valve_watchdog_periods()
             self.notes.append(f"emulated valves' SYNC watchdog and the controller's stall fault: "
@@ -143,10 +143,9 @@ class Run:
         child = Child(name, ["-m", "plant_emulator", "--bus", str(self.spec), "--rig", self.scenario.rig,
                              "--rate-hz", str(self.options.rate_hz),
                              "--sync-watchdog-periods", f"{watchdog:g}", "--config", str(config),
-                             "--summary", str(self.out / f"{name}.json"),
-                             *(["--realtime"] if self.pacing == "realtime" else [])], self.out)
+                             "--summary", str(self.out / f"{name}.json"), "--pacing", self.pacing], self.out)
         heartbeats = self.host.node_heartbeats
-        child.start()                # --realtime: it locks its memory and runs SCHED_FIFO itself
+        child.start()                # realtime: it locks its memory and runs SCHED_FIFO itself
         self.children.append(child)
         # its boot-up heartbeats: the controller's 5 s activation window starts only then
         self.host.wait_until(lambda: self.host.node_heartbeats > heartbeats, 10**9,

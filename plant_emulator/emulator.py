@@ -1,9 +1,11 @@
-"""The emulator on the bus: leg nodes (CiA 408 valve driver + encoder, load cell, pressure
-sensors), the IMU node (hexapod), fault injection, and the process loop.
+"""The emulated rig's nodes on the bus: each leg's node (CiA 408 valve driver with the leg's
+encoder, load cell and pressure transducers), the IMU node (hexapod), NMT, heartbeats, EMCY,
+the SYNC watchdog, and the injected frame faults. The rig behind them, its valves and its
+sensors are `simulated_rig.SimulatedRig`; this module only puts it on the bus.
 
 Per SYNC k (docs/ARCHITECTURE.md "The emulator's cycle"):
-1. every valve applies the command latched during cycle k-1 (state machine, setpoint) and
-   checks its command timeout and spool deviation; EMCY on a fault;
+1. every OPERATIONAL valve applies the command latched during cycle k-1 and checks its spool
+   (EMCY on a fault);
 2. every OPERATIONAL sensor node samples the rig as it is at t_k and sends its frames due on
    this SYNC (LEG_STATE every SYNC, with the valve state just applied; LEG_PRESSURE,
    VALVE_STATUS, IMU at their divisors), the IMU's first and each leg's LEG_STATE last: the
@@ -11,33 +13,34 @@ Per SYNC k (docs/ARCHITECTURE.md "The emulator's cycle"):
    samples of SYNC k it uses are those of cycle k, never by chance the next cycle's;
 3. the rig integrates exactly one SYNC period with the applied spool setpoints.
 So the emulator follows whoever produces SYNC, in realtime and lockstep pacing alike.
-Heartbeats and the SYNC-loss watchdog run on the wall clock, like a real node's timers.
+Heartbeats and the SYNC-loss watchdog run on the clock (`poll`), like a real node's timers.
 When the watchdog trips (the controller died or stalled), the plant does not stop with the
 bus: the physics catches up to the trip with the valves as they were, then runs on the
-wall clock with the valves in FAULT_HOLD, and EMU_TRUTH reports where the mechanism went
-(what a fault test measures), until SYNC returns.
+clock with the valves in FAULT_HOLD, and EMU_TRUTH reports where the mechanism went (what a
+fault test measures), until SYNC returns. The process around it: `process.py`.
 """
 
 from __future__ import annotations
 
 import json
-import math
 import sys
 import time
 from dataclasses import dataclass, field
 
 import can
-import mujoco
 import numpy as np
 
 from physics import hydraulics as hy
+from plant_emulator.injected import KNOWN_FAULTS
 from plant_emulator.params import EmulatorConfig
-from plant_emulator.valve_node import Emergency, ValveDriver, ValveState
+from plant_emulator.simulated_rig import SimulatedRig
+from plant_emulator.valve_node import Emergency, ValveState
 from program.realtime import percentiles_us
 from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import E2E_REJECTED, RxStatus
-from protocol.enums import EmuCommand, EmuFault, NmtCommand, NmtState
+from protocol.enums import EmuCommand, EmuFault, NmtCommand, NmtState, Pacing
+from protocol.interfaces import attitude_values, leg_pressure_values, leg_state_values, valve_command_of
 from protocol.nodes import CONTROLLER_NODE, IMU_NODE, rig_nodes
 from protocol.outbox import Outbox
 
@@ -48,28 +51,10 @@ SP_RESPONSE, SP_NODES, SP_SEND, SP_PHYSICS, SP_TOTAL = range(len(SYNC_PHASES))
 SYNC_HISTORY = 1 << 16
 BABBLE_ID = 0x601                    # not in the DBC (an SDO request id of node 1)
 FREE_RUN_CATCH_UP_STEPS = 25         # free run: periods of physics per poll at most (a late wake-up)
-# EMU_CTRL.FAULT (the DBC's value table). REPEAT: the node re-sends its previous frame (a
-# frozen alive counter); LEG_JAM: the cylinder's rod seized (mechanical; the valve still works).
-# ENCODER_DRIFT, FORCE_STUCK, FORCE_ZERO: the leg's sensors; SPOOL_STUCK: the spool held open
-# whatever the valve does (mechanical); SUPPLY_DROP: the power unit delivers part of its pressure;
-# FRAME_LOSS: each frame of the node lost at random; SEAL_LEAK: a worn piston seal (mechanical).
-# FAULT_PARAM is the fault's value for these (until cleared), its duration in SYNCs for the others
-VALUE_PARAM_FAULTS = (EmuFault.BABBLE, EmuFault.OUT_OF_RANGE, EmuFault.ENCODER_DRIFT, EmuFault.SPOOL_STUCK,
-                      EmuFault.SUPPLY_DROP, EmuFault.FRAME_LOSS, EmuFault.SEAL_LEAK)
-KNOWN_FAULTS = frozenset(int(kind) for kind in EmuFault if kind is not EmuFault.NONE)
 SYNC_TIMEOUT_EVENT = "emulator: event sync_timeout"   # a stderr line per SYNC-watchdog trip (JSON after it)
 # a stderr line per injected fault, at the first SYNC that sees it: the fault's onset cycle
 # (the host's EMU_CTRL and the controller's SYNC race to this process: only it knows the order)
 FAULT_ONSET_EVENT = "emulator: event fault_onset"
-
-
-def attitude_rpy(quat_wxyz) -> np.ndarray:
-    """(roll, pitch, yaw) of the bus's convention R = Rz(yaw) Ry(pitch) Rx(roll), from
-    MuJoCo's rotation matrix of the body's quaternion (SciPy's Rotation is the tests' oracle)."""
-    rot = np.empty(9)
-    mujoco.mju_quat2Mat(rot, np.asarray(quat_wxyz, dtype=float))
-    pitch = math.asin(max(-1.0, min(1.0, -rot[6])))
-    return np.array([math.atan2(rot[7], rot[8]), pitch, math.atan2(rot[3], rot[0])])
 
 
 @dataclass
@@ -88,69 +73,63 @@ class Counters:
     kicks: int = 0                    # EMU_KICK pushes applied to the platform
     plant_unstable: int = 0           # periods whose physics had diverged (MuJoCo reset, or not finite)
     plant_unstable_first_s: float | None = None     # the simulated time of the first of them
-    injected: dict = field(default_factory=dict)
     # every SYNC-watchdog trip: when (epoch s), and how late this process woke for it (ms): a
     # real node's hardware timer fires on time; ours is this process's wake-up (hil faults, case 1)
     sync_timeouts: list = field(default_factory=list)
     fault_onsets: list = field(default_factory=list)    # every injection: its SYNC counter and epoch time
 
-    def as_dict(self) -> dict:
+    def as_dict(self, injected: dict) -> dict:
         return {k: getattr(self, k) for k in ("syncs", "frames_in", "frames_out", "e2e_errors",
                                               "sync_sequence_errors", "valve_faults", "emergencies",
                                               "unknown_frames", "host_stalls", "free_run_steps",
                                               "kicks", "plant_unstable", "plant_unstable_first_s")} | {
-            "host_stall_max_ms": round(self.host_stall_max_s * 1e3, 3), "injected": dict(self.injected),
+            "host_stall_max_ms": round(self.host_stall_max_s * 1e3, 3), "injected": dict(injected),
             "sync_timeouts": list(self.sync_timeouts), "fault_onsets": list(self.fault_onsets)}
 
 
 class Emulator:
     """Nodes of one rig on one bus. `handle(msg)` for every received frame, `poll(now)` often."""
 
-    def __init__(self, bus: can.BusABC | None, rig, cfg: EmulatorConfig, clock=time.monotonic):
+    def __init__(self, bus: can.BusABC | None, rig, cfg: EmulatorConfig, clock=time.monotonic,
+                 pacing: str | None = None):
         self.bus, self.rig, self.cfg, self.clock = bus, rig, cfg, clock
-        rig.warm_up()                     # kernels loaded before the first SYNC, not in it
+        # its own --pacing, said against the controller's CTRL_STATUS.PACING (None: not checked)
+        self.pacing = Pacing[pacing.upper()] if pacing is not None else None
+        self.controller_pacing: Pacing | None = None
+        self.sim = SimulatedRig(rig, cfg)
         self.legs = range(1, rig.n_legs + 1)
-        self.has_imu = rig.n_legs == 6
+        self.has_imu = self.sim.has_imu
         self.nodes = rig_nodes(rig.n_legs)
-        self.valves = {n: self._new_valve() for n in self.legs}
-        self.spool_demand = np.zeros(rig.n_legs)    # each valve's own demand over the last period
         self.nmt = {n: NmtState.BOOTUP for n in self.nodes}
-        names = ["NMT", "SYNC", "EMU_CTRL", "EMU_KICK"] + [f"VALVE_CMD_{n}" for n in self.legs]
+        names = ["NMT", "SYNC", "EMU_CTRL", "EMU_KICK", "CTRL_STATUS"] + [f"VALVE_CMD_{n}" for n in self.legs]
         self.decoder = FrameDecoder(names)
         self._cmd_slot = {CODECS[f"VALVE_CMD_{n}"].frame_id: n for n in self.legs}
         self._ids = {name: CODECS[name].frame_id for name in names}
+        self._pacing_index = CODECS["CTRL_STATUS"].index["PACING"]
         self.out = {name: Outbox(name) for name in self._tx_names()}
         self.counters = Counters()
-        self.rng = np.random.default_rng(cfg.sensors.seed)
         self.sync_counter = 0
         self.last_sync_time: float | None = None
         self.last_sync_waited_s = 0.0          # how long that SYNC sat in the socket first
         self.sync_lost_reported = False
         self.next_heartbeat = 0.0
-        self.faults: dict[tuple[int, int], list] = {}     # (target, kind) -> [remaining cycles or -1, param]
         self._held: dict[str, bytes] = {}                  # REORDER: frame held back per message
         self._last_sent: dict[str, bytes] = {}             # REPEAT: the frame sent before the fault
         self._free_run_next: float | None = None           # wall time of the next free-run step
         self._delayed: list[can.Message] = []              # DELAY: frames sent at the next SYNC
-        # what a sensor fault took at its onset, per (node, fault): STUCK the readings it froze,
-        # FORCE_STUCK the force, ENCODER_DRIFT the rig time; dropped when the fault clears
-        self._onset_values: dict[tuple[int, int], object] = {}
         self._onsets: list[dict] = []                      # injected since the last SYNC
-        self._ignore_commands = 0
-        divisors = {"LEG_PRESSURE": cfg.nodes.leg_pressure_divisor, "VALVE_STATUS": cfg.nodes.valve_status_divisor,
-                    "IMU": cfg.nodes.imu_divisor}
-        self._period = {}                                   # SYNC-driven frames: send every n-th SYNC
-        for name in self.out:
-            dbc_period = CODECS[name].schedule.sync_period
-            if dbc_period > 0:
-                override = next((d for prefix, d in divisors.items() if name.startswith(prefix)), 0)
-                self._period[name] = override or dbc_period
+        self._leg_operational = np.zeros(rig.n_legs, dtype=bool)
         self._overflow = sync_counter_overflow()
         self.phase_s = np.zeros((SYNC_HISTORY, len(SYNC_PHASES)))     # per SYNC, seconds
 
-    def _new_valve(self) -> ValveDriver:
-        nodes = self.cfg.nodes
-        return ValveDriver(nodes.command_timeout_syncs, nodes.spool_jam_threshold, nodes.spool_jam_syncs)
+    @property
+    def valves(self) -> dict:
+        """Each leg node's valve driver, by node id."""
+        return {n: self.sim.valves[n - 1] for n in self.legs}
+
+    @property
+    def faults(self):
+        return self.sim.faults
 
     def _tx_names(self) -> list[str]:
         names = []
@@ -171,21 +150,21 @@ class Emulator:
 
     def _fault(self, target: int, kind: EmuFault):
         """The active injected fault `kind` on `target` ([remaining, param]) or None."""
-        return self.faults.get((target, kind))
+        return self.sim.faults.get(target, kind)
 
     def _emit(self, node: int, name: str) -> None:
         """Encode and send a node's frame through the injected frame faults."""
         box = self.out[name]
         if not box.encode():
             return
-        if not self.faults:                    # the common case: nothing injected
+        if not self.sim.faults:                # the common case: nothing injected
             self._last_sent[name] = bytes(box.message.data)
             self._send(box.message)
             return
-        if self._fault(node, EmuFault.SILENT) or self._fault(node, EmuFault.DROP):
+        if self.sim.silent(node):
             return
         loss = self._fault(node, EmuFault.FRAME_LOSS)
-        if loss is not None and self.rng.random() * 100.0 < loss[1]:
+        if loss is not None and self.sim.sensors.rng.random() * 100.0 < loss[1]:
             return
         message = box.message
         if self._fault(node, EmuFault.REPEAT):
@@ -237,8 +216,7 @@ class Emulator:
     # -- lifecycle ----------------------------------------------------------------------------
     def boot(self) -> None:
         """Power-on: valves INIT -> DISABLED, boot-up heartbeats, then PRE-OPERATIONAL."""
-        for valve in self.valves.values():
-            valve.boot()
+        self.sim.boot()
         for n in self.nodes:
             self.nmt[n] = NmtState.BOOTUP
         self._heartbeats()
@@ -284,14 +262,31 @@ class Emulator:
             wait = min(wait, self._free_run_next - now)
         return max(wait, 0.0)
 
+    def pause_node_clocks(self, seconds: float) -> None:
+        """The emulated nodes' timers stand still for `seconds` (this process was not running).
+
+        A real valve's SYNC watchdog is a hardware timer; ours is this process's wall clock.
+        When the whole host stalls (measured here with a SCHED_FIFO sleeper on each CPU: 3-10 ms
+        late wake-ups, mostly on both CPUs at once, a few per minute) the controller cannot send
+        SYNC and we cannot watch for it either; a freeze longer than the watchdog would read as
+        a lost SYNC and fault the valves. A controller that stalls alone still trips it.
+        """
+        self.counters.host_stalls += 1
+        self.counters.host_stall_max_s = max(self.counters.host_stall_max_s, seconds)
+        if self.last_sync_time is not None:
+            self.last_sync_time += seconds
+        if self._free_run_next is not None:
+            self._free_run_next += seconds
+        self.next_heartbeat += seconds
+
     def _free_run(self, steps: int, apply_valves: bool = True) -> None:
         """`steps` periods of physics without SYNC, the valves' spools as they are now (or,
         `apply_valves` False, the rig's commands as they were); the truth after each (the
         sensor nodes stay quiet: they sample on SYNC)."""
         for _ in range(max(steps, 0)):
             if apply_valves:
-                self._apply_valves()
-            self.rig.advance(self.cfg.nodes.sync_period_s)
+                self.sim.apply_valves()
+            self.sim.advance()
             self._check_plant()
             self.counters.free_run_steps += 1
             self._send_truth(self.sync_counter)
@@ -319,23 +314,34 @@ class Emulator:
                 command, node = (int(v) for v in self.decoder.values["NMT"])
                 self._nmt(command, node)
             return
+        if frame_id == self._ids["CTRL_STATUS"]:
+            if status is RxStatus.OK:
+                self._controller_status()
+            return
         if status is not RxStatus.OK:
             if status in E2E_REJECTED:
                 self.counters.e2e_errors += 1
                 node = self._cmd_slot.get(frame_id)
                 if node is not None and status is not RxStatus.REPEATED:
-                    self.valves[node].receive_invalid()
+                    self.sim.valves[node - 1].receive_invalid()
             return
         node = self._cmd_slot.get(frame_id)
         if node is not None:
-            if self._ignore_commands or self.nmt[node] != NmtState.OPERATIONAL:
+            if self._fault(CONTROLLER_NODE, EmuFault.DROP) or self.nmt[node] != NmtState.OPERATIONAL:
                 return
-            _, _, d, h, m, r, setpoint = self.decoder.values[f"VALVE_CMD_{node}"]
-            self.valves[node].receive(bool(d), bool(h), bool(m), bool(r), float(setpoint))
+            self.sim.valves[node - 1].receive(*valve_command_of(self.decoder.values[f"VALVE_CMD_{node}"]))
         elif frame_id == self._ids["EMU_CTRL"]:
             self._emu_ctrl(*(self.decoder.values["EMU_CTRL"][2:]))
         elif frame_id == self._ids["EMU_KICK"]:
             self._kick(*(self.decoder.values["EMU_KICK"][2:]))
+
+    def _controller_status(self) -> None:
+        """Say once, on stderr, that the controller runs another pacing than this process."""
+        pacing = Pacing(int(self.decoder.values["CTRL_STATUS"][self._pacing_index]))
+        if pacing is not self.controller_pacing and self.pacing is not None and pacing is not self.pacing:
+            print(f"emulator: the controller runs --pacing {pacing.name.lower()}, this emulator --pacing "
+                  f"{self.pacing.name.lower()}: start both with the same --pacing", file=sys.stderr, flush=True)
+        self.controller_pacing = pacing
 
     def _kick(self, axis: float, value: float, duration_s: float) -> None:
         if not hasattr(self.rig, "kick"):
@@ -356,9 +362,9 @@ class Emulator:
             elif command == NmtCommand.ENTER_PREOPERATIONAL:
                 self.nmt[n] = NmtState.PRE_OPERATIONAL
             elif command in (NmtCommand.RESET_NODE, NmtCommand.RESET_COMMUNICATION):
-                if command == NmtCommand.RESET_NODE and n in self.valves:
-                    self.valves[n] = self._new_valve()
-                    self.valves[n].boot()
+                if command == NmtCommand.RESET_NODE and n in self.legs:
+                    self.sim.valves[n - 1] = self.sim.new_valve()
+                    self.sim.valves[n - 1].boot()
                 self.nmt[n] = NmtState.BOOTUP
                 self._heartbeat(n)
                 self.nmt[n] = NmtState.PRE_OPERATIONAL
@@ -368,45 +374,25 @@ class Emulator:
         if command == EmuCommand.SET_LOAD:
             self.rig.set_load(load_kg)
         elif command == EmuCommand.INJECT_FAULT and kind in KNOWN_FAULTS:
-            kind = EmuFault(kind)
-            lasts = param if param > 0 and kind not in VALUE_PARAM_FAULTS else -1
-            self.faults[(target, kind)] = [lasts, param]
-            self.counters.injected[kind.name] = self.counters.injected.get(kind.name, 0) + 1
-            self._apply_state_fault(target, kind, True)
-            self._onsets.append({"target": target, "fault": kind.name})
+            self.inject(target, EmuFault(kind), param)
         elif command == EmuCommand.CLEAR_FAULT:
-            if self.faults.pop((target, kind), None) is not None:
-                self._apply_state_fault(target, kind, False)
+            if self.sim.clear(target, kind):
+                self._frames_fault_ended(target, kind)
         elif command == EmuCommand.CLEAR_ALL:
-            for key in list(self.faults):
-                self.faults.pop(key)
-                self._apply_state_fault(*key, False)
+            for key in self.sim.clear_all():
+                self._frames_fault_ended(*key)
 
-    def _apply_state_fault(self, target: int, kind: int, on: bool) -> None:
-        if not on:
-            self._onset_values.pop((target, kind), None)
-        if kind == EmuFault.VALVE_JAM and 1 <= target <= self.rig.n_legs:
-            self.rig.jammed[target - 1] = on
-        elif kind == EmuFault.LEG_JAM and 1 <= target <= self.rig.n_legs:
-            self.rig.set_rod_seized(target - 1, on)
-        elif kind == EmuFault.SEAL_LEAK and 1 <= target <= self.rig.n_legs:
-            self.rig.set_seal_leak(target - 1, float(self.faults[(target, kind)][1]) if on else 0.0)
-        elif kind == EmuFault.REPEAT and not on:
+    def inject(self, target: int, kind: EmuFault, param: int) -> None:
+        """A fault on node `target` (EMU_CTRL INJECT_FAULT); its onset is reported at the next SYNC."""
+        self.sim.inject(target, kind, param)
+        self._onsets.append({"target": target, "fault": kind.name})
+
+    def _frames_fault_ended(self, target: int, kind: int) -> None:
+        """What a frame fault leaves behind when it ends."""
+        if kind == EmuFault.REPEAT:
             self._last_sent.clear()
-        elif kind in (EmuFault.SUPPLY_LOSS, EmuFault.SUPPLY_DROP):
-            self.rig.set_supply_fraction(self._supply_fraction())
-        elif kind == EmuFault.DROP and target == CONTROLLER_NODE:
-            self._ignore_commands = on
-        elif kind == EmuFault.DELAY and not on:
+        elif kind == EmuFault.DELAY:
             self._flush_delayed()
-
-    def _supply_fraction(self) -> float:
-        """The power unit's share of its nominal pressure under the supply faults injected:
-        none with SUPPLY_LOSS (it stops), SUPPLY_DROP's percentage, else all."""
-        if any(kind == EmuFault.SUPPLY_LOSS for _, kind in self.faults):
-            return 0.0
-        drops = [entry[1] for (_, kind), entry in self.faults.items() if kind == EmuFault.SUPPLY_DROP]
-        return min(drops) / 100.0 if drops else 1.0
 
     def _flush_delayed(self) -> None:
         delayed, self._delayed = self._delayed, []
@@ -426,26 +412,61 @@ class Emulator:
         self.sync_lost_reported = False
         self._free_run_next = None
         self._flush_delayed()
-        for n, valve in self.valves.items():
-            if self.nmt[n] != NmtState.OPERATIONAL:
-                continue
-            emergency = valve.on_sync()
-            if emergency is None:
-                emergency = valve.check_spool(float(self.rig.state[n - 1, hy.S_SPOOL]), float(self.spool_demand[n - 1]))
-            if emergency is not None:
-                self._emergency(n, emergency)
+        sim = self.sim
+        for i, n in enumerate(self.legs):
+            self._leg_operational[i] = self.nmt[n] == NmtState.OPERATIONAL
+        for i, emergency in sim.valves_on_sync(self._leg_operational):
+            self._emergency(i + 1, emergency)
         nodes = self.clock()
-        self._sample_and_send(counter)
+        sim.sample(counter, self._leg_operational, self.has_imu and self.nmt[IMU_NODE] == NmtState.OPERATIONAL)
+        self._send_samples()
         sent = self.clock()
-        self._apply_valves()
-        self.rig.advance(self.cfg.nodes.sync_period_s)
+        sim.apply_valves()
+        sim.advance()
         stepped = self.clock()
         self._check_plant()
-        self._count_down_faults()
+        for key in sim.end_sync():
+            self._frames_fault_ended(*key)
+        self._babble()
         phase[SP_RESPONSE], phase[SP_NODES], phase[SP_SEND] = sent - now, nodes - now, sent - nodes
         phase[SP_PHYSICS], phase[SP_TOTAL] = stepped - sent, self.clock() - now
         if self._onsets:                          # after the response: a print takes its time
             self._report_onsets(counter)
+
+    def _babble(self) -> None:
+        """BABBLE: frames of an id not in the DBC, FAULT_PARAM of them per SYNC."""
+        for count in self.sim.faults.of_kind(EmuFault.BABBLE):
+            babble = can.Message(arbitration_id=BABBLE_ID, data=bytes(8), is_extended_id=False)
+            for _ in range(max(count, 1)):
+                self._send(babble)
+
+    def _send_samples(self) -> None:
+        """This SYNC's samples as frames: the IMU's first, each leg's LEG_STATE last."""
+        sim = self.sim
+        if sim.attitude_due:
+            attitude_values(self.out["IMU_ATTITUDE"].values, sim.attitude_rad)
+            self._emit(IMU_NODE, "IMU_ATTITUDE")
+        if sim.rate_due:
+            box = self.out["IMU_RATE"]
+            box.values[box.index["RATE_X"]:box.index["RATE_Z"] + 1] = sim.rate_rad_s
+            self._emit(IMU_NODE, "IMU_RATE")
+        for i, n in enumerate(self.legs):
+            if not sim.sampled[i]:
+                continue
+            valve = sim.valves[i]
+            if sim.pressure_due[i]:
+                leg_pressure_values(self.out[f"LEG_PRESSURE_{n}"].values, *sim.pressure[i])
+                self._emit(n, f"LEG_PRESSURE_{n}")
+            if sim.status_due[i]:
+                box = self.out[f"VALVE_STATUS_{n}"]
+                box.values[box.index["VALVE_STATE"]] = int(valve.state)
+                box.values[box.index["SPOOL_ACTUAL"]] = sim.spool_actual(i)
+                box.values[box.index["FAULT_REASON"]] = int(valve.fault_reason)
+                self._emit(n, f"VALVE_STATUS_{n}")
+            leg_state_values(self.out[f"LEG_STATE_{n}"].values, sim.position_m[i], sim.force_n[i],
+                             sim.spool_actual(i), int(valve.state), False)
+            self._emit(n, f"LEG_STATE_{n}")
+        self._send_truth(self.sync_counter)
 
     def _check_plant(self) -> None:
         """Say once, on stderr, that the emulated physics diverged; count every such period."""
@@ -465,92 +486,6 @@ class Emulator:
             print(f"{FAULT_ONSET_EVENT} {json.dumps(onset)}", file=sys.stderr, flush=True)
         self._onsets.clear()
 
-    def _apply_valves(self) -> None:
-        """Spool commands to the rig, and the load-holding valves open only while ACTIVE."""
-        blocks = self.cfg.nodes.hold_blocks_ports
-        for n, valve in self.valves.items():
-            stuck = self._fault(n, EmuFault.SPOOL_STUCK)        # the spool goes there whatever its demand
-            self.spool_demand[n - 1] = valve.spool_command
-            self.rig.command[n - 1] = valve.spool_command if stuck is None else stuck[1] / 100.0
-            self.rig.ports_open[n - 1] = 0.0 if blocks and valve.state is not ValveState.ACTIVE else 1.0
-
-    def _count_down_faults(self) -> None:
-        for key, entry in list(self.faults.items()):
-            if key[1] == EmuFault.BABBLE:
-                babble = can.Message(arbitration_id=BABBLE_ID, data=bytes(8), is_extended_id=False)
-                for _ in range(max(entry[1], 1)):
-                    self._send(babble)
-            if entry[0] > 0:
-                entry[0] -= 1
-                if entry[0] == 0:
-                    del self.faults[key]
-                    self._apply_state_fault(*key, False)
-
-    def _due(self, name: str, counter: int) -> bool:
-        period = self._period.get(name, 0)
-        if period <= 1:
-            return period == 1
-        return (counter - 1) % period == CODECS[name].schedule.sync_phase % period
-
-    def _sample_and_send(self, counter: int) -> None:
-        rig, cfg, rng = self.rig, self.cfg, self.rng
-        if self.has_imu and self.nmt[IMU_NODE] == NmtState.OPERATIONAL:
-            if self._due("IMU_ATTITUDE", counter):
-                _, quat = rig.platform_pose()
-                box = self.out["IMU_ATTITUDE"]
-                box.values[box.index["ROLL"]:box.index["YAW"] + 1] = (
-                    attitude_rpy(quat) + cfg.sensors.imu_angle_noise_rad * rng.standard_normal(3))
-                self._emit(IMU_NODE, "IMU_ATTITUDE")
-            if self._due("IMU_RATE", counter):
-                box = self.out["IMU_RATE"]
-                rate = rig.platform_body_rate() + cfg.sensors.imu_rate_noise_rad_s * rng.standard_normal(3)
-                box.values[box.index["RATE_X"]:box.index["RATE_Z"] + 1] = rate
-                self._emit(IMU_NODE, "IMU_RATE")
-        for n in self.legs:
-            if self.nmt[n] != NmtState.OPERATIONAL:
-                continue
-            i = n - 1
-            valve = self.valves[n]
-            measured = rig.state[i, hy.S_Y]
-            drift = self._fault(n, EmuFault.ENCODER_DRIFT)
-            if drift is not None:                      # um/s since the fault's onset, read in counts too
-                start = self._onset_values.setdefault((n, EmuFault.ENCODER_DRIFT), rig.time_s)
-                measured += drift[1] * 1e-6 * (rig.time_s - start)
-            position = round(measured / cfg.sensors.encoder_resolution_m) * cfg.sensors.encoder_resolution_m
-            force = rig.rod_force_n[i] + cfg.sensors.load_cell_noise_n * rng.standard_normal()
-            if self._fault(n, EmuFault.STUCK):
-                position, force = self._onset_values.setdefault((n, EmuFault.STUCK), (position, force))
-            if self._fault(n, EmuFault.FORCE_STUCK):
-                force = self._onset_values.setdefault((n, EmuFault.FORCE_STUCK), force)
-            if self._fault(n, EmuFault.FORCE_ZERO):
-                force = 0.0
-            if self._fault(n, EmuFault.OUT_OF_RANGE):
-                param = self.faults[(n, EmuFault.OUT_OF_RANGE)][1]
-                force = float(param) if param else 1e9         # saturates at the DBC's maximum
-            name = f"LEG_PRESSURE_{n}"
-            if self._due(name, counter):
-                box = self.out[name]
-                noise = cfg.sensors.pressure_noise_pa
-                box.values[box.index["PA"]] = rig.state[i, hy.S_PA] + noise * rng.standard_normal()
-                box.values[box.index["PB"]] = rig.state[i, hy.S_PB] + noise * rng.standard_normal()
-                box.values[box.index["PS"]] = rig.supply_pressure_pa + noise * rng.standard_normal()
-                self._emit(n, name)
-            name = f"VALVE_STATUS_{n}"
-            if self._due(name, counter):
-                box = self.out[name]
-                box.values[box.index["VALVE_STATE"]] = int(valve.state)
-                box.values[box.index["SPOOL_ACTUAL"]] = rig.state[i, hy.S_SPOOL]
-                box.values[box.index["FAULT_REASON"]] = int(valve.fault_reason)
-                self._emit(n, name)
-            box = self.out[f"LEG_STATE_{n}"]
-            box.values[box.index["VALVE_STATE"]] = int(valve.state)
-            box.values[box.index["SENSOR_FAULT"]] = 0
-            box.values[box.index["POSITION"]] = position
-            box.values[box.index["FORCE"]] = force
-            box.values[box.index["SPOOL"]] = rig.state[i, hy.S_SPOOL]
-            self._emit(n, box.codec.name)
-        self._send_truth(counter)
-
     def _send_truth(self, counter: int) -> None:
         """EMU_TRUTH: the simulated pose for HIL metrics (after the leg frames: the
         controller's collection never waits for it)."""
@@ -564,47 +499,13 @@ class Emulator:
             box.values[box.index["Z"]] = self.rig.state[0, hy.S_Y]
         self._emit(0, "EMU_TRUTH")
 
-    # -- process loop -------------------------------------------------------------------------
-    def pause_node_clocks(self, seconds: float) -> None:
-        """The emulated nodes' timers stand still for `seconds` (this process was not running).
-
-        A real valve's SYNC watchdog is a hardware timer; ours is this process's wall clock.
-        When the whole host stalls (measured here with a SCHED_FIFO sleeper on each CPU: 3-10 ms
-        late wake-ups, mostly on both CPUs at once, a few per minute) the controller cannot send
-        SYNC and we cannot watch for it either; a freeze longer than the watchdog would read as
-        a lost SYNC and fault the valves. A controller that stalls alone still trips it.
-        """
-        self.counters.host_stalls += 1
-        self.counters.host_stall_max_s = max(self.counters.host_stall_max_s, seconds)
-        if self.last_sync_time is not None:
-            self.last_sync_time += seconds
-        if self._free_run_next is not None:
-            self._free_run_next += seconds
-        self.next_heartbeat += seconds
-
-    def run(self, should_stop) -> None:
-        """Receive and dispatch until `should_stop()`; timers between frames."""
-        self.boot()
-        wait = 0.0
-        while not should_stop():
-            timeout = min(max(wait, 0.0005), 0.05)
-            wake = self.clock() + timeout
-            msg = self.bus.recv(timeout=timeout)
-            received = self.clock()
-            if received - wake > self.cfg.nodes.sync_period_s:         # woken this late: not scheduled
-                self.pause_node_clocks(received - wake)
-            if msg is not None:
-                self.handle(msg)
-                busy = self.clock() - received
-                if busy > self.cfg.nodes.sync_period_s:                # a stall inside the handling
-                    self.pause_node_clocks(busy)
-            wait = self.poll()
-
     def summary(self) -> dict:
         valves = {str(n): ValveState(v.state).name for n, v in self.valves.items()}
         n = min(self.counters.syncs, SYNC_HISTORY)
         phases = {name: percentiles_us(self.phase_s[:n, j]) for j, name in enumerate(SYNC_PHASES)} if n else {}
-        return {"rig": self.rig.name, "sim_time_s": round(self.rig.time_s, 6), **self.counters.as_dict(),
-                "phases_us": phases,
+        pacings = {"pacing": self.pacing, "controller_pacing": self.controller_pacing}
+        return {"rig": self.rig.name, "sim_time_s": round(self.rig.time_s, 6),
+                **{k: p.name.lower() if p is not None else None for k, p in pacings.items()},
+                **self.counters.as_dict(self.sim.faults.injected), "phases_us": phases,
                 "rx_status": {s.name: int(c) for s, c in zip(RxStatus, self.decoder.counts.sum(axis=0))},
                 "valves": valves}

@@ -6,16 +6,21 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
-from plant_emulator.params import load_config
+from plant_emulator.params import LOCKSTEP_SYNC_TIMEOUT_PERIODS, ConfigError, load_config
 from program.cliutil import StopFlag, number_in_range, output_file
 from program.realtime import applied, cpu_latency_measure, freeze_gc, lock_memory, set_fifo
+from program.sections import read_toml
+from protocol.enums import PACINGS
 
 RIGS = ("testbench", "hexapod")
 
 
 def load_run_config(args) -> object:
-    """The config file with the command line's overrides (load, SYNC rate, watchdog)."""
+    """The config file with the command line's overrides (load, SYNC rate, watchdog: in
+    lockstep, unless the command line or the file sets it, longer than the controller's
+    wait for a cycle's frames)."""
     overrides: dict = {}
     if getattr(args, "load_kg", None) is not None:
         overrides["testbench"] = {"load_kg": args.load_kg}
@@ -25,9 +30,16 @@ def load_run_config(args) -> object:
         nodes["sync_period_ms"] = 1000.0 / args.rate_hz
     if getattr(args, "sync_watchdog_periods", None) is not None:
         nodes["sync_timeout_periods"] = args.sync_watchdog_periods
+    elif getattr(args, "pacing", None) == "lockstep" and not _file_sets(args.config, "nodes", "sync_timeout_periods"):
+        nodes["sync_timeout_periods"] = LOCKSTEP_SYNC_TIMEOUT_PERIODS
     if nodes:
         overrides["nodes"] = nodes
     return load_config(args.config, overrides or None)
+
+
+def _file_sets(path: str | None, section: str, key: str) -> bool:
+    """Whether the user's config file declares `[section] key` (it wins over a default)."""
+    return path is not None and key in read_toml(Path(path), ConfigError).get(section, {})
 
 
 def realtime_setup(cfg) -> list[str]:
@@ -43,6 +55,28 @@ def _log(text: str) -> None:
     print(f"emulator: {text}", file=sys.stderr, flush=True)
 
 
+def run(emulator, bus, should_stop) -> None:
+    """The process's loop: receive and handle frames until `should_stop()`, the nodes' timers
+    between them; a wake-up later than a SYNC period (the process was not scheduled) pauses
+    the nodes' clocks (`Emulator.pause_node_clocks`)."""
+    emulator.boot()
+    period = emulator.cfg.nodes.sync_period_s
+    wait = 0.0
+    while not should_stop():
+        timeout = min(max(wait, 0.0005), 0.05)
+        wake = emulator.clock() + timeout
+        msg = bus.recv(timeout=timeout)
+        received = emulator.clock()
+        if received - wake > period:                         # woken this late: not scheduled
+            emulator.pause_node_clocks(received - wake)
+        if msg is not None:
+            emulator.handle(msg)
+            busy = emulator.clock() - received
+            if busy > period:                                # a stall inside the handling
+                emulator.pause_node_clocks(busy)
+        wait = emulator.poll()
+
+
 def run_emulator(args) -> int:
     from plant_emulator.emulator import Emulator
     from plant_emulator.rigs import make_rig
@@ -53,16 +87,16 @@ def run_emulator(args) -> int:
     rig = make_rig(args.rig, cfg)
     stop = StopFlag()
     bus = open_bus(spec)
-    emulator = Emulator(bus, rig, cfg)
+    emulator = Emulator(bus, rig, cfg, pacing=args.pacing)
     bus.set_filters(emulator.decoder.can_filters())   # the nodes' CAN controllers' acceptance filters
     # started: what start-up built leaves the collector's scans, so a collection in the run is short
     freeze_gc(disable=False)
-    if args.realtime:
+    if args.pacing == "realtime":
         realtime_setup(cfg)
     else:                                   # lockstep: its SYNC handling waits on the controller's frames
         applied(cpu_latency_measure(cfg.nodes.cpu_latency_us), _log)
     try:
-        emulator.run(stop)
+        run(emulator, bus, stop)
     finally:
         bus.shutdown()
     summary = emulator.summary()
@@ -88,11 +122,14 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="SYNC rate the controller runs at (default: the config's sync_period_ms)")
     parser.add_argument("--sync-watchdog-periods", type=number_in_range(float, 1.0, 10000.0), default=None,
                         help="the valves' SYNC watchdog, in SYNC periods of wall clock (default: the config's "
-                             "[nodes].sync_timeout_periods, 3); lockstep runs need one longer than the "
-                             "controller's lockstep wait")
+                             f"[nodes].sync_timeout_periods, 3; with --pacing lockstep "
+                             f"{LOCKSTEP_SYNC_TIMEOUT_PERIODS:g}, longer than the controller's wait for a "
+                             "cycle's frames)")
     parser.add_argument("--config", metavar="FILE", help="TOML overriding the emulator's data/emulator.toml")
     parser.add_argument("--summary", metavar="FILE", type=output_file, help="write the exit counters as JSON")
-    parser.add_argument("--realtime", action="store_true",
-                        help="once started, lock the process's memory (mlockall) and run SCHED_FIFO at "
-                             "[nodes].realtime_priority (each logged when not permitted)")
+    parser.add_argument("--pacing", choices=PACINGS, default="realtime",
+                        help="the controller's --pacing (said at start when the controller's CTRL_STATUS "
+                             "differs). realtime: once started, lock the process's memory (mlockall) and run "
+                             "SCHED_FIFO at [nodes].realtime_priority (each logged when not permitted); "
+                             "lockstep: normal priority, the valves' SYNC watchdog long")
     parser.set_defaults(handler=run_emulator)

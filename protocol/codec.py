@@ -168,6 +168,20 @@ class MessageCodec:
             e2e.protect(buf, self.data_id, self.dlc)
         return EncodeStatus.SATURATED if saturated else EncodeStatus.OK
 
+    def quantize_into(self, values, out) -> bool:
+        """What a receiver decodes from a frame of SI `values` (signal order), without the
+        bytes: each value rounded to its signal's step and saturated at its range, as
+        `decode_into(encode_into(values))` gives (the E2E entries of `out` left as they are).
+        False, `out` unchanged, when a value is not finite (no such frame is sent)."""
+        if isinstance(values, np.ndarray):
+            values = values.tolist()
+        if not all(math.isfinite(values[entry[0]]) for entry in self._enc):
+            return False
+        for i, _, _, to_si, scale, offset, raw_min, raw_max in self._enc:
+            raw = min(max(round((values[i] / to_si - offset) / scale), raw_min), raw_max)
+            out[i] = (raw * scale + offset) * to_si
+        return True
+
     def decode_into(self, data, out) -> None:
         """Unpack `data` (exactly `dlc` bytes) into `out` in SI units, signal order."""
         self._unpack(data, out, self._dec_si)

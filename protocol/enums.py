@@ -40,6 +40,7 @@ def _messages(prefix: str) -> list[str]:
 State = _enum("State", value_table("CTRL_STATUS", "STATE"))                 # the controller's state
 Fault = _enum("Fault", value_table("CTRL_STATUS", "FAULT_CODE"))            # its latched fault
 ControllerKind = _enum("ControllerKind", value_table("CTRL_STATUS", "CONTROLLER"))
+Pacing = _enum("Pacing", value_table("CTRL_STATUS", "PACING"))               # what starts a cycle
 Command = _enum("Command", value_table("HOST_CMD", "COMMAND"))              # HOST_CMD.COMMAND
 Ack = _enum("Ack", value_table("CTRL_ACK", "RESULT"))                       # CTRL_ACK.RESULT
 AckKind = _enum("AckKind", value_table("CTRL_ACK", "KIND"))                 # which host frame an ack answers
@@ -56,6 +57,8 @@ NmtState = _enum("NmtState", _same_table(_messages("HEARTBEAT_"), "STATE"))  # C
 EmuCommand = _enum("EmuCommand", value_table("EMU_CTRL", "COMMAND"))
 EmuFault = _enum("EmuFault", value_table("EMU_CTRL", "FAULT"))               # faults the emulator injects
 KickAxis = _enum("KickAxis", value_table("EMU_KICK", "AXIS"))                # EMU_KICK's push
+
+PACINGS = tuple(p.name.lower() for p in Pacing)       # the command lines' --pacing
 
 VALVE_FAULT_STATES = (ValveState.FAULT_HOLD, ValveState.FAULT_DISABLED)
 TestMode.__test__ = False            # an enum, not a pytest class despite its name

@@ -1,16 +1,21 @@
-"""The typed hand-offs between the bus and the controller: what the loop read this cycle
+"""The typed hand-offs between the rig and the controller: what was read this cycle
 (`Measurements`, the state interfaces) and what the controller commands (`ValveCommands`,
-the command interfaces). Both are allocated once; the cycle only writes into them.
+the command interfaces), and where each of their fields sits in the DBC's frames. Both are
+allocated once; a cycle only writes into them. The controller's loop fills them from the
+bus; a simulated rig (plant_emulator/simulated_rig.py) fills them in process.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from protocol.codec import CODECS
+from protocol.enums import ImuStatus
+
 
 class Measurements:
-    """One cycle's inputs, SI. The loop fills it (it decides nothing); `Controller.update`
-    reads it. Node events are the ones seen since the previous cycle's read."""
+    """One cycle's inputs, SI. The loop (or a simulated rig) fills it and decides nothing;
+    `Controller.update` reads it. Node events are the ones seen since the previous cycle's read."""
 
     def __init__(self, n_legs: int, n_nodes: int):
         # LEG_STATE_n, every cycle
@@ -37,6 +42,15 @@ class Measurements:
         self.stalled = False                           # the loop's clock ran past the stall limit
         self.overrun = False                           # the previous cycle missed its deadline
 
+    def report_legs(self, position_m, force_n, valve_state: int) -> None:
+        """Every leg's LEG_STATE came with these readings, exactly (no wire, no noise: what
+        a linearisation feeds the controller)."""
+        self.position_m[:] = position_m
+        self.force_n[:] = force_n
+        self.valve_state[:] = valve_state
+        self.fresh.fill(True)
+        self.rejected.fill(False)
+
 
 class ValveCommands:
     """One cycle's outputs per leg: the CiA 408 control word (CW_D power stage enabled,
@@ -52,14 +66,94 @@ class ValveCommands:
 
     def hold_all(self) -> None:
         """Every valve to HOLD: powered, spool centred."""
-        self.enable[:] = 1.0
-        self.hold[:] = 1.0
-        self.active[:] = 0.0
-        self.reset[:] = 0.0
-        self.spool[:] = 0.0
+        self.enable.fill(1.0)
+        self.hold.fill(1.0)
+        self.active.fill(0.0)
+        self.reset.fill(0.0)
+        self.spool.fill(0.0)
 
     def disable_all(self) -> None:
         """Every valve DISABLED: power stage off, spool centred by its spring."""
         self.hold_all()
-        self.enable[:] = 0.0
-        self.hold[:] = 0.0
+        self.enable.fill(0.0)
+        self.hold.fill(0.0)
+
+
+# -- where the interfaces' fields sit in the frames (the one map between them) ---------------------
+# The DBC's signal indexes, looked up once; both sides of the bus go through these: the
+# controller's loop from decoded frames into Measurements and from ValveCommands into
+# VALVE_CMD; the emulated nodes (and the in-process rig) the other way.
+
+def _indexes(message: str, *signals: str) -> tuple[int, ...]:
+    index = CODECS[message].index
+    return tuple(index[s] for s in signals)
+
+
+LS_VALVE_STATE, LS_SENSOR_FAULT, LS_POSITION, LS_FORCE, LS_SPOOL = _indexes(
+    "LEG_STATE_1", "VALVE_STATE", "SENSOR_FAULT", "POSITION", "FORCE", "SPOOL")
+LP_PA, LP_PB, LP_PS, LP_FAULT_A, LP_FAULT_B = _indexes(
+    "LEG_PRESSURE_1", "PA", "PB", "PS", "SENSOR_FAULT_A", "SENSOR_FAULT_B")
+IMU_VALID = int(ImuStatus.VALID)
+IMU_STATUS, IMU_ROLL, IMU_PITCH, IMU_YAW = _indexes("IMU_ATTITUDE", "STATUS", "ROLL", "PITCH", "YAW")
+VC_D, VC_H, VC_M, VC_R, VC_SPOOL = _indexes("VALVE_CMD_1", "CW_D", "CW_H", "CW_M", "CW_R", "SPOOL_SETPOINT")
+
+
+def leg_state_into(values, meas: Measurements, leg: int) -> None:
+    """A decoded LEG_STATE of `leg` into the Measurements (the frame came: the caller marks it fresh)."""
+    meas.position_m[leg] = values[LS_POSITION]
+    meas.force_n[leg] = values[LS_FORCE]
+    meas.spool[leg] = values[LS_SPOOL]
+    meas.valve_state[leg] = int(values[LS_VALVE_STATE])
+    meas.sensor_fault[leg] = values[LS_SENSOR_FAULT] != 0.0
+
+
+def leg_state_values(values, position_m: float, force_n: float, spool: float, valve_state: int,
+                     sensor_fault: bool) -> None:
+    """A leg node's LEG_STATE fields."""
+    values[LS_VALVE_STATE] = valve_state
+    values[LS_SENSOR_FAULT] = 1 if sensor_fault else 0
+    values[LS_POSITION] = position_m
+    values[LS_FORCE] = force_n
+    values[LS_SPOOL] = spool
+
+
+def leg_pressure_into(values, pressures, leg: int) -> bool:
+    """A decoded LEG_PRESSURE of `leg`: when both chamber transducers are sound, its PA, PB
+    and PS into row `leg` of `pressures` (n x 3); whether they were."""
+    if values[LP_FAULT_A] or values[LP_FAULT_B]:
+        return False
+    pressures[leg, 0] = values[LP_PA]
+    pressures[leg, 1] = values[LP_PB]
+    pressures[leg, 2] = values[LP_PS]
+    return True
+
+
+def leg_pressure_values(values, pa_pa: float, pb_pa: float, ps_pa: float) -> None:
+    values[LP_PA], values[LP_PB], values[LP_PS] = pa_pa, pb_pa, ps_pa
+
+
+def attitude_into(values, out) -> bool:
+    """A decoded IMU_ATTITUDE: roll, pitch, yaw into `out` when the IMU says it is valid."""
+    if int(values[IMU_STATUS]) != IMU_VALID:
+        return False
+    out[0], out[1], out[2] = values[IMU_ROLL], values[IMU_PITCH], values[IMU_YAW]
+    return True
+
+
+def attitude_values(values, rpy) -> None:
+    values[IMU_ROLL], values[IMU_PITCH], values[IMU_YAW] = rpy[0], rpy[1], rpy[2]
+
+
+def valve_command_values(values, cmd: ValveCommands, leg: int) -> None:
+    """`leg`'s control word and setpoint into its VALVE_CMD."""
+    values[VC_D] = cmd.enable[leg]
+    values[VC_H] = cmd.hold[leg]
+    values[VC_M] = cmd.active[leg]
+    values[VC_R] = cmd.reset[leg]
+    values[VC_SPOOL] = cmd.spool[leg]
+
+
+def valve_command_of(values) -> tuple[bool, bool, bool, bool, float]:
+    """A decoded VALVE_CMD as a valve driver takes it: (D, H, M, R, spool setpoint)."""
+    return (bool(values[VC_D]), bool(values[VC_H]), bool(values[VC_M]), bool(values[VC_R]),
+            float(values[VC_SPOOL]))

@@ -279,5 +279,5 @@ class InverseDynamics:
         """tau = Jx^-T W for the pose of the last call."""
         ok = gauss_solve_into(self.jacobian, wrench, self._lu, self.force_n, True) > 0.0
         if not ok:
-            self.force_n[:] = np.nan
+            self.force_n.fill(np.nan)
         return ok

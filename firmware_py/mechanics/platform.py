@@ -17,7 +17,8 @@ class PlatformModel:
     def __init__(self, geometry: Geometry, tolerance_m: float, max_iterations: int, period_s: float):
         self.geometry = geometry
         self.period_s = period_s
-        self.leg_min_m = geometry.leg_min_m
+        self.leg_min_m = np.array(geometry.leg_min_m)        # 0-d arrays: a Python number in a ufunc
+        self._inverse_period = np.array(1.0 / period_s)       # would be converted every call
         self.dk = DirectKinematics(geometry, tolerance_m, max_iterations)
         self.ref_dk = DirectKinematics(geometry, tolerance_m, max_iterations)
         self.dynamics = InverseDynamics(geometry)
@@ -43,6 +44,7 @@ class PlatformModel:
         self._zero6 = np.zeros(6)
         self._scratch6 = np.empty(6)
         self.radius = float(np.linalg.norm(geometry.platform_anchor_m[0]))
+        self._inverse_radius = np.array(1.0 / self.radius)
         self.det_home = 1.0
         self.det_ratio = 1.0
         self.converged = True
@@ -54,7 +56,7 @@ class PlatformModel:
     def _scaled_det(self) -> float:
         # rotation columns scaled by the platform radius: dimensionless, as the condition index
         self.jacobian_scaled[:, 0:3] = self.jacobian[:, 0:3]
-        np.multiply(self.jacobian[:, 3:6], 1.0 / self.radius, out=self.jacobian_scaled[:, 3:6])
+        np.multiply(self.jacobian[:, 3:6], self._inverse_radius, out=self.jacobian_scaled[:, 3:6])
         return gauss_solve_into(self.jacobian_scaled, self._zero6, self._lu, self._scratch6, False)
 
     def update_measured_kinematics(self, position_m, quat) -> None:
@@ -76,7 +78,7 @@ class PlatformModel:
     def reset_reference(self, strokes_m) -> None:
         np.add(strokes_m, self.leg_min_m, out=self.ref_lengths)
         self.ref_dk.solve(self.ref_lengths, self.dk.pose)
-        self.prev_twist[:] = 0.0
+        self.prev_twist.fill(0.0)
 
     def reference_forces(self, strokes_m, stroke_rates) -> bool:
         """Actuator forces of eq. 10.5 along the reference: pose by DK of the reference
@@ -90,10 +92,10 @@ class PlatformModel:
         jacobian_into(self._ref_units, self._ref_world, self._ref_jacobian)
         self.prev_twist[:] = self.twist
         if gauss_solve_into(self._ref_jacobian, stroke_rates, self._lu, self.twist, False) == 0.0:
-            self.force_n[:] = np.nan
+            self.force_n.fill(np.nan)
             return False
         np.subtract(self.twist, self.prev_twist, out=self.accel)
-        np.multiply(self.accel, 1.0 / self.period_s, out=self.accel)
+        np.multiply(self.accel, self._inverse_period, out=self.accel)
         ok = self.dynamics.forces(pose[0:3], pose[3:7], self.twist, self.accel)
         self.force_n[:] = self.dynamics.force_n
         return ok and self.ref_dk.converged

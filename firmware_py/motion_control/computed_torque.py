@@ -163,7 +163,6 @@ class _Gains:
         self.pressure_a, self.pressure_b = cfg.valve_map.pressure_a_pa, cfg.valve_map.pressure_b_pa
         self.hp, self.supply_pa = cfg.hydraulics, cfg.hydraulic_model.supply_pressure_pa
         self.u_max = cfg.limits.spool_max
-        self.full_scale_v = cfg.actuator.valve_full_scale_v
         self.filter_wn, self.filter_zeta = 2 * math.pi * gains.velocity_filter_hz, FILTER_ZETA
         self.filter_ad, self.filter_bd = second_order_filter(period_s, gains.velocity_filter_hz, FILTER_ZETA)
         self.stiffness = np.zeros(n_legs)         # each leg's oil column at its operating point, N/m
@@ -189,7 +188,7 @@ class ComputedTorque(_Gains):
         self.integral = np.zeros(6)
         self.twist_raw = np.zeros(6)          # measured, from the legs' velocity estimates
         self.twist = np.zeros(6)              # ... low-passed: the encoders' counts make it jump
-        self._twist_filter = np.zeros((6, 3))
+        self.twist_filter_state = np.zeros((6, 3))
         self.accel_cmd = np.zeros(6)
         self.force_cmd = self.dynamics.force_n
         self.force_ref_prev = np.zeros(N_LEGS)
@@ -199,15 +198,15 @@ class ComputedTorque(_Gains):
 
     def reset(self) -> None:
         """Valves locked or a fault: the integral and the reference-force history start again."""
-        self.integral[:] = 0.0
-        self._twist_filter[:] = 0.0
+        self.integral.fill(0.0)
+        self.twist_filter_state.fill(0.0)
         self._fresh = True
 
-    def update(self, platform, strokes_ref, velocity_estimate, joint_error, velocity_ref, accel_ref, force_measured,
-               u_out) -> bool:
+    def update(self, platform, strokes_ref, velocity_estimate, joint_error, velocity_ref, accel_ref,
+               force_measured) -> bool:
         """One cycle from the platform model (measured and reference pose, the reference's
-        twist, acceleration and forces: the legs' `accel_ref` is not used); writes u_out (V).
-        False: singular (u_out held)."""
+        twist, acceleration and forces: the legs' `accel_ref` is not used); writes spool_cmd
+        (fraction of full input). False: singular (spool_cmd held)."""
         if self._fresh:
             self.force_ref_prev[:] = platform.force_n
             self._fresh = False
@@ -215,7 +214,7 @@ class ComputedTorque(_Gains):
         pose_error_into(ref_pose, pose, self.error)
         if gauss_solve_into(platform.jacobian, velocity_estimate, self._lu, self.twist_raw, False) == 0.0:
             return False
-        low_pass_into(self.twist_raw, self._twist_filter, self.filter_ad, self.filter_bd, self.filter_wn,
+        low_pass_into(self.twist_raw, self.twist_filter_state, self.filter_ad, self.filter_bd, self.filter_wn,
                       self.filter_zeta, self.twist)
         task_acceleration_into(platform.accel, platform.twist, self.twist, self.error, self.integral, self.kp,
                                self.kd, self.ki, self.accel_cmd)
@@ -226,7 +225,6 @@ class ComputedTorque(_Gains):
         self.force_ref_prev[:] = platform.force_n
         if not saturated:                     # conditional integration (anti-windup)
             integrate_into(self.integral, self.error, self.period_s)
-        np.multiply(self.spool_cmd, self.full_scale_v, out=u_out)
         return True
 
 
@@ -257,14 +255,14 @@ class LegComputedTorque(_Gains):
         self._fresh = True
 
     def reset(self) -> None:
-        self.integral[:] = 0.0
-        self._velocity_filter[:] = 0.0
+        self.integral.fill(0.0)
+        self._velocity_filter.fill(0.0)
         self._fresh = True
 
-    def update(self, platform, strokes_ref, velocity_estimate, joint_error, velocity_ref, accel_ref, force_measured,
-               u_out) -> bool:
+    def update(self, platform, strokes_ref, velocity_estimate, joint_error, velocity_ref, accel_ref,
+               force_measured) -> bool:
         """One cycle, as `ComputedTorque.update` (no platform: `platform` is not used); writes
-        u_out (V). Always True: the stroke has no singularity."""
+        spool_cmd. Always True: the stroke has no singularity."""
         if self._fresh:                       # the load's weight and the reference force start here
             self.load_force[:] = force_measured
         first_order_into(force_measured, self.load_alpha, self.load_force)
@@ -283,5 +281,4 @@ class LegComputedTorque(_Gains):
         self.force_ref_prev[:] = self.force_ref
         if not saturated:
             integrate_into(self.integral, joint_error, self.period_s)
-        np.multiply(self.spool_cmd, self.full_scale_v, out=u_out)
         return True

@@ -226,10 +226,10 @@ class JointController:
         """Estimators at rest at `position_m` (scalar or per leg), mass at its initial value."""
         cfg = self.cfg
         g = np.broadcast_to(GRAVITY_M_S2 if gravity_axial is None else gravity_axial, (self.n_legs,))
-        self.kalman_x[:] = 0.0
+        self.kalman_x.fill(0.0)
         self.kalman_x[:, 0] = position_m
         self.kalman_p[:] = np.diag([self.jp[JP_R_BASE], 1e-4, 1e-2])
-        self.st[:] = 0.0
+        self.st.fill(0.0)
         self.st[:, ST_MASS] = cfg.mass_estimator.initial_kg
         self.st[:, ST_RLS_P] = cfg.mass_estimator.covariance_initial
         for column, value in ((ST_FY, self.kalman_x[:, 0]), (ST_D, self.kalman_x[:, 0]), (ST_FG, g),

@@ -68,14 +68,14 @@ class Reference:
     def held(self) -> None:
         """This cycle's reference: the held position, at rest."""
         self.yr[:] = self.hold_position
-        self.vr[:] = 0.0
-        self.ar[:] = 0.0
+        self.vr.fill(0.0)
+        self.ar.fill(0.0)
 
     def follow(self, position) -> None:
         """Valves locked: the reference follows `position` (what will be held when enabled)."""
         self.yr[:] = position
-        self.vr[:] = 0.0
-        self.ar[:] = 0.0
+        self.vr.fill(0.0)
+        self.ar.fill(0.0)
         self.hold_position[:] = position
 
     def advance(self, cycle: int) -> bool:

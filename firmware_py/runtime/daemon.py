@@ -71,7 +71,7 @@ def run_daemon(args) -> int:
         with open(args.summary, "w") as handle:
             json.dump(summary, handle, indent=1)
     timing = summary["timing"].get("compute_us", {})
-    print(f"controller: rig={controller.rig} controller={args.controller} pacing={args.pacing} "
+    print(f"controller: rig={controller.status.rig} controller={args.controller} pacing={args.pacing} "
           f"cycles={summary['cycles']} "
           f"overruns={summary['overruns']} e2e_errors={summary['e2e_errors']} "
           f"missing_frames={summary['missing_frames']} faults={summary['faults']} "

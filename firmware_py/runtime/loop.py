@@ -33,19 +33,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from firmware_py.controller import RESET_GRACE_CYCLES, Controller
+from firmware_py.controller import Controller
 from firmware_py.supervision.supervisor import LATCHED, emergency_code
 from program.realtime import percentiles_us
 from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import E2E_REJECTED, RxStatus
-from protocol.enums import ImuStatus, NmtCommand, NmtState
+from protocol.enums import PACINGS, NmtCommand, NmtState, Pacing
+from protocol.interfaces import attitude_into, leg_pressure_into, leg_state_into, valve_command_values
 from protocol.nodes import CONTROLLER_NODE, IMU_NODE, SENDER_OF_NODE, rig_nodes
 from protocol.outbox import Outbox
 
-PACINGS = ("realtime", "lockstep")
-# the summary's false-alarm measures: each monitor's largest ratio to its threshold before the first fault
-PEAK_KEYS = ("residual_peak", "supply_peak", "spool_peak", "attitude_peak", "pressure_peak")
 HISTORY = 1 << 16                       # cycles kept for the timing percentiles
 # the cycle's phases, in order (seconds each, per cycle, in `phase_s`): SYNC sent; the sensor
 # window less the frames' handling; the frames' handling (decode, dispatch); read; update;
@@ -79,40 +77,33 @@ class ControllerLoop:
         if pacing not in PACINGS:
             raise ValueError(f"pacing must be one of {PACINGS}, got {pacing!r}")
         self.bus, self.controller, self.pacing, self.clock = bus, controller, pacing, clock
+        self._pacing_value = int(Pacing[pacing.upper()])
         self.cfg = controller.cfg
         self.period_s = 1.0 / rate_hz
         self.log = log or (lambda text: print(f"controller: {text}", file=sys.stderr, flush=True))
         self.meas, self.cmd = controller.new_interfaces()
-        n = controller.n
+        n = controller.status.n_legs
         self.legs = range(1, n + 1)
         self.nodes = rig_nodes(n)
         rx = [f"LEG_STATE_{i}" for i in self.legs] + [f"VALVE_STATUS_{i}" for i in self.legs]
         rx += [f"LEG_PRESSURE_{i}" for i in self.legs] + [f"EMCY_{i}" for i in self.nodes]
         rx += [f"HEARTBEAT_{i}" for i in self.nodes] + list(HOST_FRAMES)
-        if controller.hexapod:
+        has_imu = controller.status.n_nodes > n
+        if has_imu:
             rx += ["IMU_ATTITUDE", "IMU_RATE"]
         self.decoder = FrameDecoder(rx)
         self.expected = self.decoder.expected_mask([f"LEG_STATE_{i}" for i in self.legs])
         self._leg_slots = [self.decoder.slot[f"LEG_STATE_{i}"] for i in self.legs]
         self._leg_values = [self.decoder.values[f"LEG_STATE_{i}"] for i in self.legs]
-        index = CODECS["LEG_STATE_1"].index
-        self._i_pos, self._i_force, self._i_spool = index["POSITION"], index["FORCE"], index["SPOOL"]
-        self._i_valve, self._i_sensor = index["VALVE_STATE"], index["SENSOR_FAULT"]
         self._leg_of_id = {CODECS[f"LEG_STATE_{i}"].frame_id: i - 1 for i in self.legs}
         self._heartbeat_of_id = {CODECS[f"HEARTBEAT_{node}"].frame_id: k for k, node in enumerate(self.nodes)}
         self._heartbeat_values = [self.decoder.values[f"HEARTBEAT_{node}"] for node in self.nodes]
         self._emcy_of_id = {CODECS[f"EMCY_{node}"].frame_id: node for node in self.nodes}
         self._host_ids = {CODECS[name].frame_id: name for name in HOST_FRAMES}
-        index = CODECS["LEG_PRESSURE_1"].index
-        self._i_pa, self._i_pb, self._i_ps = index["PA"], index["PB"], index["PS"]
-        self._i_pfault = (index["SENSOR_FAULT_A"], index["SENSOR_FAULT_B"])
         self._pressure_of_id = {CODECS[f"LEG_PRESSURE_{i}"].frame_id: i - 1 for i in self.legs}
         self._pressure_values = [self.decoder.values[f"LEG_PRESSURE_{i}"] for i in self.legs]
-        self._imu_attitude_id = CODECS["IMU_ATTITUDE"].frame_id if controller.hexapod else -1
-        if controller.hexapod:                        # views made once: the cycle copies through them
-            attitude, index = self.decoder.values["IMU_ATTITUDE"], CODECS["IMU_ATTITUDE"].index
-            self._imu_status = attitude[index["STATUS"]:index["STATUS"] + 1]
-            self._imu_rpy = attitude[index["ROLL"]:index["YAW"] + 1]
+        self._imu_attitude_id = CODECS["IMU_ATTITUDE"].frame_id if has_imu else -1
+        self._imu_values = self.decoder.values["IMU_ATTITUDE"] if has_imu else None
         self.out_sync = Outbox("SYNC")
         self.out_nmt = Outbox("NMT")
         self.out_cmd = [Outbox(f"VALVE_CMD_{i}") for i in self.legs]
@@ -121,12 +112,10 @@ class ControllerLoop:
         self.out_heartbeat = Outbox(f"HEARTBEAT_{CONTROLLER_NODE}")
         self.out_emcy = Outbox(f"EMCY_{CONTROLLER_NODE}")
         self._status_schedule = CODECS["CTRL_STATUS"].schedule
-        c = CODECS["VALVE_CMD_1"].index
-        self._i_d, self._i_h, self._i_m, self._i_r, self._i_sp = (c[k] for k in ("CW_D", "CW_H", "CW_M", "CW_R",
-                                                                                   "SPOOL_SETPOINT"))
         self._overflow = sync_counter_overflow()
         self.sync_counter = 0
         self.heartbeat_seen = np.full(len(self.nodes), -np.inf)
+        self._now = np.zeros(())                    # read's clock as a 0-d array: no conversion per cycle
         self.nmt_state = {node: -1 for node in self.nodes}
         self.stats = Stats()
         self.compute_s = np.zeros(HISTORY)
@@ -145,9 +134,14 @@ class ControllerLoop:
         self._imu_emergency = False                 # ... from the IMU
         self._latched = False                       # the last EMCY_16 said: a fault is latched
         self._attitude_new = False
-        self._pressure_new = np.zeros(len(self.legs), dtype=bool)    # LEG_PRESSURE since the last read
+        # the latest valid LEG_PRESSURE (PA, PB, PS) and IMU attitude, and whether one came since the last read
+        self._pressure = np.zeros((len(self.legs), 3))
+        self._rejected = np.zeros(len(self.legs), dtype=bool)     # a LEG_STATE failed E2E this cycle
+        self._pressure_valid = np.zeros(len(self.legs), dtype=bool)
+        self._pressure_new = np.zeros(len(self.legs), dtype=bool)
+        self._attitude = np.zeros(3)
         self._stall_s = self.cfg.timing.stall_fault_periods * self.period_s if pacing == "realtime" else math.inf
-        self._forced: bool | None = None            # shutdown: True HOLD, False DISABLED
+        self._restarts_seen = 0                     # the controller's restart requests carried out
         self.state_at_stop = None                   # the controller's state when the shutdown began
 
     # -- receive --------------------------------------------------------------------------
@@ -163,24 +157,19 @@ class ControllerLoop:
                 self.stats.e2e_errors += 1
                 leg = self._leg_of_id.get(frame_id)
                 if leg is not None:
-                    self.meas.rejected[leg] = True
+                    self._rejected[leg] = True
             return
         if frame_id in self._leg_of_id:
             return                                   # read() copies it after the window
         leg = self._pressure_of_id.get(frame_id)
-        if leg is not None:                          # SI (Pa) from the codec
-            values = self._pressure_values[leg]
-            valid = not (values[self._i_pfault[0]] or values[self._i_pfault[1]])
-            self.meas.pressure_valid[leg] = valid    # a transducer fault: no piston force
+        if leg is not None:                          # SI (Pa) from the codec, kept for the next read
+            valid = leg_pressure_into(self._pressure_values[leg], self._pressure, leg)
+            self._pressure_valid[leg] = valid        # a transducer fault: no piston force
             if valid:
-                self.meas.pa_pa[leg] = values[self._i_pa]
-                self.meas.pb_pa[leg] = values[self._i_pb]
-                self.meas.ps_pa[leg] = values[self._i_ps]
                 self._pressure_new[leg] = True
             return
         if frame_id == self._imu_attitude_id:
-            if self._imu_status[0] == ImuStatus.VALID:
-                self.meas.attitude_rad[:] = self._imu_rpy
+            if attitude_into(self._imu_values, self._attitude):
                 self._attitude_new = True
             return
         k = self._heartbeat_of_id.get(frame_id)
@@ -262,23 +251,26 @@ class ControllerLoop:
 
     # -- read / write ---------------------------------------------------------------------
     def read(self, now: float) -> None:
-        """The cycle's Measurements: LEG_STATE of the legs whose frame came, and the events
-        since the last read."""
+        """The cycle's Measurements (the one place they are filled): LEG_STATE of the legs whose
+        frame came, the latest pressures and attitude, and the events since the last read."""
         meas, fresh = self.meas, self.decoder.fresh
         for leg, slot in enumerate(self._leg_slots):
             values = self._leg_values[leg]
             ok = bool(fresh[slot])
             meas.fresh[leg] = ok
             if ok:
-                meas.position_m[leg] = values[self._i_pos]
-                meas.force_n[leg] = values[self._i_force]
-                meas.spool[leg] = values[self._i_spool]
-                meas.valve_state[leg] = int(values[self._i_valve])
-                meas.sensor_fault[leg] = values[self._i_sensor] != 0.0
-        np.subtract(now, self.heartbeat_seen, out=meas.heartbeat_age_s)
+                leg_state_into(values, meas, leg)
+        np.copyto(meas.rejected, self._rejected)
+        self._now[()] = now
+        np.subtract(self._now, self.heartbeat_seen, out=meas.heartbeat_age_s)
+        meas.attitude_rad[:] = self._attitude
         meas.attitude_fresh, self._attitude_new = self._attitude_new, False
+        np.copyto(meas.pressure_valid, self._pressure_valid)
+        meas.pa_pa[:] = self._pressure[:, 0]
+        meas.pb_pa[:] = self._pressure[:, 1]
+        meas.ps_pa[:] = self._pressure[:, 2]
         np.copyto(meas.pressure_fresh, self._pressure_new)
-        self._pressure_new[:] = False
+        self._pressure_new.fill(False)
         meas.emergency, self._emergency = self._emergency, False
         meas.imu_emergency, self._imu_emergency = self._imu_emergency, False
         meas.stalled, self._stalled = self._stalled, False
@@ -295,35 +287,27 @@ class ControllerLoop:
 
     def write(self) -> None:
         """VALVE_CMD_* from the ValveCommands, CTRL_STATUS when due, CTRL_ACK, NMT start."""
-        controller, cmd = self.controller, self.cmd
-        if self._forced is True:
-            cmd.hold_all()
-        elif self._forced is False:
-            cmd.disable_all()
+        status, cmd = self.controller.status, self.cmd
         for leg, box in enumerate(self.out_cmd):
-            v = box.values
-            v[self._i_d] = cmd.enable[leg]
-            v[self._i_h] = cmd.hold[leg]
-            v[self._i_m] = cmd.active[leg]
-            v[self._i_r] = cmd.reset[leg]
-            v[self._i_sp] = cmd.spool[leg]
+            valve_command_values(box.values, cmd, leg)
             self._send(box)
         if self._status_schedule.due(self.sync_counter):
             v = self.out_status.values
             i = self.out_status.index
-            v[i["STATE"]] = int(controller.state)
-            v[i["FAULT_CODE"]] = int(controller.sup.fault_code)
-            v[i["CONTROLLER"]] = controller.sup.controller
+            v[i["STATE"]] = int(status.state)
+            v[i["PACING"]] = self._pacing_value
+            v[i["FAULT_CODE"]] = int(status.fault)
+            v[i["CONTROLLER"]] = status.kind
             v[i["COMPUTE_TIME_MAX"]] = self._compute_max
             v[i["PERIOD_ERROR_MAX"]] = self._period_error_max
             v[i["OVERRUNS"]] = self.stats.overruns % 256
-            v[i["ACTIVE_WAYPOINT"]] = controller.active_waypoint % 256
+            v[i["ACTIVE_WAYPOINT"]] = status.active_waypoint % 256
             self._send(self.out_status)
             self._compute_max = 0.0
             self._period_error_max = 0.0
         self._send_acks()
-        if controller.nodes_restart_requested:
-            controller.nodes_restart_requested = False
+        if status.restart_requests != self._restarts_seen:
+            self._restarts_seen = status.restart_requests
             if any(self.nmt_state[n] != NmtState.OPERATIONAL for n in self.nodes):
                 self._nmt_start()                    # nodes that rebooted since activation
 
@@ -333,7 +317,7 @@ class ControllerLoop:
             kind, seq, result = acks.popleft()
             v, i = self.out_ack.values, self.out_ack.index
             v[i["KIND"]], v[i["SEQ"]], v[i["RESULT"]] = kind, seq % 256, result
-            v[i["QUEUE_FREE"]] = self.controller.waypoints.free()
+            v[i["QUEUE_FREE"]] = self.controller.status.queue_free
             self._send(self.out_ack)
 
     def _nmt_start(self) -> None:
@@ -364,21 +348,22 @@ class ControllerLoop:
         self._send(self.out_sync)
         sent = self.clock()
         self.decoder.begin_cycle()
-        self.meas.rejected[:] = False
+        self._rejected.fill(False)
         window = self.cfg.timing.sync_window_fraction * self.period_s if self.pacing == "realtime" \
             else self.cfg.timing.lockstep_timeout_s
         self._decode_s = 0.0
         self._collect(now + window)
         self.stats.missing_frames += self.decoder.end_cycle(self.expected)
         start = self.clock()
-        faults_before = self.controller.sup.faults
+        status = self.controller.status
+        faults_before = status.faults
         self.read(start)
         read = self.clock()
         self.controller.update(self.meas, self.cmd)
         updated = self.clock()
         self.write()
         self._heartbeat(start)
-        self.stats.faults += self.controller.sup.faults - faults_before
+        self.stats.faults += status.faults - faults_before
         written = self.clock()
         compute = written - start
         self.compute_s[k] = compute
@@ -386,7 +371,7 @@ class ControllerLoop:
         phase[PH_READ], phase[PH_UPDATE], phase[PH_WRITE] = read - start, updated - read, written - updated
         self._compute_max = max(self._compute_max, compute)
         self.stats.cycles += 1
-        if self.controller.sup.faults != faults_before:
+        if status.faults != faults_before:
             self._log_fault(now)
         self._report_latch()
         # after the write: its cost never delays VALVE_CMD, and it waits when the SYNC is near
@@ -398,31 +383,31 @@ class ControllerLoop:
         """EMCY_16 when the controller latches a fault or an e-stop (its code in DETAIL, the
         leg in INFO), and with ERROR_CODE 0 when a RESET clears it: what a CANopen watcher
         listens for."""
-        sup = self.controller.sup
-        latched = sup.state in LATCHED
+        status = self.controller.status
+        latched = status.state in LATCHED
         if latched == self._latched:
             return
         self._latched = latched
         v, i = self.out_emcy.values, self.out_emcy.index
-        v[i["ERROR_CODE"]] = emergency_code(sup.fault_code) if latched else 0
+        v[i["ERROR_CODE"]] = emergency_code(status.fault) if latched else 0
         v[i["ERROR_REGISTER"]] = 1 if latched else 0          # CiA 301 bit 0: generic error
-        v[i["STATE"]] = int(sup.state)
-        v[i["DETAIL"]] = int(sup.fault_code) if latched else 0
+        v[i["STATE"]] = int(status.state)
+        v[i["DETAIL"]] = int(status.fault) if latched else 0
         v[i["SYNC_COUNTER"]] = self.sync_counter
-        v[i["INFO"]] = sup.fault_leg if latched else 0         # the leg a leg fault was isolated to
+        v[i["INFO"]] = status.fault_leg if latched else 0         # the leg a leg fault was isolated to
         self._send(self.out_emcy)
 
     def _log_fault(self, sync_time: float) -> None:
         """One stderr line when the controller faults (an event, not the steady cycle): which
         legs' frames were missing or rejected how many cycles in a row, and what the receiver
         last made of each; the leg a SENSOR_TIMEOUT or E2E_ERROR came from is named here."""
-        c = self.controller
+        s = self.controller.status
         last = [RxStatus(int(self.decoder.last_status[slot])).name for slot in self._leg_slots]
-        leg = f" leg {c.sup.fault_leg}" if c.sup.fault_leg else ""
-        self.log(f"fault {c.sup.fault_code.name}{leg} at cycle {self.stats.cycles}: residual/threshold "
-                 f"{[round(r, 2) for r in c.residuals.ratio.tolist()]}, missing in a row "
-                 f"{c.frames.missing.tolist()}, rejected in a row {c.frames.rejected.tolist()}, last LEG_STATE "
-                 f"status {last}, overruns in a row {c.loop_monitor.overruns_in_row}, this cycle "
+        leg = f" leg {s.fault_leg}" if s.fault_leg else ""
+        self.log(f"fault {s.fault.name}{leg} at cycle {self.stats.cycles}: residual/threshold "
+                 f"{[round(r, 2) for r in s.residual_ratio.tolist()]}, missing in a row "
+                 f"{s.missing_in_row.tolist()}, rejected in a row {s.rejected_in_row.tolist()}, last LEG_STATE "
+                 f"status {last}, overruns in a row {s.overruns_in_row}, this cycle "
                  f"{1e6 * (self.clock() - sync_time):.0f} us after its SYNC")
 
     # -- lifecycle ------------------------------------------------------------------------
@@ -443,10 +428,11 @@ class ControllerLoop:
             msg = self.bus.recv(timeout=0.02)
             if msg is not None:
                 self.dispatch(msg)
-        self.controller.reset_cycles = RESET_GRACE_CYCLES  # one Reset pulse: clears faults left from before
+        self.controller.reset_valves()               # one Reset pulse: clears faults left from before
         self._run_cycles(cfg.timing.hold_cycles, should_stop)
         self.controller.activated(cfg.supervisor.auto_enable)
-        self.log(f"active: rig={self.controller.rig} state={self.controller.state.name} pacing={self.pacing} "
+        status = self.controller.status
+        self.log(f"active: rig={status.rig} state={status.state.name} pacing={self.pacing} "
                  f"rate={1.0 / self.period_s:g} Hz")
 
     def _run_cycles(self, count: int | None, should_stop) -> None:
@@ -473,11 +459,10 @@ class ControllerLoop:
     def shutdown(self) -> None:
         """Valves to HOLD, then DISABLED, over a few cycles; SYNC keeps running meanwhile."""
         never = lambda: False  # noqa: E731
-        self.state_at_stop = self.controller.state
+        self.state_at_stop = self.controller.status.state
         self.controller.shut_down()
-        self._forced = True
         self._run_cycles(self.cfg.timing.shutdown_hold_cycles, never)
-        self._forced = False
+        self.controller.power_off()
         self._run_cycles(self.cfg.timing.shutdown_disable_cycles, never)
 
     def timing(self) -> dict:
@@ -492,10 +477,10 @@ class ControllerLoop:
         return out
 
     def summary(self) -> dict:
-        c, s = self.controller, self.stats
-        return {"rig": c.rig, "controller": c.sup.controller, "pacing": self.pacing,
+        status, s = self.controller.status, self.stats
+        return {"rig": status.rig, "controller": status.kind, "pacing": self.pacing,
                 "cycles": s.cycles, "overruns": s.overruns, "e2e_errors": s.e2e_errors,
-                "missing_frames": s.missing_frames, "faults": s.faults, "fault_code": c.sup.fault_code.name,
-                **{key: round(getattr(c, key), 3) for key in PEAK_KEYS},
-                "state": (self.state_at_stop or c.state).name, "emergencies": s.emergencies,
+                "missing_frames": s.missing_frames, "faults": s.faults, "fault_code": status.fault.name,
+                **status.margins.as_dict(),
+                "state": (self.state_at_stop or status.state).name, "emergencies": s.emergencies,
                 "host_commands": s.host_commands, "frames_sent": s.frames_sent, "timing": self.timing()}

@@ -59,6 +59,15 @@ def any_above(values, limit):
 
 
 @njit(cache=True)
+def all_set(flags):
+    """Whether every entry is true (no reduction's result buffer, as `ndarray.all` makes)."""
+    for i in range(flags.shape[0]):
+        if not flags[i]:
+            return False
+    return True
+
+
+@njit(cache=True)
 def any_in(values, a, b):
     """Whether any entry equals a or b."""
     for i in range(values.shape[0]):
@@ -119,8 +128,8 @@ class FrameMonitor:
         self.rejected = np.zeros(n_legs, dtype=np.int64)    # ... of which a frame came and was rejected
 
     def reset(self) -> None:
-        self.missing[:] = 0
-        self.rejected[:] = 0
+        self.missing.fill(0)
+        self.rejected.fill(0)
 
     def check(self, fresh: np.ndarray, rejected: np.ndarray, sensor_fault: np.ndarray) -> Fault:
         code = frames_check(fresh, rejected, sensor_fault, self.missing, self.rejected, self.e2e_limit,

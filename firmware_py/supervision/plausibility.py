@@ -7,7 +7,7 @@ cylinder. It catches what the other limits only see late or never: a stuck encod
 reference runs away from a frozen reading), a seized rod, a lost supply pressure (the legs
 sink while the valves push them up).
 
-Rule: while the valve input stays beyond `input_min` (volts) with one sign for
+Rule: while the valve input stays beyond `spool_min` (fraction of full input) with one sign for
 `window` cycles, the encoder must advance at least `travel_min` in that direction from the
 furthest point back it reached in the window; a window without it is implausible.
 Defaults (controller.toml): on the hexapod 30 % input for 0.2 s, 0.5 mm (4 encoder counts):
@@ -29,13 +29,13 @@ from firmware_py.mechanics.rotation import angle_between_matrices, rpy_to_matrix
 
 
 @njit(cache=True)
-def motion_window(input_v, position_m, input_min_v, window, travel_min_m, count, start, sign):
+def motion_window(spool, position_m, spool_min, window, travel_min_m, count, start, sign):
     """One cycle of every leg's motion window; True when a leg completed one without moving
     `travel_min_m` along its command."""
     implausible = False
-    for leg in range(input_v.shape[0]):
-        driven = abs(input_v[leg]) >= input_min_v
-        s = (1.0 if input_v[leg] > 0.0 else -1.0) if driven else 0.0
+    for leg in range(spool.shape[0]):
+        driven = abs(spool[leg]) >= spool_min
+        s = (1.0 if spool[leg] > 0.0 else -1.0) if driven else 0.0
         if s != sign[leg]:                   # a new direction (or none) starts a new window here
             start[leg] = position_m[leg]
             count[leg] = 0
@@ -57,20 +57,20 @@ def motion_window(input_v, position_m, input_min_v, window, travel_min_m, count,
 
 
 class MotionPlausibility:
-    def __init__(self, n: int, input_min_v: float, window: int, travel_min_m: float):
-        self.input_min_v, self.window, self.travel_min_m = input_min_v, window, travel_min_m
+    def __init__(self, n: int, spool_min: float, window: int, travel_min_m: float):
+        self.spool_min, self.window, self.travel_min_m = spool_min, window, travel_min_m
         self.count = np.zeros(n, dtype=np.int64)        # cycles in the current window
         self.start = np.zeros(n)                         # encoder reading when it began
         self.sign = np.zeros(n)                          # the command's direction in it (0: none)
 
     def reset(self) -> None:
-        self.count[:] = 0
-        self.sign[:] = 0.0
+        self.count.fill(0)
+        self.sign.fill(0.0)
 
-    def update(self, input_v: np.ndarray, position_m: np.ndarray) -> bool:
-        """One cycle: `input_v` the commanded valve input (V), `position_m` the encoder.
-        True when a leg completed a window without moving along its command."""
-        return motion_window(input_v, position_m, self.input_min_v, self.window, self.travel_min_m, self.count,
+    def update(self, spool: np.ndarray, position_m: np.ndarray) -> bool:
+        """One cycle: `spool` the commanded valve input (fraction of full input), `position_m`
+        the encoder. True when a leg completed a window without moving along its command."""
+        return motion_window(spool, position_m, self.spool_min, self.window, self.travel_min_m, self.count,
                              self.start, self.sign)
 
 
@@ -149,8 +149,8 @@ class FrozenLoadCells:
         self.run = np.zeros(n_legs, dtype=np.int64)
 
     def reset(self) -> None:
-        self.last[:] = np.nan
-        self.run[:] = 0
+        self.last.fill(np.nan)
+        self.run.fill(0)
 
     def update(self, force_n: np.ndarray, fresh: np.ndarray) -> int:
         return frozen_step(force_n, fresh, self.last, self.run, self.limit)
@@ -192,8 +192,8 @@ class SupplyPressure:
         self.cycle_peak = 0.0
 
     def reset(self) -> None:
-        self.ratio[:] = 0.0
-        self.run[:] = 0
+        self.ratio.fill(0.0)
+        self.run.fill(0)
 
     def update(self, ps_pa: np.ndarray, fresh: np.ndarray) -> tuple[bool, int]:
         count, lone, self.cycle_peak = supply_step(ps_pa, fresh, self.tank_pa, self.drop_pa, self.flow_spread,

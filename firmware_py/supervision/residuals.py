@@ -42,9 +42,14 @@ command before the applied one (which command the valve applied is known only to
     d_X        = p_X,sample - p_X,predicted                              X = A, B
     threshold  = sum over the parameters j of |p_X,j - p_X,nominal| + beta_X / V_X A_X q + floor
     ratio      = the smaller over the two commands of max_X |d_X| / threshold
+    evidence   = ratio + max(0, the ratio at the leg's sample before - carry)
 with A_X the area on chamber X (A, alpha A), q the encoder's count and `floor` the two
 samples' noise and wire steps: a count of swept volume through the chamber's stiffness, as the
-reading's error swings by q when the count steps. What it sees: flow between the chambers the
+reading's error swings by q when the count steps. A leg is faulty when its evidence passes 1: one
+sample beyond, or two in a row whose ratios sum past 1 + carry. A fault's first sample sees the
+chambers' jump at its onset, the next the offset that stays; where the onset falls just before a
+sample the first sees little, so a fault near the threshold needs the two together. A model error
+held under (1 + carry) / 2 of its bound is no fault. What it sees: flow between the chambers the
 model has no path for (a leaking piston seal pulls p_A and p_B together), a chamber
 transducer gone wrong.
 """
@@ -182,7 +187,7 @@ class ActuatorResiduals:
     def start(self, position_m, pressure_valid, pa_pa, pb_pa) -> None:
         start_state(pressure_valid, pa_pa, pb_pa, position_m, self.state, self.seeded, self.y_prev, self.stale,
                     self.residual, self.above)
-        self.flow_bound[:] = 0.0
+        self.flow_bound.fill(0.0)
         self.legs_faulty, self.worst_leg = 0, -1
 
     def update(self, spool_applied, fresh, position_m, force_n, gravity_axial, accel_m_s2, pressure_fresh, pa_pa,
@@ -254,8 +259,8 @@ class SpoolResidual:
         self.legs_faulty, self.worst_leg, self.peak = 0, -1, 0.0
 
     def start(self) -> None:
-        self.seeded[:] = False
-        self.above[:] = 0
+        self.seeded.fill(False)
+        self.above.fill(0)
         self.legs_faulty, self.worst_leg = 0, -1
 
     def update(self, applied, applied_late, spool, fresh, valve_state) -> int:
@@ -281,6 +286,7 @@ PRED_COARSE_STEPS = 2       # constants, not arguments: called with 20, numba's 
 # a prediction spans at least the hexapod's LEG_PRESSURE period: where samples come every cycle
 # (the test bench) a one-cycle prediction is all quantisation, up to the count's whole term
 PRED_INTERVAL_CYCLES = 16
+NOT_JUDGED = -1.0           # a leg's ratio in a cycle without a judged sample of it
 
 
 def sample_floor_pa(noise_pa: float, wire_step_pa: float) -> float:
@@ -301,22 +307,21 @@ def predict_chambers(row, hp, spool, y_start, dy, ps, period_s, steps):
 @njit(cache=True)
 def pressure_prediction_step(models, ps, period_s, spool_applied, spool_late, fresh, position, valve_state,
                              active_state, pressure_fresh, pa_meas, pb_meas, floor_pa, encoder_m, state, y_prev,
-                             age, ratio, supply_like):
+                             age, ratio, supply_like) -> None:
     """One cycle of every leg's sample-to-sample chamber prediction: `models` the parameter
     vectors (PRED_* rows), `state[m, i]` leg i under model m; the prediction in
     PRED_FINE_STEPS per cycle, the parameters' spreads as differences of models all in
     PRED_COARSE_STEPS (their integration error cancels in the difference); PRED_LATE is
     driven by `spool_late`, the command before `spool_applied`. At a leg's LEG_PRESSURE
-    sample writes `ratio[i]` (largest |d_X| / threshold of the nearer candidate; 0 between
-    samples) and `supply_like[i]` (both chambers beyond on one side), and starts again from
-    the sample; `age[i]` counts the cycles since (-1: not
+    sample writes `ratio[i]` (largest |d_X| / threshold of the nearer candidate; -1 where no
+    sample was judged) and `supply_like[i]` (both chambers beyond on one side), and starts
+    again from the sample; `age[i]` counts the cycles since (-1: not
     started), and samples before PRED_INTERVAL_CYCLES are passed over. A leg without a fresh
     frame, or whose valve is not ACTIVE (its load-holding valves shut), starts again from its
-    next sample. Returns the largest ratio of the cycle."""
+    next sample."""
     n_models = models.shape[0]
-    peak = 0.0
     for i in range(position.shape[0]):
-        ratio[i] = 0.0
+        ratio[i] = NOT_JUDGED
         # the piston moves only as far as the reading demands: the true position is within half
         # a count of it, so a reading dithering between two counts sweeps nothing
         dy = 0.0
@@ -361,25 +366,25 @@ def pressure_prediction_step(models, ps, period_s, spool_applied, spool_late, fr
             # both chambers beyond on the same side: the valve's inflow changed, the supply's kind;
             # flow from one chamber into the other (a seal) or one transducer is the leg's own
             supply_like[i] = low == 2 or high == 2
-            peak = max(peak, worst)
         for m in range(n_models):
             state[m, i, hy.S_PA], state[m, i, hy.S_PB] = pa_meas[i], pb_meas[i]
         age[i] = 0
-    return peak
 
 
 class ChamberPrediction:
     """Every leg's chambers predicted from one LEG_PRESSURE sample to the next. `start()` when
     the valves go ACTIVE, `update(...)` every cycle after; `legs_faulty`, `worst_leg` (-1:
     none), `ratio` (at the leg's sample) and `peak` (the cycle's largest) as for the others.
-    A leg is faulty after `persistence` samples beyond in a row."""
+    `evidence` (the ratio with the excess over `carry` of the leg's sample before)
+    and `peak` (the cycle's largest evidence) as for the others. A leg is faulty after
+    `persistence` samples whose evidence is beyond in a row."""
 
     def __init__(self, n_legs: int, hp: np.ndarray, supply_pa: float, period_s: float, encoder_m: float,
                  flow_spread: float, leakage_spread: float, stiffness_spread: float, floor_pa: float,
-                 persistence: int, active_state: int):
+                 persistence: int, carry: float, active_state: int):
         self.supply_pa, self.period_s, self.encoder_m = supply_pa, period_s, encoder_m
         self.active_state = active_state
-        self.floor_pa, self.persistence = floor_pa, persistence
+        self.floor_pa, self.persistence, self.carry = floor_pa, persistence, carry
         self.models = np.tile(hp, (PRED_LATE + 1, 1))
         self.models[PRED_FLOW_LOW, hy.HP_KV] *= 1.0 - flow_spread
         self.models[PRED_FLOW_HIGH, hy.HP_KV] *= 1.0 + flow_spread
@@ -389,39 +394,51 @@ class ChamberPrediction:
         self.y_prev = np.zeros(n_legs)
         self.age = np.full(n_legs, -1, dtype=np.int64)     # cycles since the prediction's sample
         self.ratio = np.zeros(n_legs)
+        self.last = np.zeros(n_legs)             # each leg's ratio at its judged sample before
+        self.evidence = np.zeros(n_legs)
         self.supply_like = np.zeros(n_legs, dtype=np.bool_)
         self.above = np.zeros(n_legs, dtype=np.int64)
         self.legs_faulty, self.worst_leg, self.peak = 0, -1, 0.0
 
     def start(self, position_m: np.ndarray) -> None:
-        self.state[:, :, hy.S_SPOOL] = 0.0
+        self.state[:, :, hy.S_SPOOL].fill(0.0)
         self.y_prev[:] = position_m
-        self.age[:] = -1
-        self.above[:] = 0
+        self.age.fill(-1)
+        self.last.fill(0.0)
+        self.evidence.fill(0.0)
+        self.above.fill(0)
         self.legs_faulty, self.worst_leg = 0, -1
 
     def update(self, spool_applied, spool_late, fresh, position_m, valve_state, pressure_fresh, pa_pa, pb_pa) -> int:
         """`spool_applied`, `spool_late` as for `SpoolResidual.update`. Returns the legs faulty."""
-        self.peak = pressure_prediction_step(self.models, self.supply_pa, self.period_s, spool_applied, spool_late,
-                                             fresh, position_m, valve_state, self.active_state, pressure_fresh,
-                                             pa_pa, pb_pa, self.floor_pa, self.encoder_m, self.state, self.y_prev,
-                                             self.age, self.ratio, self.supply_like)
-        self.legs_faulty, self.worst_leg = sample_verdict(self.ratio, self.supply_like, pressure_fresh,
-                                                          self.persistence, self.above)
+        pressure_prediction_step(self.models, self.supply_pa, self.period_s, spool_applied, spool_late, fresh,
+                                 position_m, valve_state, self.active_state, pressure_fresh, pa_pa, pb_pa,
+                                 self.floor_pa, self.encoder_m, self.state, self.y_prev, self.age, self.ratio,
+                                 self.supply_like)
+        self.legs_faulty, self.worst_leg, self.peak = sample_verdict(self.ratio, self.supply_like, self.age,
+                                                                     self.carry, self.persistence, self.last,
+                                                                     self.evidence, self.above)
         return self.legs_faulty
 
 
 @njit(cache=True)
-def sample_verdict(ratio, supply_like, sampled, persistence, above):
-    """Persistence per leg over its samples; returns (legs faulty, the worst of them whose
-    last sample was the leg's own kind, or -1: legs of the supply's kind count only toward
-    the supply)."""
-    persisted, worst, worst_ratio = 0, -1, -1.0
+def sample_verdict(ratio, supply_like, age, carry, persistence, last, evidence, above):
+    """Each judged sample's evidence (its ratio and the excess over `carry` of the leg's
+    ratio before, `last`; a leg whose prediction broke off, `age` -1, has none before),
+    persistence over the samples; returns (legs faulty, the worst of them whose last sample
+    was the leg's own kind, or -1: legs of the supply's kind count only toward the supply;
+    the cycle's largest evidence)."""
+    persisted, worst, worst_evidence, peak = 0, -1, -1.0, 0.0
     for i in range(ratio.shape[0]):
-        if sampled[i]:
-            above[i] = above[i] + 1 if ratio[i] > 1.0 else 0
+        if age[i] < 0:
+            last[i] = 0.0
+        if ratio[i] != NOT_JUDGED:
+            evidence[i] = ratio[i] + max(0.0, last[i] - carry)
+            last[i] = ratio[i]
+            above[i] = above[i] + 1 if evidence[i] > 1.0 else 0
+            peak = max(peak, evidence[i])
         if above[i] >= persistence:
             persisted += 1
-            if not supply_like[i] and ratio[i] > worst_ratio:
-                worst, worst_ratio = i, ratio[i]
-    return persisted, worst
+            if not supply_like[i] and evidence[i] > worst_evidence:
+                worst, worst_evidence = i, evidence[i]
+    return persisted, worst, peak

@@ -25,6 +25,7 @@ class ControlledStop:
         self.base = np.zeros(n_legs)            # the references when the fault latched
         self.coupling = np.zeros(n_legs)        # leg j's share of the locked leg's error
         self.target = np.zeros(n_legs)
+        self._delta = np.zeros(())              # 0-d: no conversion in the cycle
 
     @property
     def active(self) -> bool:
@@ -40,8 +41,8 @@ class ControlledStop:
 
     def step(self, position_m: np.ndarray) -> None:
         """This cycle's references from the locked leg's measured length; counts down."""
-        delta = position_m[self.leg] - self.base[self.leg]
-        np.multiply(self.coupling, delta, out=self.target)
+        self._delta[()] = position_m[self.leg] - self.base[self.leg]
+        np.multiply(self.coupling, self._delta, out=self.target)
         self.target += self.base
         self.left -= 1
         if self.left <= 0:

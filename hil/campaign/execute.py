@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from firmware_py.runtime.loop import PEAK_KEYS
+from firmware_py.supervision.diagnostics import PEAK_KEYS
 from hil.runner import toml_sections
 
 METRICS_PREFIX = "metric."

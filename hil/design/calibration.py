@@ -27,13 +27,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hil.design.thesis import thesis_data
 from physics import hydraulics as hy
 from physics import lugre
 from physics.constants import BAR, GRAVITY_M_S2, MM
+from plant_emulator.linear_rig import TABLE_A3_LOADS_KG, table_a3
 from plant_emulator.params import EmulatorConfig, build, merge
 
-LOADS_KG = (0.0, 3.0, 6.0)
+LOADS_KG = TABLE_A3_LOADS_KG
 BAND_RAD_S = np.logspace(np.log10(5.0), np.log10(300.0), 40)
 # the calibration's bounds on Table A.3: b0 and k01 within +/-20 %, b1 within +/-25 %, the complex
 # pole pair inside Re [-65, -45], Im [75, 125] 1/s widened by 10 %.
@@ -54,11 +54,6 @@ TUNABLE = {
     "tank": ("actuator", "tank_pressure_bar", 0.0, 3.0),
     "spool_lag": ("valve", "spool_time_constant_ms", 0.2, 5.0),
 }
-
-
-def table_a3() -> np.ndarray:
-    """Rows [Po_mm, b0_0k, b1_0k, k01_0k, b0_3k, b1_3k, k01_3k, b0_6k, b1_6k, k01_6k]."""
-    return np.asarray(thesis_data("table_A3")["rows"], dtype=float)
 
 
 @dataclass

@@ -86,14 +86,9 @@ def plant_of(cfg: EmulatorConfig, model: ModalModel, rod_mass_kg: float, period_
     return Plant(model, ad, bd[:, :n], bd[:, n:], c)
 
 
-def _state_views(ctl: Controller) -> list[np.ndarray]:
-    """The controller's dynamic state: the Kalman filters, the integral, the twist filter."""
-    ct = ctl.computed_torque
-    return [ctl.joint.kalman_x, ct.integral, ct._twist_filter[:, :2]]
-
-
 def _state_steps(ctl: Controller) -> np.ndarray:
-    n = ctl.n
+    """The central differences' step of each of `Controller.dynamic_state`'s entries."""
+    n = ctl.status.n_legs
     return np.concatenate([np.tile(KALMAN_STEPS, n), np.full(6, INTEGRAL_STEP), np.tile(FILTER_STEPS, 6)])
 
 
@@ -119,56 +114,19 @@ class ControllerLinearisation:
     spool_offset: np.ndarray
 
 
-class Snapshot:
-    """Every array and plain value of a controller's objects, put back in place by `restore`
-    (a deep copy would turn the views the controller shares between its parts, e.g. the
-    legs' velocity estimate in their Kalman states, into unrelated arrays)."""
-
-    PACKAGES = ("firmware_py", "protocol")
-
-    def __init__(self, root):
-        self.items: list[tuple[object, str, object]] = []
-        seen: set[int] = set()
-        stack = [root]
-        while stack:
-            obj = stack.pop()
-            if id(obj) in seen or not hasattr(obj, "__dict__"):
-                continue
-            seen.add(id(obj))
-            for name, value in vars(obj).items():
-                if isinstance(value, np.ndarray):
-                    self.items.append((obj, name, (value, value.copy())))
-                elif value is None or isinstance(value, (bool, int, float, str)):
-                    self.items.append((obj, name, value))
-                else:
-                    members = value if isinstance(value, (list, tuple)) else (value,)
-                    stack.extend(m for m in members if type(m).__module__.startswith(self.PACKAGES))
-
-    def restore(self) -> None:
-        for obj, name, value in self.items:
-            if isinstance(value, tuple):
-                array, saved = value
-                array[...] = saved
-                value = array
-            if getattr(obj, name) is not value:          # (frozen configs never change)
-                setattr(obj, name, value)
-
-
 def _settled(cfg: ControllerConfig, model: ModalModel, forces_n, controller: str, period_s: float):
     """The controller holding the pose of `model` with its load cells at `forces_n`, settled
     (its Kalman filters' gain: the linearisation's); returned with its measurements."""
     ctl = Controller(cfg, "hexapod", period_s, CONTROLLER_NAMES[controller])
     meas, cmd = ctl.new_interfaces()
-    meas.position_m[:] = model.strokes_m
-    meas.force_n[:] = forces_n
-    meas.fresh[:] = True
-    meas.valve_state[:] = ValveState.ACTIVE
+    meas.report_legs(model.strokes_m, forces_n, ValveState.ACTIVE)
     ctl.update(meas, cmd)
     ctl.activated(True)
     for _ in range(CONVERGE_CYCLES):
         ctl.update(meas, cmd)
-    if ctl.state is not State.READY:
-        raise RuntimeError(f"the controller did not hold the pose ({ctl.state.name}, {ctl.sup.fault_code.name})")
+    status = ctl.status
+    if status.state is not State.READY:
+        raise RuntimeError(f"the controller did not hold the pose ({status.state.name}, {status.fault.name})")
     return ctl, meas, cmd
 
 
@@ -177,16 +135,15 @@ def linearise_controller(cfg: ControllerConfig, model: ModalModel, forces_n, con
     """The controller settled on the operating point of `model` (`_settled`), then
     differentiated: central differences of one update, each from the settled state put back."""
     ctl, meas, cmd = _settled(cfg, model, forces_n, controller, period_s)
-    settled = Snapshot(ctl)
-    views = _state_views(ctl)
+    settled = ctl.checkpoint()
+    views = ctl.dynamic_state()
     s0 = _read(views)
     y0 = np.concatenate([meas.position_m, meas.force_n])
-    n_legs = ctl.n
+    n_legs = ctl.status.n_legs
 
     def step(s, y):
         settled.restore()
-        meas.position_m[:] = y[:n_legs]
-        meas.force_n[:] = y[n_legs:]
+        meas.report_legs(y[:n_legs], y[n_legs:], ValveState.ACTIVE)
         _write(views, s)
         ctl.update(meas, cmd)
         return _read(views), cmd.spool.copy()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from firmware_py.runtime.loop import PEAK_KEYS
+from firmware_py.supervision.diagnostics import PEAK_KEYS
 from hil.faults.cases import LOCKSTEP_CASES, VALVE_WATCHDOG_PERIODS, realtime_cases
 from hil.faults.session import Session
 from hil.runner import RunOptions, run_scenario

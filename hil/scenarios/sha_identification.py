@@ -44,7 +44,7 @@ FULL_SCALE_V = 10.0                 # 100 % spool setpoint = 10 V of the thesis'
 SEED = 5
 # Asserted: the windows' models fit like the thesis's (eq. 5.12: 0.85-0.94), and eq. 5.7
 # finds the emulator's moving mass. That the method recovers a linear plant exactly is
-# tests/test_identification.py's job; the emulator is not linear (below), so b0, b1, k01
+# tests/hil/test_identification.py's job; the emulator is not linear (below), so b0, b1, k01
 # are compared with its linearisation and with Table A.3 and reported.
 FIT_MIN = 0.85                      # the thesis's range is 0.85-0.94: the median window must be in it
 FIT_FLOOR = 0.80                    # and no point's median below this (near the end stops, with 3 kg,
