@@ -510,12 +510,11 @@ class Controller:
 
     def _publish(self) -> None:
         """The status of this cycle (no allocation: scalars and views made once)."""
-        s, sup = self.status, self.sup
+        s, sup, reference = self.status, self.sup, self.reference
         s.state, s.fault, s.fault_leg, s.kind = sup.state, sup.fault_code, sup.fault_leg, sup.controller
-        s.active_waypoint = self.reference.active_waypoint
+        s.active_waypoint, s.moving = reference.active_waypoint, reference.trajectory is not None
         s.queue_free = self.waypoints.free()
         s.cycles, s.faults, s.restart_requests = self.cycles, sup.faults, self.restart_requests
-        s.moving = self.reference.moving
         test = self.rig.excitation
         s.testing = test is not None and test.running
         s.initialised = self.initialised and not self.reinitialise

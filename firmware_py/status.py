@@ -14,7 +14,7 @@ import numpy as np
 from protocol.enums import Fault, State
 
 
-@dataclass
+@dataclass(slots=True)
 class ControllerStatus:
     rig: str                            # "testbench" or "hexapod"
     n_legs: int
