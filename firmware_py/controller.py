@@ -464,7 +464,9 @@ class Controller:
             self.sup.fault(Fault.SUPPLY_PRESSURE)
         elif faulty:
             self._leg_fault(Fault.ACTUATOR_RESIDUAL, res.worst_leg)
-        elif chambers and self.chambers.worst_leg >= 0:
+        elif chambers and self.chambers.worst_leg >= 0 and self.spool_check.above[self.chambers.worst_leg] == 0:
+            # a spool off its band explains the chambers (they follow the spool, not the
+            # command): the spool check names it within its persistence
             self._leg_fault(Fault.CHAMBER_PRESSURE, self.chambers.worst_leg)
 
     def _leg_fault(self, fault: Fault, leg: int) -> None:

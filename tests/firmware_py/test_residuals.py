@@ -224,6 +224,23 @@ def test_a_leaking_seal_is_named_at_the_legs_next_pressure_sample(cycles_after_s
     assert detected + FAULT_AT - onset[0] <= DETECT_WITHIN, (detected, onset)
 
 
+@pytest.mark.parametrize("cycles_before_sample", [0, 1, 2])
+def test_a_stuck_spool_before_a_pressure_sample_is_the_spools_fault(cycles_before_sample):
+    """A spool stuck open just before leg 1's LEG_PRESSURE sample: the chambers miss their
+    prediction (it follows the command) a cycle before the spool check has persisted; the
+    spool off its band explains them, and SPOOL_MISMATCH names the leg."""
+    onset = []
+
+    def stick(k, loop):
+        if not onset and k >= FAULT_AT and loop.sim.counter % 16 == (PRESSURE_PHASES[0] - cycles_before_sample) % 16:
+            loop.sim.inject(*FAULTS["spool"])
+            onset.append(k)
+
+    _, detected, loop, _ = run_move(None, cycles=FAULT_AT + 40, hook=stick)
+    assert onset and detected is not None, onset
+    assert loop.status.fault is Fault.SPOOL_MISMATCH and loop.status.fault_leg == 1, loop.status.fault.name
+
+
 def _ringing_leg(plant_lag: int, known_late: bool, amplitude: float, hz: float) -> float:
     """A leg at rest, its spool swinging as computed torque's force loop rings (40 bar), the
     emulator's chamber laws in 32 steps a cycle as the plant, which applies each command
