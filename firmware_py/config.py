@@ -287,6 +287,7 @@ class Residuals(Section):
     persistence_cycles: int = key("persistence_cycles", 1, 10000)
     flow_spread: float = key("flow_spread_pct", 0.0, 100.0, per=PCT)
     supply_legs: int = key("supply_legs", 2, 6)
+    supply_tolerance_pa: float = key("supply_tolerance_bar", 0.01, 100.0, si=BAR)
     load_cell_noise_n: float = key(LOAD_CELL_NOISE)
     spool_check: bool = flag("spool_check")
     spool_floor: float = key("spool_floor_pct", 0.1, 100.0, per=PCT)

@@ -37,7 +37,7 @@ from firmware_py.rig_model import rig_model
 from firmware_py.status import ControllerStatus
 from firmware_py.supervision.diagnostics import FalseAlarmMargins
 from firmware_py.supervision.monitors import FrameMonitor, LimitMonitor, LoopMonitor, NodeMonitor, all_set
-from firmware_py.supervision.plausibility import FrozenLoadCells, MotionPlausibility, SupplyPressure
+from firmware_py.supervision.plausibility import FrozenLoadCells, MotionPlausibility, SupplyAtRest, SupplyPressure
 from firmware_py.supervision.residuals import ActuatorResiduals, ChamberPrediction, SpoolResidual, sample_floor_pa
 from firmware_py.supervision.stopping import ControlledStop
 from firmware_py.supervision.supervisor import ACTIVE, LATCHED, Action, Supervisor
@@ -53,6 +53,7 @@ MOTION_COMMANDS = (Command.ENABLE, Command.HOME, Command.PARK, Command.START)
 RESET_GRACE_CYCLES = 4                 # valves need a SYNC or two to leave FAULT after R
 # what the valves are told outside the laws: by the supervisor's state, or forced at shutdown
 VALVES_DISABLED, VALVES_HOLD, VALVES_ACTIVE = 0, 1, 2
+AT_REST = (State.IDLE, State.READY)            # no move plays: the valves draw no flow
 
 
 class Controller:
@@ -102,6 +103,8 @@ class Controller:
         self.residuals_running = False
         # the valves' P-port transducers against the supply the model assumes
         self.supply = SupplyPressure(n, supply_pa, cfg.hydraulics[hy.HP_TANK], res.flow_spread, res.supply_legs)
+        self.supply_at_rest = SupplyAtRest(n, supply_pa, res.supply_tolerance_pa, res.supply_legs)
+        self.resting, self.rest_peak = False, 0.0     # the at-rest check judging, its ratio this cycle
         self.margins = FalseAlarmMargins()
         self.stop = ControlledStop(n, rig.stop_cycles)
         # the valve input the laws write (fraction of full input), and what was sent: the last
@@ -133,7 +136,8 @@ class Controller:
             spool=self.spool_cmd, load_mass_kg=joint.mass_kg, residual_ratio=self.residuals.ratio,
             missing_in_row=self.frames.missing, rejected_in_row=self.frames.rejected,
             pose=platform.dk.pose if platform is not None else None,
-            reference_pose=platform.ref_dk.pose if platform is not None else None, margins=self.margins)
+            reference_pose=platform.ref_dk.pose if platform is not None else None, margins=self.margins,
+            supply_configured_pa=self.supply_at_rest.nominal_pa)
 
     def new_interfaces(self) -> tuple[Measurements, ValveCommands]:
         """Measurements and commands sized for this rig (allocate once, reuse every cycle)."""
@@ -160,6 +164,7 @@ class Controller:
         self.residuals.update(self.spool_applied, meas.fresh, meas.position_m, meas.force_n, rig.gravity_axial,
                               self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
         self.supply.update(meas.ps_pa, meas.pressure_fresh)
+        self.supply_at_rest.update(meas.ps_pa, meas.pressure_fresh)
         self.spool_check.update(self.spool_applied, self.spool_late, meas.spool, meas.fresh, meas.valve_state)
         self.chambers.start(meas.position_m)
         self.chambers.update(self.spool_applied, self.spool_late, meas.fresh, meas.position_m, meas.valve_state,
@@ -181,6 +186,7 @@ class Controller:
         self.load_cells.reset()
         self.plausibility.reset()
         self.supply.reset()
+        self.supply_at_rest.reset()
         self.limits.recovery_left[0] = 0
         self.joint.reset(0.0)
 
@@ -382,6 +388,7 @@ class Controller:
         if testing and not active:
             test.stop()                              # a fault or an e-stop ends it: valves hold
             testing = False
+        self._supply_at_rest(meas, testing)
         if stopping:                                 # the healthy legs to the pose the locked leg allows
             self.stop.step(meas.position_m)
             ref.yr[:] = self.stop.target
@@ -452,7 +459,8 @@ class Controller:
         chambers = self.chambers.update(self.spool_applied, self.spool_late, meas.fresh, meas.position_m,
                                         meas.valve_state, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
         attitude = self.rig.attitude_check.ratio if self.rig.platform is not None else 0.0
-        self.margins.record(self.cycles, self.sup.faults > 0, res.peak, self.supply.cycle_peak, self.spool_check.peak,
+        self.margins.record(self.cycles, self.sup.faults > 0, res.peak, max(self.supply.cycle_peak, self.rest_peak),
+                            self.spool_check.peak,
                             attitude, self.chambers.peak)
         if supply_faulty:
             self.sup.fault(Fault.SUPPLY_PRESSURE)
@@ -468,6 +476,26 @@ class Controller:
             # a spool off its band explains the chambers (they follow the spool, not the
             # command): the spool check names it within its persistence
             self._leg_fault(Fault.CHAMBER_PRESSURE, self.chambers.worst_leg)
+
+    def _supply_at_rest(self, meas: Measurements, testing: bool) -> None:
+        """The P-port transducers against the configured supply while no move plays (IDLE or
+        READY): off on `supply_legs` legs is the power unit's SUPPLY_PRESSURE, said as such
+        before the chamber and flow checks, which assume that supply, can name a leg's seal;
+        one leg off alone for two samples is its transducer's SENSOR_FAULT."""
+        check = self.supply_at_rest
+        if not (self.cfg.residuals.enabled and self.sup.state in AT_REST and not self.reference.moving
+                and not testing):
+            if self.resting:                         # a move starts: its samples are not at rest
+                check.reset()
+                self.resting, self.rest_peak = False, 0.0
+            return
+        self.resting = True
+        off, lone = check.update(meas.ps_pa, meas.pressure_fresh)
+        self.rest_peak = check.peak
+        if off:
+            self.sup.fault(Fault.SUPPLY_PRESSURE)
+        elif lone >= 0:
+            self.sup.fault(Fault.SENSOR_FAULT, lone + 1)
 
     def _leg_fault(self, fault: Fault, leg: int) -> None:
         """A fault isolated to one leg: that leg holds while the others stop (the hexapod's
@@ -521,6 +549,7 @@ class Controller:
         s.testing = test is not None and test.running
         s.initialised = self.initialised and not self.reinitialise
         s.overruns_in_row = self.loop_monitor.overruns_in_row
+        s.supply_measured_pa = self.supply_at_rest.measured_pa
         if self.rig.platform is not None:
             s.attitude_mismatch_rad = self.rig.attitude_check.angle_rad
 

@@ -7,6 +7,7 @@ Arrays are views of the controller's own state, made once (reading them allocate
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,6 +33,8 @@ class ControllerStatus:
     testing: bool = False               # an identification test (HOST_TEST) drives the valve
     initialised: bool = False           # a complete set of measurements has come since start or RESET
     overruns_in_row: int = 0
+    supply_configured_pa: float = 0.0   # the supply the actuator model assumes
+    supply_measured_pa: float = math.nan  # the P-port transducers' mean at rest (NaN while moving)
     # per leg (views)
     reference_m: np.ndarray = None      # the joint reference of this cycle
     hold_m: np.ndarray = None           # where the legs are held when no trajectory plays

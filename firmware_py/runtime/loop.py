@@ -35,11 +35,12 @@ import numpy as np
 
 from firmware_py.controller import Controller
 from firmware_py.supervision.supervisor import LATCHED, emergency_code
+from physics.constants import BAR
 from program.realtime import percentiles_us
 from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import E2E_REJECTED, RxStatus
-from protocol.enums import PACINGS, NmtCommand, NmtState, Pacing
+from protocol.enums import PACINGS, Fault, NmtCommand, NmtState, Pacing
 from protocol.interfaces import attitude_into, leg_pressure_into, leg_state_into, valve_command_values
 from protocol.nodes import CONTROLLER_NODE, IMU_NODE, SENDER_OF_NODE, rig_nodes
 from protocol.outbox import Outbox
@@ -408,7 +409,17 @@ class ControllerLoop:
                  f"{[round(r, 2) for r in s.residual_ratio.tolist()]}, missing in a row "
                  f"{s.missing_in_row.tolist()}, rejected in a row {s.rejected_in_row.tolist()}, last LEG_STATE "
                  f"status {last}, overruns in a row {s.overruns_in_row}, this cycle "
-                 f"{1e6 * (self.clock() - sync_time):.0f} us after its SYNC")
+                 f"{1e6 * (self.clock() - sync_time):.0f} us after its SYNC{self._supply_note(s)}")
+
+    @staticmethod
+    def _supply_note(s) -> str:
+        """What a SUPPLY_PRESSURE is measured against, in the operator's units."""
+        if s.fault is not Fault.SUPPLY_PRESSURE:
+            return ""
+        if math.isnan(s.supply_measured_pa):
+            return "; the P-port transducers' samples off the model's flow band while moving"
+        return (f"; supply measured {s.supply_measured_pa / BAR:.1f} bar at rest (the P-port transducers' mean), "
+                f"configured {s.supply_configured_pa / BAR:.1f} bar ([hydraulic_model] supply_pressure_bar)")
 
     # -- lifecycle ------------------------------------------------------------------------
     def activate(self, should_stop=lambda: False) -> None:

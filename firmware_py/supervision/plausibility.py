@@ -199,3 +199,57 @@ class SupplyPressure:
         count, lone, self.cycle_peak = supply_step(ps_pa, fresh, self.tank_pa, self.drop_pa, self.flow_spread,
                                                    self.ratio, self.run, self.legs_needed)
         return count >= self.legs_needed, lone
+
+
+@njit(cache=True)
+def supply_at_rest_step(ps, fresh, nominal_pa, tolerance_pa, latest, seen, run, legs_needed):
+    """Judge the valves' P-port samples while no leg draws flow: each leg's latest sample
+    against the configured supply. Returns (legs whose latest sample is more than
+    `tolerance_pa` off, the first leg off for two samples in a row or -1 when fewer than
+    `legs_needed` are off, the mean of the latest samples (NaN before any), the largest
+    |off| / tolerance)."""
+    count, lone, total, heard, peak = 0, -1, 0.0, 0, 0.0
+    for i in range(ps.shape[0]):
+        if fresh[i]:
+            latest[i] = ps[i]
+            seen[i] = True
+            run[i] = run[i] + 1 if abs(ps[i] - nominal_pa) > tolerance_pa else 0
+        if not seen[i]:
+            continue
+        heard += 1
+        total += latest[i]
+        off = abs(latest[i] - nominal_pa) / tolerance_pa
+        peak = max(peak, off)
+        if off > 1.0:
+            count += 1
+            if run[i] >= 2 and lone < 0:
+                lone = i
+    return count, (lone if count < legs_needed else -1), (total / heard if heard else math.nan), peak
+
+
+class SupplyAtRest:
+    """The power unit's pressure while the platform holds (before a move, between moves): at
+    rest the valves draw no flow and each P-port transducer reads the set pressure itself, so
+    the supply the model assumes is checked directly, far tighter than the flow band a moving
+    leg allows. `update` returns (supply off, the leg whose transducer alone disagrees or -1);
+    `measured_pa` is the mean of the legs' latest samples (NaN while none is at rest). `reset()` when a move starts (its
+    samples are not at rest)."""
+
+    def __init__(self, n_legs: int, nominal_pa: float, tolerance_pa: float, legs_needed: int):
+        self.nominal_pa, self.tolerance_pa = nominal_pa, tolerance_pa
+        self.legs_needed = min(legs_needed, n_legs)
+        self.latest = np.zeros(n_legs)
+        self.seen = np.zeros(n_legs, dtype=np.bool_)
+        self.run = np.zeros(n_legs, dtype=np.int64)
+        self.measured_pa = math.nan
+        self.peak = 0.0
+
+    def reset(self) -> None:
+        self.seen.fill(False)
+        self.run.fill(0)
+        self.measured_pa = math.nan
+
+    def update(self, ps_pa: np.ndarray, fresh: np.ndarray) -> tuple[bool, int]:
+        count, lone, self.measured_pa, self.peak = supply_at_rest_step(
+            ps_pa, fresh, self.nominal_pa, self.tolerance_pa, self.latest, self.seen, self.run, self.legs_needed)
+        return count >= self.legs_needed, lone
