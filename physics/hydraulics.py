@@ -301,3 +301,47 @@ def holding_pressures(force_n: float, ps: float, hp: np.ndarray) -> tuple[float,
     load_pressure = force_n / hp[HP_AREA_A]
     pb = (ps + hp[HP_TANK] - load_pressure) / (1.0 + alpha)
     return load_pressure + alpha * pb, pb
+
+
+def force_capacity(velocity_m_s: float, ps: float, hp: np.ndarray) -> tuple[float, float]:
+    """The hydraulic force range (eq. 4.15) a leg gives at piston velocity `velocity_m_s`
+    with its valve fully open each way: the chambers' steady state (eq. 4.7-4.8, both rates
+    0, the leakage included) at spool +1 (the largest force, extending positive) and at -1
+    (the smallest). NaN for a side on which that opening cannot move the piston so fast (a
+    chamber would have to leave [cavitation floor, supply]). Steady pressures do not depend
+    on the chamber volumes, so this holds at any stroke."""
+    from scipy.optimize import fsolve
+    area, alpha = hp[HP_AREA_A], hp[HP_ALPHA]
+
+    def side(spool: float) -> float:
+        def residual(q):
+            pa, pb = q[0] * BAR, q[1] * BAR
+            qa, qb, _, _ = valve_flows(spool, pa, pb, ps, hp)
+            leak = (hp[HP_LEAK] + hp[HP_SEAL_LEAK]) * (pa - pb)
+            return [(qa - leak - area * velocity_m_s) * 1e6 / area,
+                    (qb + leak + alpha * area * velocity_m_s) * 1e6 / area]
+
+        # the side the open spool pressurises starts near the supply, the other near the tank
+        start = [0.9 * ps / BAR, 0.1 * ps / BAR] if spool > 0.0 else [0.1 * ps / BAR, 0.9 * ps / BAR]
+        solution, _, ier, _ = fsolve(residual, start, full_output=True, xtol=1e-12)
+        pa, pb = solution[0] * BAR, solution[1] * BAR
+        inside = hp[HP_P_MIN] - 1.0 <= min(pa, pb) and max(pa, pb) <= ps + 1.0
+        if ier != 1 or max(abs(r) for r in residual(solution)) > 1e-6 or not inside:
+            return math.nan
+        return float(piston_force(pa, pb, hp))
+
+    return side(1.0), side(-1.0)
+
+
+def capacity_table(velocities_m_s: np.ndarray, ps: float, hp: np.ndarray) -> np.ndarray:
+    """`force_capacity` over a velocity grid: (len, 2) of (largest, smallest) force [N]. A
+    leg braking (pushing while it retracts, pulling while it extends) drives oil back toward
+    the supply; the relief above it is not modelled, so that side is taken as at rest (a lower
+    bound). What stays NaN is a speed the open valve cannot reach."""
+    table = np.array([force_capacity(float(v), ps, hp) for v in velocities_m_s])
+    push_rest, pull_rest = force_capacity(0.0, ps, hp)
+    braking_push = (velocities_m_s < 0.0) & np.isnan(table[:, 0])
+    braking_pull = (velocities_m_s > 0.0) & np.isnan(table[:, 1])
+    table[braking_push, 0] = push_rest
+    table[braking_pull, 1] = pull_rest
+    return table

@@ -4,6 +4,8 @@
     hydrapod design schedule [--plants SRC] [--out FILE] [--ki-scale] [--kp-fraction] [--ti-fraction] [--json]
     hydrapod design modes [--pose X,Y,Z,ROLL,PITCH,YAW] [--payload-kg M] [--supply-bar P] [--along] [--sealed]
                           [--closed-loop] [--json] [--plot DIR]
+    hydrapod design capacity [--movements M ...] [--payload-kg M ...] [--supply-bar P ...] [--time-scale S]
+                             [--config FILE] [--json]
     hydrapod design computed-torque [--out FILE] [--supply-bar P] [--rigs LIST] [--samples N] [--refine N]
                                     [--seed S] [--min-damping Z] [--workers N] [--bandwidth-hz] [--damping]
                                     [--integral-fraction] [--velocity-gain] [--testbench-velocity-gain]
@@ -223,6 +225,17 @@ def _computed_torque(args) -> int:
     return 0
 
 
+def _capacity(args) -> int:
+    from firmware_py.config import load_config
+    from hil.design.capacity import format_utilisation, utilisation
+    cfg = load_config(args.config)
+    supplies = args.supply_bar or [cfg.hydraulic_model.supply_pressure_pa / BAR]
+    rows = [utilisation(cfg, name, payload, supply, args.time_scale)
+            for name in args.movements for payload in args.payload_kg for supply in supplies]
+    print(json.dumps([r.as_dict() for r in rows], indent=1) if args.json else format_utilisation(rows))
+    return 0
+
+
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     design = sub.add_parser("design", help="design tools: robustness of the PI, gain schedule (chapter 7), "
                                            "the hexapod's modes")
@@ -308,3 +321,16 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="low-pass of the measured twist")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_computed_torque)
+
+    p = design_sub.add_parser("capacity", help="what the legs can give against what the thesis's movements ask: "
+                                               "the utilisation at a time scale, and the time scale they need")
+    p.add_argument("--movements", nargs="+", choices=("circle", "diagonal"), default=["circle", "diagonal"])
+    p.add_argument("--payload-kg", nargs="+", type=number_in_range(float, 0.0, 50.0), default=[0.0],
+                   help="payloads on the platform (default 0)")
+    p.add_argument("--supply-bar", nargs="+", type=number_in_range(float, 1.0, 400.0), default=None,
+                   help="power unit pressures (default: the config's [hydraulic_model] supply_pressure_bar)")
+    p.add_argument("--time-scale", type=number_in_range(float, 0.25, 8.0), default=1.0,
+                   help="x the thesis's ta, tm (default 1)")
+    p.add_argument("--config", metavar="FILE", default=None, help="controller TOML (its models, geometry)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_capacity)
