@@ -73,6 +73,8 @@ class Counters:
     kicks: int = 0                    # EMU_KICK pushes applied to the platform
     plant_unstable: int = 0           # periods whose physics had diverged (MuJoCo reset, or not finite)
     plant_unstable_first_s: float | None = None     # the simulated time of the first of them
+    joint_limits: int = 0             # periods that ended with a universal joint on its stop
+    joint_limits_first_s: float | None = None       # the simulated time of the first of them
     # every SYNC-watchdog trip: when (epoch s), and how late this process woke for it (ms): a
     # real node's hardware timer fires on time; ours is this process's wake-up (hil faults, case 1)
     sync_timeouts: list = field(default_factory=list)
@@ -82,7 +84,8 @@ class Counters:
         return {k: getattr(self, k) for k in ("syncs", "frames_in", "frames_out", "e2e_errors",
                                               "sync_sequence_errors", "valve_faults", "emergencies",
                                               "unknown_frames", "host_stalls", "free_run_steps",
-                                              "kicks", "plant_unstable", "plant_unstable_first_s")} | {
+                                              "kicks", "plant_unstable", "plant_unstable_first_s", "joint_limits",
+                                              "joint_limits_first_s")} | {
             "host_stall_max_ms": round(self.host_stall_max_s * 1e3, 3), "injected": dict(injected),
             "sync_timeouts": list(self.sync_timeouts), "fault_onsets": list(self.fault_onsets)}
 
@@ -469,8 +472,15 @@ class Emulator:
         self._send_truth(self.sync_counter)
 
     def _check_plant(self) -> None:
-        """Say once, on stderr, that the emulated physics diverged; count every such period."""
+        """Say once, on stderr, that the emulated physics diverged, or that the platform went
+        where the rig's joints stop it; count every such period."""
         rig, counters = self.rig, self.counters
+        if rig.joint_limit_periods != counters.joint_limits:
+            if counters.joint_limits == 0:
+                print(f"emulator: a universal joint reached its stop at t = {rig.first_joint_limit_s:.3f} s (the "
+                      "platform where the rig's joints stop it)", file=sys.stderr, flush=True)
+            counters.joint_limits = rig.joint_limit_periods
+            counters.joint_limits_first_s = rig.first_joint_limit_s
         if rig.unstable_periods == counters.plant_unstable:
             return
         if counters.plant_unstable == 0:

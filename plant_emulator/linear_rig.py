@@ -66,6 +66,8 @@ class LinearRig:
         self.supply_pressure_pa = supply_pa
         self.time_s = 0.0
         self.unstable_periods = 0
+        self.joint_limit_periods = 0
+        self.first_joint_limit_s = None
         self.first_unstable_s = None
         self._steps: dict[float, tuple[np.ndarray, np.ndarray, float]] = {}
 

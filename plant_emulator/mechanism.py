@@ -15,6 +15,7 @@ positions, Jacobians, mass matrices, bias forces and constraint Jacobians are Mu
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import mujoco
@@ -42,6 +43,9 @@ def _frame(u3: np.ndarray, u1: np.ndarray) -> np.ndarray:
     return np.column_stack([u4, u2, u3])
 
 
+JOINT_LIMIT_MARGIN_RAD = math.radians(0.5)    # a hinge this close to its range is on its stop
+
+
 def _quat_of(rot: np.ndarray) -> np.ndarray:
     quat = np.empty(4)
     mujoco.mju_mat2Quat(quat, rot.ravel())
@@ -64,7 +68,11 @@ class LegHome:
 
 
 def build_mjcf(geometry: RigGeometry, timestep_s: float = TIMESTEP_S,
-               stroke_limits: bool = False) -> tuple[str, list[LegHome]]:
+               joint_limits: bool = False) -> tuple[str, list[LegHome]]:
+    """The 6-UPS as MJCF, and each leg's home. `joint_limits`: the rig's end stops (the
+    stroke) and universal joints (each hinge within the joint's cone of the vertical leg:
+    the box of the two hinges keeps the leg inside the cone, reaching it on the box's edges),
+    so a lost platform stops where the rig's would instead of folding through its base."""
     home = geometry.home_position_m
     legs_home = []
     bodies = []
@@ -78,12 +86,17 @@ def build_mjcf(geometry: RigGeometry, timestep_s: float = TIMESTEP_S,
         # end stops of the stroke, 1 mm beyond it so a leg exactly at an end is not on its stop
         slide_low = geometry.leg_min_m - length - STOP_MARGIN_M
         slide_high = geometry.leg_max_m - length + STOP_MARGIN_M
-        slide_range = f' range="{slide_low:.9g} {slide_high:.9g}"' if stroke_limits else ""
+        slide_range = f' range="{slide_low:.9g} {slide_high:.9g}"' if joint_limits else ""
+        hinge_ranges = ("", "")
+        if joint_limits:
+            centre = vertical_hinges(frame, geometry.universal_axis[i])
+            cone = geometry.universal_cone_rad
+            hinge_ranges = tuple(f' range="{c - cone:.9g} {c + cone:.9g}"' for c in centre)
         cyl, rod = geometry.cylinder, geometry.rod
         bodies.append(f"""
     <body name="cylinder{i}" pos="{_fmt(anchor)}" quat="{_fmt(_quat_of(frame))}">
-      <joint name="u1_{i}" type="hinge" axis="{_fmt(axis1_local)}"/>
-      <joint name="u2_{i}" type="hinge" axis="0 1 0"/>
+      <joint name="u1_{i}" type="hinge" axis="{_fmt(axis1_local)}"{hinge_ranges[0]}/>
+      <joint name="u2_{i}" type="hinge" axis="0 1 0"{hinge_ranges[1]}/>
       <inertial pos="{_fmt(cyl.com_m)}" mass="{cyl.mass_kg:.12g}" fullinertia="{_full_inertia(cyl.inertia_kg_m2)}"/>
       <geom type="capsule" fromto="0 0 0 0 0 {geometry.cylinder_length_m:.6g}"
             size="{geometry.cylinder_radius_m:.6g}" mass="0"/>
@@ -127,9 +140,9 @@ def build_mjcf(geometry: RigGeometry, timestep_s: float = TIMESTEP_S,
 class Mechanism:
     """The MuJoCo 6-UPS: set a platform state, step with actuator forces, inverse dynamics."""
 
-    def __init__(self, geometry: RigGeometry, timestep_s: float = TIMESTEP_S, stroke_limits: bool = False):
+    def __init__(self, geometry: RigGeometry, timestep_s: float = TIMESTEP_S, joint_limits: bool = False):
         self.geometry = geometry
-        self.xml, self.legs_home = build_mjcf(geometry, timestep_s, stroke_limits)
+        self.xml, self.legs_home = build_mjcf(geometry, timestep_s, joint_limits)
         self.model = mujoco.MjModel.from_xml_string(self.xml)
         self.data = mujoco.MjData(self.model)
         m = self.model
@@ -145,6 +158,11 @@ class Mechanism:
         self.slide_dof = np.array([m.jnt_dofadr[joint(f"slide{i}")] for i in range(6)])
         self.u1_dof = np.array([m.jnt_dofadr[joint(f"u1_{i}")] for i in range(6)])
         self.u2_dof = np.array([m.jnt_dofadr[joint(f"u2_{i}")] for i in range(6)])
+        # the hinges' ranges (limited: the rig's universal joints), each leg's u1 then u2
+        self.hinge_qpos = np.concatenate([self.u1_qpos, self.u2_qpos])
+        hinges = np.concatenate([[joint(f"u1_{i}") for i in range(6)], [joint(f"u2_{i}") for i in range(6)]])
+        self.hinge_limited = m.jnt_limited[hinges].astype(bool)
+        self.hinge_range = m.jnt_range[hinges].copy()
         self.rod_site = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f"rod_end{i}") for i in range(6)])
         self.platform_site = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f"platform_joint{i}")
                                        for i in range(6)])
@@ -162,17 +180,15 @@ class Mechanism:
         for i, leg in enumerate(self.legs_home):
             top = np.asarray(position_m) + rot @ self.geometry.platform_anchor_m[i]
             length = np.linalg.norm(top - leg.anchor)
-            target = leg.frame.T @ ((top - leg.anchor) / length)    # leg axis in the home link frame
-            n = leg.frame.T @ self.geometry.universal_axis[i]         # first hinge axis, same frame
-            # Rot(n, th1) Rot(y, th2) e_z = target; rotating about n keeps the component
-            # along n, so th2 comes first, then th1 turns v = Rot(y, th2) e_z onto target.
-            th2 = _solve_second_hinge(n, target)
-            v = np.array([np.sin(th2), 0.0, np.cos(th2)])
-            vp = v - (n @ v) * n
-            tp = target - (n @ target) * n
-            th1 = np.arctan2(n @ np.cross(vp, tp), vp @ tp)
+            th1, th2 = hinge_angles(leg.frame, self.geometry.universal_axis[i], (top - leg.anchor) / length)
             out[i] = (th1, th2, length - leg.length_m)
         return out
+
+    def at_joint_limit(self, margin_rad: float = JOINT_LIMIT_MARGIN_RAD) -> bool:
+        """A universal joint on (within `margin_rad` of) its cone."""
+        q = self.data.qpos[self.hinge_qpos]
+        low, high = self.hinge_range[:, 0], self.hinge_range[:, 1]
+        return bool(np.any(self.hinge_limited & ((q <= low + margin_rad) | (q >= high - margin_rad))))
 
     def set_pose(self, position_m, quat) -> None:
         """Put the mechanism at a platform pose with the legs closed, at rest."""
@@ -241,6 +257,25 @@ class Mechanism:
         solution, *_ = np.linalg.lstsq(system, tree, rcond=None)
         residual = np.linalg.norm(system @ solution - tree) / max(np.linalg.norm(tree), 1e-12)
         return solution[:6], float(residual)
+
+
+def hinge_angles(frame: np.ndarray, first_axis: np.ndarray, direction: np.ndarray) -> tuple[float, float]:
+    """The universal joint's two hinge angles that point a leg (home link `frame`, first hinge
+    `first_axis` in the base frame) along the unit `direction` (base frame)."""
+    n = frame.T @ first_axis
+    target = frame.T @ direction
+    # Rot(n, th1) Rot(y, th2) e_z = target; rotating about n keeps the component along n, so
+    # th2 comes first, then th1 turns v = Rot(y, th2) e_z onto target
+    th2 = _solve_second_hinge(n, target)
+    v = np.array([np.sin(th2), 0.0, np.cos(th2)])
+    vp = v - (n @ v) * n
+    tp = target - (n @ target) * n
+    return float(np.arctan2(n @ np.cross(vp, tp), vp @ tp)), th2
+
+
+def vertical_hinges(frame: np.ndarray, first_axis: np.ndarray) -> tuple[float, float]:
+    """The hinge angles of the leg standing vertical: the centre of the joint's cone."""
+    return hinge_angles(frame, first_axis, np.array([0.0, 0.0, 1.0]))
 
 
 def _solve_second_hinge(n: np.ndarray, target: np.ndarray) -> float:

@@ -5,6 +5,7 @@ mistake in either reading shows up as a disagreement in HIL rather than being sh
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -42,6 +43,7 @@ class RigGeometry:
     platform: Body
     cylinder: Body
     rod: Body
+    universal_cone_rad: float = math.pi / 2   # each universal joint's half-aperture about the base normal
     gravity_m_s2: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -GRAVITY_M_S2]))
 
     @property
@@ -122,4 +124,5 @@ def read_rig_geometry(path: str | Path | None = None) -> RigGeometry:
         rod_radius_m=_value(data, source, "links", "rod_diameter_mm") * MM / 2.0,
         platform=_body(data, source, "platform"), cylinder=_body(data, source, "cylinder"),
         rod=_body(data, source, "rod"),
+        universal_cone_rad=math.radians(_value(data, source, "joints", "universal_cone_deg")),
     )

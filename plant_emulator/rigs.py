@@ -164,6 +164,8 @@ class _RigBase:
         self.time_s = 0.0
         self.unstable_periods = 0                  # advances after which the physics was not finite
         self.first_unstable_s: float | None = None
+        self.joint_limit_periods = 0               # advances that ended with a joint on its stop (hexapod)
+        self.first_joint_limit_s: float | None = None
 
     def _note_stability(self, unstable: bool) -> None:
         """Count an advance whose physics diverged (what follows it is not physics)."""
@@ -264,7 +266,7 @@ class HexapodRig(_RigBase):
     def __init__(self, cfg: EmulatorConfig, geometry: RigGeometry | None = None):
         super().__init__(cfg)
         self.geometry = geometry or read_rig_geometry()
-        self.mechanism = Mechanism(self.geometry, timestep_s=cfg.hexapod.mujoco_timestep_s, stroke_limits=True)
+        self.mechanism = Mechanism(self.geometry, timestep_s=cfg.hexapod.mujoco_timestep_s, joint_limits=True)
         mech, model = self.mechanism, self.mechanism.model
         self.home_length_m = np.array([leg.length_m for leg in mech.legs_home])
         self._cylinder_body = model.body_parentid[model.site_bodyid[mech.rod_site]]
@@ -345,6 +347,10 @@ class HexapodRig(_RigBase):
             if data.warning[kind].number:
                 diverged, data.warning[kind].number = True, 0
         self._note_stability(diverged)
+        if mech.at_joint_limit():
+            self.joint_limit_periods += 1
+            if self.first_joint_limit_s is None:
+                self.first_joint_limit_s = self.time_s
 
     def warm_up(self) -> None:
         """As TestbenchRig.warm_up: the kernels loaded on scratch copies, the rig untouched."""

@@ -99,13 +99,13 @@ def _peak(cfg: ControllerConfig, capacity: LegCapacity, name: str, payload_kg: f
 
 
 def utilisation(cfg: ControllerConfig, name: str, payload_kg: float = 0.0, supply_bar: float | None = None,
-                time_scale: float = 1.0) -> Utilisation:
-    """The movement's utilisation at `time_scale`, and the time scale at which it is 1."""
+                time_scale: float = 1.0, needed: bool = True) -> Utilisation:
+    """The movement's utilisation at `time_scale`, and (`needed`) the time scale at which it is 1."""
     supply_pa = cfg.hydraulic_model.supply_pressure_pa if supply_bar is None else supply_bar * 1e5
     capacity = LegCapacity.of(cfg, supply_pa)
     peak, at_s, leg, force, velocity = _peak(cfg, capacity, name, payload_kg, time_scale)
     return Utilisation(name, payload_kg, supply_pa / 1e5, time_scale, peak, at_s, leg + 1, force, velocity,
-                       needed_scale(cfg, capacity, name, payload_kg))
+                       needed_scale(cfg, capacity, name, payload_kg) if needed else math.nan)
 
 
 def needed_scale(cfg: ControllerConfig, capacity: LegCapacity, name: str, payload_kg: float,

@@ -13,9 +13,10 @@ from tests.support.cli import hydrapod
 
 def test_the_utilisation_falls_with_the_time_scale_and_is_one_at_the_needed_scale():
     cfg = load_config()
-    fast, slow = (utilisation(cfg, "diagonal", 0.0, 25.0, scale) for scale in (1.0, 2.0))
+    fast = utilisation(cfg, "diagonal", 0.0, 25.0, 1.0)
+    slow = utilisation(cfg, "diagonal", 0.0, 25.0, 2.0, needed=False)
     assert fast.utilisation > 1.0 > slow.utilisation
-    at_needed = utilisation(cfg, "diagonal", 0.0, 25.0, fast.needed_scale)
+    at_needed = utilisation(cfg, "diagonal", 0.0, 25.0, fast.needed_scale, needed=False)
     assert at_needed.utilisation == pytest.approx(1.0, abs=0.02)
 
 
