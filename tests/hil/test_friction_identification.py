@@ -22,7 +22,7 @@ from hil.design.friction_fit import (
 from hil.scenarios.friction import FINE_SENSOR_MM
 from physics import lugre
 from physics.constants import GRAVITY_M_S2, MM
-from tests.support.cli import hydrapod
+from tests.support.cli import hydrapod, reanalysed
 
 # Table 6.1 (the emulator's seal) in SI
 TRUE = {"+": SteadySide(12.1994, 10.6468, 10.0 * MM, 0.1316 / MM),
@@ -96,10 +96,7 @@ def test_friction_steady_recovers_the_emulators_map_through_the_bus(steady_run):
 @STEADY_GROUP
 def test_friction_steady_analysis_from_the_log_alone(steady_run, tmp_path):
     out, _ = steady_run
-    proc = hydrapod("hil", "analyze", out / "run.blf", "--scenario", "friction-steady", "--out", tmp_path, "--json")
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    again = json.loads((tmp_path / "metrics.json").read_text())
-    first = json.loads((out / "metrics.json").read_text())
+    again, first = reanalysed(out, "friction-steady", tmp_path)
     assert again["metrics"]["fits"] == first["metrics"]["fits"]
 
 

@@ -38,23 +38,25 @@ def payload_signals(codec):
     return codec.signals[2:] if codec.e2e else codec.signals
 
 
+def si_values(codec, physical):
+    """A values array with each payload signal at its physical value (DBC units) in SI."""
+    v = codec.new_values()
+    for s, x in zip(payload_signals(codec), physical):
+        v[codec.index[s.name]] = x * s.to_si
+    return v
+
+
 def raw_grid_values(codec):
     """SI values that sit exactly on the raw grid, within the DBC range."""
     def build(raws):
-        v = codec.new_values()
-        for s, raw in zip(payload_signals(codec), raws):
-            v[codec.index[s.name]] = (raw * s.scale + s.offset) * s.to_si
-        return v
+        return si_values(codec, [raw * s.scale + s.offset for s, raw in zip(payload_signals(codec), raws)])
     return st.tuples(*(st.integers(s.raw_min, s.raw_max) for s in payload_signals(codec))).map(build)
 
 
 def any_in_range_values(codec):
     """Arbitrary SI floats within the DBC range (between grid points)."""
     def build(xs):
-        v = codec.new_values()
-        for s, x in zip(payload_signals(codec), xs):
-            v[codec.index[s.name]] = x * s.to_si
-        return v
+        return si_values(codec, xs)
     return st.tuples(*(st.floats(s.raw_min * s.scale + s.offset, s.raw_max * s.scale + s.offset,
                                  allow_nan=False) for s in payload_signals(codec))).map(build)
 
@@ -80,10 +82,7 @@ def test_roundtrip_within_half_an_lsb(name):
 def beyond_range_values(codec):
     """Arbitrary SI floats up to twice each signal's range beyond either end (saturating)."""
     def build(xs):
-        v = codec.new_values()
-        for s, x in zip(payload_signals(codec), xs):
-            v[codec.index[s.name]] = x * s.to_si
-        return v
+        return si_values(codec, xs)
     spans = [(s.raw_min * s.scale + s.offset, s.raw_max * s.scale + s.offset) for s in payload_signals(codec)]
     return st.tuples(*(st.floats(lo - 2 * (hi - lo) - 1, hi + 2 * (hi - lo) + 1, allow_nan=False)
                        for lo, hi in spans)).map(build)

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 from dataclasses import dataclass
+from pathlib import Path
 
 from hil.cli import main
 
@@ -25,3 +27,10 @@ def hydrapod(*args: str) -> Result:
         except SystemExit as stop:            # argparse's one-line errors exit 2
             code = stop.code if isinstance(stop.code, int) else 1
     return Result(code, out.getvalue(), err.getvalue())
+
+
+def reanalysed(out: Path, scenario: str, tmp_path: Path) -> tuple[dict, dict]:
+    """`hydrapod hil analyze` on a run's log alone: (its metrics.json, the run's own)."""
+    proc = hydrapod("hil", "analyze", out / "run.blf", "--scenario", scenario, "--out", tmp_path, "--json")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return json.loads((tmp_path / "metrics.json").read_text()), json.loads((out / "metrics.json").read_text())
