@@ -248,6 +248,14 @@ class ValveMap(Section):
     spool: np.ndarray = table("spool_pct", si=0.01)
     pressure_a_pa: np.ndarray = table("pressure_a_bar", si=BAR)
     pressure_b_pa: np.ndarray = table("pressure_b_bar", si=BAR)
+    supply_pressure_pa: float = key(hy.SUPPLY_PRESSURE)       # the supply the map was derived at
+
+    def at_supply(self, supply_pa: float) -> tuple[np.ndarray, ...]:
+        """(force_n, velocity_m_s, spool, pressure_a_pa, pressure_b_pa) at another supply, by
+        `hydraulics.supply_similarity`: the same spools, the axes and pressures scaled."""
+        force, velocity = hy.supply_similarity(supply_pa, self.supply_pressure_pa)
+        return (self.force_n * force, self.velocity_m_s * velocity, self.spool, self.pressure_a_pa * force,
+                self.pressure_b_pa * force)
 
     def validate(self, where, error) -> None:
         for name, axis in (("force_n", self.force_n), ("velocity_mm_s", self.velocity_m_s)):
@@ -308,6 +316,8 @@ class Limits(Section):
     velocity_max_m_s: float = key("velocity_max_mm_s", 1.0, 1e4, si=MM)
     force_max_n: float = key("force_max_n", 1.0, 1e6)
     tracking_error_max_m: float = key("tracking_error_max_mm", 0.1, 1000.0, si=MM)
+    platform_error_max_m: float = key("platform_error_max_mm", 0.1, 1000.0, si=MM)
+    platform_angle_max_rad: float = key("platform_angle_max_deg", 0.01, 90.0, si=math.pi / 180.0)
     spool_max: float = key("spool_max_pct", 1.0, 100.0, per=PCT)
 
 
@@ -338,7 +348,8 @@ class Waypoints(Section):
     queue: int = key("queue", 1, 255)
     velocity_max_m_s: float = key("velocity_max_mm_s", 0.1, 1e4, si=MM)
     step_max_m: float = key("step_max_mm", 0.0, 300.0, si=MM)
-    force_max_n: float = key("force_max_n", 1.0, 1e6)
+    capacity_share: float = key("capacity_share_pct", 10.0, 100.0, per=PCT)
+    lag_max_m: float = key("lag_max_mm", 0.01, 100.0, si=MM)
     path_samples: int = key("path_samples", 2, 1000)
 
 

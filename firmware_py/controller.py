@@ -41,7 +41,7 @@ from firmware_py.supervision.plausibility import FrozenLoadCells, MotionPlausibi
 from firmware_py.supervision.residuals import ActuatorResiduals, ChamberPrediction, SpoolResidual, sample_floor_pa
 from firmware_py.supervision.stopping import ControlledStop
 from firmware_py.supervision.supervisor import ACTIVE, LATCHED, Action, Supervisor
-from firmware_py.supervision.waypoints import WaypointQueue
+from firmware_py.supervision.waypoints import Chain, WaypointQueue
 from physics import hydraulics as hy
 from physics.actuator import piston_force
 from physics.constants import BAR
@@ -159,6 +159,7 @@ class Controller:
         self.load_cells.update(meas.force_n, meas.fresh)
         self.limits.check_always(self.spool_cmd, self.joint.kalman_x, meas.force_n)
         self.limits.check_active(meas.position_m, self.joint.velocity_estimate, self.joint.error_m)
+        rig.pose_error_exceeds(self.joint.error_m)
         self.plausibility.update(self.spool_cmd, meas.position_m)
         self.residuals.start(meas.position_m, meas.pressure_valid, meas.pa_pa, meas.pb_pa)
         self.residuals.update(self.spool_applied, meas.fresh, meas.position_m, meas.force_n, rig.gravity_axial,
@@ -174,7 +175,8 @@ class Controller:
         ref.play(through_points(np.array([rig.home_strokes, rig.home_strokes + 1e-3]), 0.1, 0.2), [0], 0)
         ref.advance(1)
         ref.hold(np.zeros(n))
-        self.waypoints.check(rig.home_strokes, rig.home_pose, (0.0, 0.0, 0.0), 1.0, 0.2, False, 0.0)   # a commit's
+        self.waypoints.check(Chain([rig.home_strokes], [0.2], [1.0]), rig.home_pose, (0.0, 0.0, 0.0), False,
+                             0.0)   # a commit's
         rig.warm_up(ref)
         # the cycle's own arrays: a view of another layout would compile a new signature
         law = self.laws[COMPUTED_TORQUE]
@@ -520,6 +522,8 @@ class Controller:
             self.plausibility.reset()
             return
         sup.fault(self.limits.check_active(meas.position_m, joint.velocity_estimate, joint.error_m))
+        if self.rig.pose_error_exceeds(joint.error_m):
+            sup.fault(Fault.TRACKING_ERROR)
         if self.plausibility.update(self.spool_cmd, meas.position_m):
             sup.fault(Fault.MOTION_PLAUSIBILITY)
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 from collections import deque
 from enum import IntEnum
 
-from protocol.enums import AckKind, Command
+from protocol.enums import AckKind, Command, time_scale_to_wire
 
 IMMEDIATE_COMMANDS = (int(Command.ESTOP), int(Command.DISABLE))
 COMMIT_MAX_WAIT_CYCLES = 50      # a commit waits for a cycle with room at most this long, then runs
@@ -35,7 +35,8 @@ class Frame(IntEnum):
 class HostLink:
     def __init__(self):
         self.queue: deque[tuple] = deque()              # (Frame, values)
-        self.acks: deque[tuple[int, int, int]] = deque()  # (AckKind, SEQ, result) to send
+        # (AckKind, SEQ, result, CTRL_ACK.TIME_SCALE as sent: 0 where it does not apply)
+        self.acks: deque[tuple[int, int, int, float]] = deque()
         self.commit_waited = 0                           # cycles the front commit has waited for room
 
     # -- what the loop decoded ------------------------------------------------------------
@@ -80,15 +81,17 @@ class HostLink:
     def _carry_out(self, controller, frame: Frame, values: tuple) -> None:
         if frame is Frame.COMMAND:
             command, argument, seq = values
-            self.acks.append((AckKind.HOST_CMD, seq, int(controller.host_command(command, argument))))
+            self.acks.append((AckKind.HOST_CMD, seq, int(controller.host_command(command, argument)), 0.0))
         elif frame is Frame.POSITION:
             controller.stage_position(*values)
         elif frame is Frame.ROTATION:
             controller.stage_rotation(*values)
         elif frame is Frame.COMMIT:
             tag, seq, segment_time, accel_time, flags = values
-            self.acks.append((AckKind.WAYPOINT, seq,
-                              int(controller.waypoint_commit(tag, seq, segment_time, accel_time, flags))))
+            result = int(controller.waypoint_commit(tag, seq, segment_time, accel_time, flags))
+            scale = time_scale_to_wire(controller.waypoints.time_scale_needed)
+            self.acks.append((AckKind.WAYPOINT, seq, result, scale))
         else:
             mode, seq, valve_v, force_n, duration_s = values
-            self.acks.append((AckKind.TEST, seq, int(controller.test_command(mode, valve_v, force_n, duration_s))))
+            self.acks.append((AckKind.TEST, seq, int(controller.test_command(mode, valve_v, force_n, duration_s)),
+                              0.0))

@@ -13,10 +13,12 @@ from __future__ import annotations
 import numpy as np
 
 from firmware_py.config import ControllerConfig
+from firmware_py.mechanics.dynamics import gauss_solve_into
 from firmware_py.mechanics.geometry import Geometry, default_geometry
 from firmware_py.motion_control.computed_torque import ComputedTorque, LegComputedTorque
 from firmware_py.motion_control.excitation import IdentificationSignal
-from firmware_py.supervision.monitors import all_set
+from firmware_py.supervision.capacity import leg_capacity
+from firmware_py.supervision.monitors import all_set, pose_beyond
 from firmware_py.supervision.plausibility import AttitudeCrossCheck
 from firmware_py.supervision.waypoints import HexapodCheck, TestbenchCheck
 from physics.constants import GRAVITY_M_S2
@@ -47,7 +49,7 @@ class TestbenchModel:
         self.tau_n = np.zeros(1)
         self.home_pose = (0.0, 0.0, float(self.home_strokes[0]))
         self.check = TestbenchCheck(cfg.waypoints, cfg.limits.stroke_margin_m, cfg.actuator.moving_mass_kg,
-                                    cfg.actuator.stroke_m)
+                                    cfg.actuator.stroke_m, leg_capacity(cfg))
         self.computed_torque = LegComputedTorque(cfg, 1, period_s)
         # its slide holds no static load: without the residuals a tight motion window stands in
         # for them; with them on the supervisor's backstop (at 20 bar it creeps out of a stick at 5 %)
@@ -61,6 +63,10 @@ class TestbenchModel:
     def estimate(self, meas) -> Fault:
         """Nothing to estimate beyond the leg: its stroke is the measurement."""
         return Fault.NONE
+
+    def pose_error_exceeds(self, joint_error_m) -> bool:
+        """No platform: the leg's own tracking limit is the bound."""
+        return False
 
     def initialise(self, position_m) -> None:
         """Nothing but the leg's own estimators, which the controller starts."""
@@ -103,12 +109,16 @@ class HexapodModel:
         self.gravity_axial = self.platform.gravity_axial
         self.tau_n = self.platform.force_n
         self.home_pose = tuple(self.geometry.home_position_m)
-        self.check = HexapodCheck(cfg.waypoints, kinematics.dk_tolerance_m, self.geometry)
+        self.check = HexapodCheck(cfg.waypoints, kinematics.dk_tolerance_m, self.geometry, leg_capacity(cfg))
         self.computed_torque = ComputedTorque(cfg, self.geometry, period_s)
         self.plausibility_window = (cfg.plausibility.spool, cfg.plausibility.cycles)
         self.stop_cycles = round(cfg.supervisor.controlled_stop_s / period_s)
         self.attitude_check = AttitudeCrossCheck(cfg.plausibility.attitude_mismatch_rad,
                                                  cfg.plausibility.attitude_mismatch_samples)
+        self.platform_error_max_m = cfg.limits.platform_error_max_m
+        self.platform_angle_max_rad = cfg.limits.platform_angle_max_rad
+        self.pose_error = np.zeros(6)              # Jx^-1 of the legs' errors: the platform's, first order
+        self._lu = np.empty((6, 6))
         self.singularity_ratio_min = kinematics.singularity_ratio_min
         self.dk_failures_fault = kinematics.dk_failures_fault
         self.dk_failures = 0                 # direct kinematics not converged, cycles in a row
@@ -132,6 +142,13 @@ class HexapodModel:
                                                                                       *meas.attitude_rad):
             return Fault.ATTITUDE_MISMATCH
         return Fault.NONE
+
+    def pose_error_exceeds(self, joint_error_m) -> bool:
+        """The platform's pose error, from the legs' by the Jacobian at the measured pose,
+        beyond [limits] platform_error_max_mm or platform_angle_max_deg."""
+        if gauss_solve_into(self.platform.jacobian, joint_error_m, self._lu, self.pose_error, False) == 0.0:
+            return False                     # singular: the singularity check's
+        return pose_beyond(self.pose_error, self.platform_error_max_m, self.platform_angle_max_rad)
 
     def initialise(self, position_m) -> None:
         """The pose and the reference's pose start at the measured strokes."""

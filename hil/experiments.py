@@ -14,6 +14,8 @@ from firmware_py.mechanics.geometry import Geometry
 from firmware_py.mechanics.kinematics import ik_batch
 from firmware_py.mechanics.workspace import MIN_CONDITION_INDEX, check_poses
 from firmware_py.motion_control.trajectory import T_START, JointTrajectory, through_points
+from protocol.codec import CODECS
+from protocol.enums import WaypointFlag
 
 
 def concatenate(parts: list[JointTrajectory]) -> JointTrajectory:
@@ -109,6 +111,40 @@ THESIS_MOVEMENTS = {
 }
 
 
+@dataclass(frozen=True)
+class MovementWaypoint:
+    position_m: np.ndarray
+    segment_time_s: float
+    accel_time_s: float
+    flags: int
+
+
+def movement_waypoints(motion: Motion) -> list[MovementWaypoint]:
+    """The waypoints a host sends for the movement after its return home, as the controller
+    decodes them (position and times at their signals' steps): each part a trajectory of its
+    own, START on its first waypoint (it runs when the previous ends), LAST on its last."""
+    out = []
+    for p, part in enumerate(motion.parts):
+        for k, point in enumerate(part[1:]):
+            flags = (WaypointFlag.START if k == 0 else 0) | (WaypointFlag.LAST if k == len(part) - 2 else 0)
+            out.append(on_the_wire(point, segment_time(motion, p, part[k], point), motion.ta_s, int(flags)))
+    return out
+
+
+def on_the_wire(position_m, segment_time_s: float, accel_time_s: float, flags: int) -> MovementWaypoint:
+    """A waypoint as HOST_WAYPOINT_POS and _TIME carry it."""
+    position, timing = CODECS["HOST_WAYPOINT_POS"], CODECS["HOST_WAYPOINT_TIME"]
+    values = position.new_values()
+    values[[position.index[a] for a in ("X", "Y", "Z")]] = position_m
+    position.quantize_into(values, values)
+    times = timing.new_values()
+    times[timing.index["SEGMENT_TIME"]], times[timing.index["ACCEL_TIME"]] = segment_time_s, accel_time_s
+    timing.quantize_into(times, times)
+    return MovementWaypoint(values[[position.index[a] for a in ("X", "Y", "Z")]],
+                            float(times[timing.index["SEGMENT_TIME"]]), float(times[timing.index["ACCEL_TIME"]]),
+                            flags)
+
+
 def segment_time(motion: Motion, part: int, start, end) -> float:
     """The thesis's tm, except the approach from home (part 0), whose timing the thesis does
     not give: at APPROACH_SPEED_M_S (0.25 s for 200 mm asks more than the actuators give)."""
@@ -121,7 +157,6 @@ def segment_time(motion: Motion, part: int, start, end) -> float:
 # -- the test bench's sine (chapter 7.6.2) ----------------------------------------------------
 SINE_CENTRE_MM, SINE_AMPLITUDE_MM = 150.0, 125.0
 SINE_POINTS_PER_PERIOD = 16
-# The waypoint guards are for operators; this experiment asks up to 1.25 m/s (w = 10 rad/s),
-# and the SLS's blend-time acceleration bound overestimates a sine's by ~10x.
-TRACKING_OVERRIDES = {"waypoints": {"velocity_max_mm_s": 3000.0, "force_max_n": 6000.0},
+# The waypoint speed guard is for operators; this experiment asks up to 1.25 m/s (w = 10 rad/s).
+TRACKING_OVERRIDES = {"waypoints": {"velocity_max_mm_s": 3000.0},
                       "limits": {"velocity_max_mm_s": 2500.0, "tracking_error_max_mm": 100.0}}

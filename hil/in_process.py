@@ -17,6 +17,8 @@ loop and the allocation report drive.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from firmware_py.config import ControllerConfig
@@ -27,7 +29,7 @@ from plant_emulator.loopback_bus import LoopbackBus
 from plant_emulator.params import LOCKSTEP_SYNC_TIMEOUT_PERIODS, EmulatorConfig, build, merge
 from plant_emulator.rigs import make_rig
 from plant_emulator.simulated_rig import SimulatedRig
-from protocol.enums import Ack, AckKind, State
+from protocol.enums import Ack, AckKind, State, time_scale_from_wire
 
 PERIOD_S = 0.002
 
@@ -48,7 +50,9 @@ class InProcessLoop:
         self.ctl = Controller(controller_cfg, rig, PERIOD_S, CONTROLLER_NAMES[kind])
         self.meas, self.cmd = self.ctl.new_interfaces()
         self.acks: dict[tuple[int, int], Ack] = {}     # (AckKind, SEQ) -> result, as they come
-        self.seq = 1
+        self.time_scale = math.nan                     # the last ack's TIME_SCALE (NaN: none)
+        self.seq = 1                                   # HOST_CMD and HOST_TEST
+        self.waypoint_seq = 0
 
     @property
     def status(self):
@@ -61,7 +65,8 @@ class InProcessLoop:
         self.ctl.after_write()
         acks = self.ctl.host.acks
         while acks:
-            kind, seq, result = acks.popleft()
+            kind, seq, result, wire = acks.popleft()
+            self.time_scale = time_scale_from_wire(wire)
             self.acks[(kind, seq % 256)] = Ack(result)
 
     def cycles(self, count: int) -> None:
@@ -98,13 +103,17 @@ class InProcessLoop:
         return self._answer(AckKind.TEST, seq)
 
     def send_waypoint(self, point, segment_s: float, accel_s: float, flags: int, rpy=(0.0, 0.0, 0.0)) -> Ack:
-        """A waypoint's three frames (position, orientation, timing); the commit's acknowledgement."""
-        seq, self.seq = self.seq, (self.seq + 1) % 256
+        """A waypoint's three frames (position, orientation, timing); the commit's acknowledgement.
+        Waypoints count their own SEQ, and a refused one is sent again with the same (PROTOCOL.md)."""
+        seq = self.waypoint_seq
         host = self.ctl.host
         host.waypoint_position(seq & 0x0F, *point)
         host.waypoint_rotation(seq & 0x0F, *rpy)
         host.waypoint_commit(seq & 0x0F, seq, segment_s, accel_s, int(flags))
-        return self._answer(AckKind.WAYPOINT, seq)
+        ack = self._answer(AckKind.WAYPOINT, seq)
+        if ack is Ack.ACCEPTED:
+            self.waypoint_seq = (seq + 1) % 256
+        return ack
 
     def waypoint(self, point, segment_s: float, accel_s: float, flags: int, rpy=(0.0, 0.0, 0.0)) -> None:
         """A waypoint that must be accepted (HostRefused otherwise)."""

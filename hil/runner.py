@@ -69,7 +69,8 @@ class RunOptions:
     valve_watchdog_periods: float | None = None   # realtime: the emulated valves' SYNC watchdog
     start_timeout_s: float = START_TIMEOUT_S       # a slow machine (a VM in software emulation) needs more
     plots: bool = True                             # False: metrics and report only (batch runs, slow machines)
-    time_scale: float | None = None                # the movements (pm-*): this many times the thesis's ta, tm
+    # the movements (pm-*): this many times the thesis's ta, tm; "auto": the planner's
+    time_scale: float | str | None = None
     # a controller config file's sections (e.g. `hydrapod design schedule`), over the
     # scenario's own overrides: validated by the caller before the run
     controller_config: dict = field(default_factory=dict)
@@ -295,12 +296,21 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
         raise UserInputError(f"--loads: {scenario.name} does not run at several loads")
     if options.positions_m:
         scenario.check_positions(options.positions_m)
+    scenario = copy.copy(scenario)                   # the registered instance keeps its defaults
+    note = scenario.configure_for(scenario.controllers_for(options.controllers, options.short))
+    if note:
+        options.notes.append(note)
     if options.time_scale is not None:
         if not scenario.time_scalable:
             raise UserInputError(f"--time-scale: {scenario.name} has no movement timing to scale "
                                  f"(the pm-* scenarios have)")
-        scenario = copy.copy(scenario)               # the registered instance keeps its default
-        scenario.time_scale = options.time_scale
+        if options.time_scale == "auto":
+            scale, how = scenario.planned_time_scale(merge_sections(scenario.controller_overrides,
+                                                                    options.controller_config))
+            options.notes.append(f"--time-scale auto: {scale:g} x the thesis's timing ({how})")
+            scenario.time_scale = scale
+        else:
+            scenario.time_scale = options.time_scale
     pacing = options.pacing or scenario.pacing
     if pacing not in scenario.pacings:
         raise UserInputError(f"--pacing {pacing}: {scenario.name} runs in {' or '.join(scenario.pacings)} pacing")

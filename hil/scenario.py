@@ -62,6 +62,11 @@ class Scenario(ABC):
     def controllers_for(self, chosen: tuple[str, ...] | None, short: bool) -> tuple[str, ...]:
         return chosen or (self.short_controllers if short and self.short_controllers else self.controllers)
 
+    def configure_for(self, controllers: tuple[str, ...]) -> str | None:
+        """Adjust this scenario (a copy) for the controllers that will run; a note saying how,
+        for the report, or None."""
+        return None
+
     def first_controller(self, chosen: tuple[str, ...] | None, short: bool = False) -> str:
         return self.controllers_for(chosen, short)[0]
 

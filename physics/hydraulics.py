@@ -259,6 +259,15 @@ def pack(cylinder, valve: ValveSection, chambers: ChamberSection, tank_pa: float
 STEADY_SPOOL_UNIT = 1e-3     # the steady-state solver's spool variable, per unit of it
 
 
+def supply_similarity(supply_pa: float, derived_at_pa: float) -> tuple[float, float]:
+    """(force factor r, velocity factor sqrt(r)), r = supply_pa / derived_at_pa: through
+    turbulent orifices (eq. 4.3) the spool that holds a leg at force F and velocity v at one
+    supply holds r F at sqrt(r) v at r times that supply, every pressure r times; exact without
+    the tank pressure, the leakage and the cavitation floor (within ~1 % of the spool here)."""
+    ratio = supply_pa / derived_at_pa
+    return ratio, math.sqrt(ratio)
+
+
 def steady_state(y: float, force_n: float, ps: float, hp: np.ndarray, velocity_m_s: float = 0.0,
                  guess=None) -> tuple[float, float, float, bool]:
     """Chamber pressures PA, PB [Pa] and the spool [fraction] at which the chambers hold

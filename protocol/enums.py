@@ -7,6 +7,7 @@ must have the same table in each; a difference fails at import.
 
 from __future__ import annotations
 
+import math
 from enum import IntEnum, IntFlag
 
 from protocol.dbc import load_database
@@ -61,4 +62,24 @@ KickAxis = _enum("KickAxis", value_table("EMU_KICK", "AXIS"))                # E
 PACINGS = tuple(p.name.lower() for p in Pacing)       # the command lines' --pacing
 
 VALVE_FAULT_STATES = (ValveState.FAULT_HOLD, ValveState.FAULT_DISABLED)
+
+# CTRL_ACK.TIME_SCALE beside RESULT BEYOND_CAPACITY: the factor that fits, rounded up to the
+# signal's 0.01; its largest value says that none does, 0 that it does not apply
+TIME_SCALE_STEP, TIME_SCALE_NONE_FITS = 0.01, 655.35
+
+
+def time_scale_to_wire(scale: float) -> float:
+    """NaN (not applicable) -> 0; inf or beyond the signal -> TIME_SCALE_NONE_FITS."""
+    if math.isnan(scale):
+        return 0.0
+    if not scale < TIME_SCALE_NONE_FITS:
+        return TIME_SCALE_NONE_FITS
+    return math.ceil(round(scale / TIME_SCALE_STEP, 6)) * TIME_SCALE_STEP
+
+
+def time_scale_from_wire(value: float) -> float:
+    """The inverse: 0 -> NaN, TIME_SCALE_NONE_FITS -> inf."""
+    if value <= 0.0:
+        return math.nan
+    return math.inf if value >= TIME_SCALE_NONE_FITS - TIME_SCALE_STEP / 2 else value
 TestMode.__test__ = False            # an enum, not a pytest class despite its name

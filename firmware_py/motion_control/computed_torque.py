@@ -157,11 +157,13 @@ class _Gains:
         self.kp, self.kd, self.ki = w * w, 2.0 * gains.damping * w, gains.integral_fraction * w ** 3
         self.period_s = period_s
         self.velocity_gain = gains.velocity_gain_per_s
-        self.force_bandwidth, self.rate_floor = gains.force_bandwidth_rad_s, cfg.computed_torque.force_rate_floor
-        self.forces, self.velocities, self.spool = (cfg.valve_map.force_n, cfg.valve_map.velocity_m_s,
-                                                    cfg.valve_map.spool)
-        self.pressure_a, self.pressure_b = cfg.valve_map.pressure_a_pa, cfg.valve_map.pressure_b_pa
         self.hp, self.supply_pa = cfg.hydraulics, cfg.hydraulic_model.supply_pressure_pa
+        # the map (and the force rate's floor, a flow through the valve) at the configured supply
+        self.forces, self.velocities, self.spool, self.pressure_a, self.pressure_b = cfg.valve_map.at_supply(
+            self.supply_pa)
+        _, flow_factor = hy.supply_similarity(self.supply_pa, cfg.valve_map.supply_pressure_pa)
+        self.force_bandwidth = gains.force_bandwidth_rad_s
+        self.rate_floor = cfg.computed_torque.force_rate_floor * flow_factor
         self.u_max = cfg.limits.spool_max
         self.filter_wn, self.filter_zeta = 2 * math.pi * gains.velocity_filter_hz, FILTER_ZETA
         self.filter_ad, self.filter_bd = second_order_filter(period_s, gains.velocity_filter_hz, FILTER_ZETA)

@@ -315,9 +315,10 @@ class ControllerLoop:
     def _send_acks(self) -> None:
         acks = self.controller.host.acks
         while acks:
-            kind, seq, result = acks.popleft()
+            kind, seq, result, time_scale = acks.popleft()
             v, i = self.out_ack.values, self.out_ack.index
             v[i["KIND"]], v[i["SEQ"]], v[i["RESULT"]] = kind, seq % 256, result
+            v[i["TIME_SCALE"]] = time_scale
             v[i["QUEUE_FREE"]] = self.controller.status.queue_free
             self._send(self.out_ack)
 

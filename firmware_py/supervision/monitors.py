@@ -193,6 +193,14 @@ def active_check(position, velocity, error, margin, stroke, velocity_max, tracki
     return NONE
 
 
+@njit(cache=True)
+def pose_beyond(pose_error, position_max, angle_max) -> bool:
+    """The platform's position error (first three) or rotation (last three) beyond its bound."""
+    position = math.sqrt(pose_error[0] ** 2 + pose_error[1] ** 2 + pose_error[2] ** 2)
+    angle = math.sqrt(pose_error[3] ** 2 + pose_error[4] ** 2 + pose_error[5] ** 2)
+    return position > position_max or angle > angle_max
+
+
 class LimitMonitor:
     def __init__(self, limits: Limits, n_legs: int, stroke_m: float):
         self.limits, self.stroke_m = limits, stroke_m

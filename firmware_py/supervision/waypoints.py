@@ -20,11 +20,13 @@ import numpy as np
 
 from firmware_py.config import Waypoints
 from firmware_py.motion_control.trajectory import JointTrajectory, hold_at, through_points
+from firmware_py.supervision.capacity import LegCapacity, PlatformLoads, leg_loads, needed_scale, shortfall_lag
 from physics.constants import GRAVITY_M_S2
 from protocol.enums import Ack, State, WaypointFlag
 
 COMMIT_STATES = (State.IDLE, State.READY, State.RUNNING)
 KNOWN_FLAGS = int(sum(WaypointFlag))         # other FLAGS bits are reserved and ignored
+SAMPLES_PER_ACCEL = 8                        # the capacity check's samples per SLS acceleration time
 
 
 @dataclass
@@ -35,52 +37,52 @@ class Waypoint:
     accel_time_s: float
     flags: WaypointFlag
     pose: tuple                  # (x, y, z, roll, pitch, yaw) as sent, SI
+    start: np.ndarray            # the joint position its segment starts from [m]
 
 
 class TestbenchCheck:
-    """One leg: Z within the stroke's guard, a bounded speed and a bounded actuator force."""
+    """One leg: Z within the stroke's guard, a bounded speed, and within the leg's capacity."""
 
     __test__ = False             # not a pytest class despite the name
 
-    def __init__(self, waypoints: Waypoints, stroke_margin_m: float, moving_mass_kg: float, stroke_m: float):
+    def __init__(self, waypoints: Waypoints, stroke_margin_m: float, moving_mass_kg: float, stroke_m: float,
+                 capacity: LegCapacity):
         self.waypoints, self.margin_m, self.moving_mass_kg, self.stroke_m = (waypoints, stroke_margin_m,
                                                                              moving_mass_kg, stroke_m)
+        self.capacity = capacity
 
-    def __call__(self, previous, pos, rot, segment_time, accel_time, step: bool, load_kg: float):
+    def __call__(self, chain: Chain, pos, rot, step: bool, load_kg: float):
         margin = self.margin_m
         if max(abs(pos[0]), abs(pos[1]), *(abs(r) for r in rot)) > 1e-9 or not (
                 margin <= pos[2] <= self.stroke_m - margin):
-            return Ack.OUTSIDE_WORKSPACE, None
+            return Ack.OUTSIDE_WORKSPACE, None, math.nan
         strokes = np.array([pos[2]])
-        if not peak_velocity_ok(self.waypoints, previous, strokes, segment_time, accel_time, step):
-            return Ack.TOO_FAST, None
+        if not peak_velocity_ok(self.waypoints, chain, strokes, step):
+            return Ack.TOO_FAST, None, math.nan
         if step:
-            return Ack.ACCEPTED, strokes
-        # the static load as estimated plus the segment's peak SLS acceleration
-        peak_accel = abs(pos[2] - float(previous[0])) / (segment_time - accel_time) * math.pi / (2.0 * accel_time)
-        force = (self.moving_mass_kg + load_kg) * (GRAVITY_M_S2 + peak_accel)
-        if force > self.waypoints.force_max_n:
-            return Ack.TOO_FAST, None
-        return Ack.ACCEPTED, strokes
+            return Ack.ACCEPTED, strokes, math.nan
+        trajectory, t0 = chain.trajectory(strokes)
+        loads = leg_loads(trajectory, t0, trajectory.duration_s, chain.sample_dt_s(),
+                          self.moving_mass_kg + load_kg, GRAVITY_M_S2)
+        return capacity_verdict(self.waypoints, self.capacity, loads, strokes)
 
 
 class HexapodCheck:
     """The target and the joint-space path to it, pose by pose: reachable, away from
-    singularities, a bounded joint speed and static-plus-inertial actuator force. Compiled
-    per pose (about 10 us each): a commit runs after a cycle's write, within its slack."""
+    singularities, a bounded joint speed, and the legs' forces along the segment's reference
+    within their capacity. Compiled per pose (about 10 us each): a commit runs after a cycle's
+    write, within its slack."""
 
-    def __init__(self, waypoints: Waypoints, dk_tolerance_m: float, geometry):
-        from firmware_py.mechanics.dynamics import InverseDynamics
+    def __init__(self, waypoints: Waypoints, dk_tolerance_m: float, geometry, capacity: LegCapacity):
         from firmware_py.mechanics.kinematics import DirectKinematics
         from firmware_py.mechanics.workspace import PoseChecker
-        self.waypoints, self.geometry = waypoints, geometry
+        self.waypoints, self.geometry, self.capacity = waypoints, geometry, capacity
         self.dk = DirectKinematics(geometry, dk_tolerance_m, 50)
-        self.dynamics = InverseDynamics(geometry)
+        self.loads = PlatformLoads(geometry, dk_tolerance_m)
         self.poses = PoseChecker(geometry)
         self.fractions = np.linspace(1.0, 0.0, waypoints.path_samples)
-        self.zero_velocity, self.accel = np.zeros(6), np.zeros(6)
 
-    def __call__(self, previous, pos, rot, segment_time, accel_time, step: bool, load_kg: float):
+    def __call__(self, chain: Chain, pos, rot, step: bool, load_kg: float):
         from firmware_py.mechanics.rotation import rpy_to_quat
         from firmware_py.mechanics.workspace import MIN_CONDITION_INDEX, OUT_CONDITION, OUT_REACHABLE
 
@@ -88,41 +90,73 @@ class HexapodCheck:
         target, quat = np.array(pos, dtype=float), rpy_to_quat(*rot)
         report = self.poses.check(target, quat)
         if not report[OUT_REACHABLE]:
-            return Ack.OUTSIDE_WORKSPACE, None
+            return Ack.OUTSIDE_WORKSPACE, None, math.nan
         if report[OUT_CONDITION] < MIN_CONDITION_INDEX:
-            return Ack.SINGULAR, None
+            return Ack.SINGULAR, None, math.nan
         strokes = self.poses.lengths - g.leg_min_m
-        if not peak_velocity_ok(self.waypoints, previous, strokes, segment_time, accel_time, step):
-            return Ack.TOO_FAST, None
+        if not peak_velocity_ok(self.waypoints, chain, strokes, step):
+            return Ack.TOO_FAST, None, math.nan
         # the joint-space path between the waypoints, back from the target
-        dk = self.dk
+        dk, previous = self.dk, chain.start
         dk.pose[0:3], dk.pose[3:7] = target, quat
         singular = False
         for s in self.fractions:
             dk.solve(g.leg_min_m + previous + s * (strokes - previous))
             if not dk.converged:
-                return Ack.OUTSIDE_WORKSPACE, None
+                return Ack.OUTSIDE_WORKSPACE, None, math.nan
             report = self.poses.check(dk.pose[0:3], dk.pose[3:7])
             if not report[OUT_REACHABLE]:
-                return Ack.OUTSIDE_WORKSPACE, None
+                return Ack.OUTSIDE_WORKSPACE, None, math.nan
             singular |= report[OUT_CONDITION] < MIN_CONDITION_INDEX
         if singular:
-            return Ack.SINGULAR, None
-        # static load plus the peak SLS acceleration of the segment's translation (dk.pose: its start)
-        self.accel[0:3] = (target - dk.pose[0:3]) / (segment_time - accel_time) * math.pi / (2.0 * accel_time)
-        if not self.dynamics.forces(target, quat, self.zero_velocity, self.accel):
-            return Ack.SINGULAR, None
-        if np.max(np.abs(self.dynamics.force_n)) > self.waypoints.force_max_n:
-            return Ack.TOO_FAST, None
-        return Ack.ACCEPTED, strokes
+            return Ack.SINGULAR, None, math.nan
+        if step:
+            return Ack.ACCEPTED, strokes, math.nan
+        trajectory, t0 = chain.trajectory(strokes)
+        try:
+            loads = self.loads.loads(trajectory, t0, trajectory.duration_s, chain.sample_dt_s())
+        except ValueError:                 # a pose between the checked ones: DK lost or singular
+            return Ack.SINGULAR, None, math.nan
+        return capacity_verdict(self.waypoints, self.capacity, loads, strokes)
 
 
-def peak_velocity_ok(waypoints: Waypoints, previous, strokes, segment_time, accel_time, step: bool) -> bool:
+def capacity_verdict(waypoints: Waypoints, capacity: LegCapacity, loads, strokes):
+    """ACCEPTED, or BEYOND_CAPACITY with the smallest time scale that fits (inf: none)."""
+    share, lag_max = waypoints.capacity_share, waypoints.lag_max_m
+    if shortfall_lag(capacity, loads, 1.0, share)[0] <= lag_max:
+        return Ack.ACCEPTED, strokes, math.nan
+    scale = needed_scale(capacity, loads, share, lag_max)
+    return Ack.BEYOND_CAPACITY, None, math.inf if math.isnan(scale) else scale
+
+
+@dataclass
+class Chain:
+    """The segment being committed and the ones queued before it that it continues (since
+    the last LAST): the trajectory the controller will build from them, as if this segment
+    ended at rest. The blend into this segment is judged with it."""
+    points: list                   # the chain's start, then each queued waypoint's strokes
+    accel_times: list
+    segment_times: list
+
+    @property
+    def start(self) -> np.ndarray:
+        return self.points[-1]
+
+    def sample_dt_s(self) -> float:
+        return self.accel_times[-1] / SAMPLES_PER_ACCEL
+
+    def trajectory(self, strokes) -> tuple[JointTrajectory, float]:
+        """(the chain through `strokes`, the time this segment starts in it)."""
+        trajectory = through_points(np.array(self.points + [strokes]), self.accel_times, self.segment_times)
+        return trajectory, float(sum(self.segment_times[:-1]))
+
+
+def peak_velocity_ok(waypoints: Waypoints, chain: Chain, strokes, step: bool) -> bool:
     """A step is bounded by its size; a segment by its peak joint velocity."""
-    distance = float(np.max(np.abs(strokes - previous)))
+    distance = float(np.max(np.abs(strokes - chain.start)))
     if step:
         return distance <= waypoints.step_max_m
-    return distance / (segment_time - accel_time) <= waypoints.velocity_max_m_s
+    return distance / (chain.segment_times[-1] - chain.accel_times[-1]) <= waypoints.velocity_max_m_s
 
 
 class WaypointQueue:
@@ -132,6 +166,7 @@ class WaypointQueue:
         self.expected_seq: int | None = None       # None: the next SEQ is free
         self._staged_pos: dict[int, tuple] = {}
         self._staged_rot: dict[int, tuple] = {}
+        self.time_scale_needed = math.nan          # the last refusal's, for CTRL_ACK (NaN: none)
 
     def stage_position(self, tag: int, x: float, y: float, z: float) -> None:
         self._staged_pos[tag & 0x0F] = (x, y, z)
@@ -151,6 +186,7 @@ class WaypointQueue:
         """Check the staged pose with this TAG and queue it, or say why not; `previous` is the
         joint position the segment starts from."""
         tag &= 0x0F
+        self.time_scale_needed = math.nan
         pos = self._staged_pos.pop(tag, None)
         rot = self._staged_rot.pop(tag, None)
         if pos is None or rot is None or (seq & 0x0F) != tag:
@@ -169,14 +205,27 @@ class WaypointQueue:
         step = bool(flags & WaypointFlag.STEP)
         if step and (not flags & WaypointFlag.LAST or (self.queue and not self.queue[-1].flags & WaypointFlag.LAST)):
             return Ack.BAD_ARGUMENT                         # a step is a trajectory of its own
-        if self.queue:
-            previous = self.queue[-1].strokes
-        result, strokes = self.check(previous, pos, rot, segment_time, accel_time, step, load_kg)
+        chain = self.chain(previous, segment_time, accel_time)
+        result, strokes, self.time_scale_needed = self.check(chain, pos, rot, step, load_kg)
         if result is not Ack.ACCEPTED:
             return result
-        self.queue.append(Waypoint(seq, strokes, segment_time, accel_time, flags, pos + rot))
+        self.queue.append(Waypoint(seq, strokes, segment_time, accel_time, flags, pos + rot, chain.start))
         self.expected_seq = (seq + 1) % 256
         return Ack.ACCEPTED
+
+    def chain(self, previous, segment_time: float, accel_time: float) -> Chain:
+        """The queued waypoints this segment continues (none after a LAST), and its own times."""
+        chained = []
+        for w in reversed(self.queue):
+            if w.flags & WaypointFlag.LAST:
+                break
+            chained.insert(0, w)
+        if not chained:
+            start = self.queue[-1].strokes if self.queue else np.asarray(previous, dtype=float)
+            return Chain([start], [accel_time], [segment_time])
+        return Chain([chained[0].start] + [w.strokes for w in chained],
+                     [w.accel_time_s for w in chained] + [accel_time],
+                     [w.segment_time_s for w in chained] + [segment_time])
 
     def head_starts_now(self) -> bool:
         """The queue's first waypoint asks to start as soon as the running motion ends."""

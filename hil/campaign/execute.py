@@ -37,7 +37,8 @@ def command(task: dict, out: Path) -> list[str]:
     if "position_mm" in params:
         argv += ["--positions", repr(float(params["position_mm"]))]
     if "time_scale" in params:
-        argv += ["--time-scale", repr(float(params["time_scale"]))]
+        scale = params["time_scale"]
+        argv += ["--time-scale", scale if scale == "auto" else repr(float(scale))]
     if task["controller_config"]:
         argv += ["--controller-config", str(out / "controller-overrides.toml")]
     if task["emulator_config"]:

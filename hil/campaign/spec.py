@@ -15,7 +15,7 @@ unknown scenario is one line naming the file and the key (exit 2).
     load_kg = [0.0, 6.0]         # scenarios that run at several loads
     position_mm = [50.0]         # sha-step's working positions
     payload_kg = [0.0]           # the hexapod's payload, declared to the controller too
-    time_scale = [1.0]           # pm-*: the thesis's timing, this many times slower
+    time_scale = [1.0, "auto"]    # pm-*: the thesis's timing, this many times slower; "auto": planned
     supply_bar = [25.0]          # the power unit's, and the controller's model's unless set
     noise = [1.0]                # the sensors' noise, x the emulator's
     seed = [1]                   # the emulator's noise seed
@@ -313,7 +313,8 @@ def load_campaign(path: str | Path) -> Campaign:
                                                    f"(it runs: {', '.join(scenario.controllers)})")
         else:
             integer = isinstance(kind[0], int) and isinstance(kind[1], int)
-            values = [_number(source, f"grid.{key}", v, *kind, integer=integer) for v in values]
+            values = [v if key == "time_scale" and v == "auto" else       # `hil run --time-scale auto`
+                      _number(source, f"grid.{key}", v, *kind, integer=integer) for v in values]
         grid[key] = list(values)
     if "load_kg" in grid and not scenario.sweeps_loads:
         raise _fail(source, "grid.load_kg", f"{scenario_name} does not run at several loads (use payload_kg)")

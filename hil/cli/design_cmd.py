@@ -204,7 +204,7 @@ def _computed_torque(args) -> int:
         design["testbench"] = {**best.as_dict(), "candidates": len(tried)}
         gains |= {key: round(best.gains[key], 4) for key in TESTBENCH_RANGES}
     source = f"the emulator's configuration at {cfg.actuator.supply_pressure_pa / BAR:g} bar"
-    text = computed_torque_toml(spool, pressure_a, pressure_b, gains, source)
+    text = computed_torque_toml(spool, pressure_a, pressure_b, gains, source, cfg.actuator.supply_pressure_pa)
     if supply:                                     # the residuals' model and the supply check at it too
         text += f"\n[hydraulic_model]\nsupply_pressure_bar = {args.supply_bar:g}\n"
     out = Path(args.out)
@@ -228,7 +228,8 @@ def _computed_torque(args) -> int:
 def _capacity(args) -> int:
     from firmware_py.config import load_config
     from hil.design.capacity import format_utilisation, utilisation
-    cfg = load_config(args.config)
+    from hil.experiments import MOVEMENT_OVERRIDES
+    cfg = load_config(args.config, overrides=MOVEMENT_OVERRIDES)      # as `hil run pm-*` configures it
     supplies = args.supply_bar or [cfg.hydraulic_model.supply_pressure_pa / BAR]
     rows = [utilisation(cfg, name, payload, supply, args.time_scale)
             for name in args.movements for payload in args.payload_kg for supply in supplies]
@@ -323,7 +324,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=_computed_torque)
 
     p = design_sub.add_parser("capacity", help="what the legs can give against what the thesis's movements ask: "
-                                               "the utilisation at a time scale, and the time scale they need")
+                                               "the utilisation and lag at a time scale, and the fastest "
+                                               "time scale the controller accepts (`hil run --time-scale auto`)")
     p.add_argument("--movements", nargs="+", choices=("circle", "diagonal"), default=["circle", "diagonal"])
     p.add_argument("--payload-kg", nargs="+", type=number_in_range(float, 0.0, 50.0), default=[0.0],
                    help="payloads on the platform (default 0)")

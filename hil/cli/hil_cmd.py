@@ -19,6 +19,14 @@ def _scenario(name: str):
     return SCENARIOS[name]
 
 
+TIME_SCALES = number_in_range(float, 0.5, 10.0)
+
+
+def _time_scale(text: str) -> float | str:
+    """--time-scale: a number within TIME_SCALES' range, or auto."""
+    return "auto" if text == "auto" else TIME_SCALES(text)
+
+
 def _controllers(text: str | None) -> tuple[str, ...] | None:
     if text is None:
         return None
@@ -192,9 +200,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                         "(e.g. SEAL_LEAK:1:10; the DBC's EMU_CTRL.FAULT names)")
     p.add_argument("--duration-s", type=number_in_range(float, 1.0, 86400.0), default=None,
                    help="realtime scenarios: seconds of running (default 60; 10 with --short)")
-    p.add_argument("--time-scale", type=number_in_range(float, 0.5, 10.0), default=None,
+    p.add_argument("--time-scale", type=_time_scale, default=None,
                    help="pm-circle, pm-diagonal: the movement at this many times the thesis's ta and tm "
-                        "(default 1: the thesis's timing)")
+                        "(default 1: the thesis's timing), or auto: the fastest the controller accepts "
+                        "with the declared payload and supply")
     p.add_argument("--valve-watchdog-periods", type=number_in_range(float, 1.0, 10000.0), default=None,
                    help="realtime: the emulated valves' SYNC watchdog in periods (default 25 on a shared host; "
                         "3 is the valves' own, for an RT kernel)")

@@ -1,11 +1,13 @@
-"""What the legs can give against what a movement asks: each leg's force capacity at its
-velocity (`physics.hydraulics.capacity_table`: the valve fully open, the chambers in steady
-state, the seals' steady friction taken off) against eq. 10.5's actuator forces along the
-movement's reference, with the payload. The utilisation is the largest ratio of the force a
-leg needs to the force it can give at that velocity over the movement and the legs; above 1
-the movement asks more than the actuators give, and the smallest time scale at which it is
-1 is what that movement needs. Uses the controller's own models (its `[hydraulic_model]`,
-`[friction]`, geometry and payload), as a check at commit would.
+"""What the legs can give against what a movement asks, and the fastest timing the
+controller accepts for it.
+
+The judgement is the controller's own (`firmware_py.supervision.capacity`): each leg's force
+at its velocity with the valve open and the seals' steady friction taken off, a share kept
+for the control, and the lag a shortfall leaves. `utilisation` reports it over a whole
+movement; `plan` finds the time scale a host sends it at: the movement's waypoints committed
+to the controller's own waypoint queue and check (its `[waypoints]`, geometry and payload,
+its `[hydraulic_model]` supply), and at every refusal the time scale the refusal names taken
+(as a host reading CTRL_ACK's TIME_SCALE would), from the slowest the hil runs accept up.
 """
 
 from __future__ import annotations
@@ -17,57 +19,27 @@ import numpy as np
 
 from firmware_py.config import ControllerConfig
 from firmware_py.mechanics.geometry import default_geometry
-from firmware_py.mechanics.platform import PlatformModel
-from hil.experiments import MOTIONS, Motion
-from physics import hydraulics as hy
-from physics import lugre
+from firmware_py.motion_control.trajectory import Y0, JointTrajectory
+from firmware_py.rig_model import HexapodModel
+from firmware_py.supervision.capacity import PlatformLoads, judge, leg_capacity, needed_scale
+from firmware_py.supervision.waypoints import WaypointQueue
+from hil.design.time_optimal import time_optimal
+from hil.experiments import MOTIONS, Motion, movement_waypoints
+from physics.constants import BAR
+from protocol.enums import Ack, State
 
 PERIOD_S = 0.002
-VELOCITY_GRID_M_S = np.linspace(-3.0, 3.0, 241)     # 25 mm/s apart; the valve's no-load speed is ~3.4 m/s
-SCALE_RANGE = (0.25, 8.0)                          # the time scales the search spans
+PLAN_SCALES = (0.5, 10.0)          # what `hil run --time-scale` accepts: the plan starts at the fastest
+PLAN_ROUNDS = 24                   # refusals answered before the plan gives up
 
 
-@dataclass
-class LegCapacity:
-    """One leg's force range [N] over the velocity grid, net of the seals' steady friction."""
-    velocities_m_s: np.ndarray
-    push_n: np.ndarray               # the largest force toward extension (NaN: beyond the valve's speed)
-    pull_n: np.ndarray               # the smallest (most negative)
-
-    @classmethod
-    def of(cls, cfg: ControllerConfig, supply_pa: float | None = None) -> LegCapacity:
-        ps = cfg.hydraulic_model.supply_pressure_pa if supply_pa is None else supply_pa
-        table = hy.capacity_table(VELOCITY_GRID_M_S, ps, cfg.hydraulics)
-        friction = np.array([lugre.steady_friction(float(v), cfg.friction.vector) for v in VELOCITY_GRID_M_S])
-        return cls(VELOCITY_GRID_M_S, table[:, 0] - friction, table[:, 1] - friction)
-
-    def utilisation(self, force_n: np.ndarray, velocity_m_s: np.ndarray) -> np.ndarray:
-        """Each force's ratio to what the leg gives at its velocity in its direction (inf
-        where it cannot: beyond the valve's speed, or a side that no longer reaches zero)."""
-        push = np.interp(velocity_m_s, self.velocities_m_s, self.push_n)
-        pull = np.interp(velocity_m_s, self.velocities_m_s, self.pull_n)
-        pushing = force_n >= 0.0
-        limit = np.where(pushing, push, pull)
-        reaches = np.isfinite(limit) & np.where(pushing, limit > 0.0, limit < 0.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(reaches, force_n / limit, np.inf)
-
-
-@dataclass
-class Utilisation:
-    movement: str
-    payload_kg: float
-    supply_bar: float
-    time_scale: float
-    utilisation: float               # the largest ratio over the movement and the legs
-    at_s: float                      # where (time into the movement) ...
-    leg: int                         # ... and which leg (1..6)
-    force_n: float                   # the force it needs there
-    velocity_m_s: float              # at that velocity
-    needed_scale: float              # the time scale at which the utilisation is 1 (NaN: beyond the search)
-
-    def as_dict(self) -> dict:
-        return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in self.__dict__.items()}
+def declared(cfg: ControllerConfig, payload_kg: float | None = None, supply_bar: float | None = None):
+    """`cfg` with this payload and supply declared (None: as configured)."""
+    if payload_kg is not None:
+        cfg = replace(cfg, hexapod=replace(cfg.hexapod, payload_kg=payload_kg))
+    if supply_bar is not None:
+        cfg = replace(cfg, hydraulic_model=replace(cfg.hydraulic_model, supply_pressure_pa=supply_bar * BAR))
+    return cfg
 
 
 def movement(name: str, time_scale: float) -> Motion:
@@ -76,61 +48,101 @@ def movement(name: str, time_scale: float) -> Motion:
     return replace(motion, parts=motion.parts[1:], ta_s=motion.ta_s * time_scale, tm_s=motion.tm_s * time_scale)
 
 
-def _peak(cfg: ControllerConfig, capacity: LegCapacity, name: str, payload_kg: float, time_scale: float):
-    """(utilisation, t, leg index, force, velocity) at the worst sample of the movement."""
-    geometry = default_geometry().with_payload(payload_kg)
-    motion = movement(name, time_scale)
+def scaled(motion: Motion, time_scale: float) -> Motion:
+    return replace(motion, ta_s=motion.ta_s * time_scale, tm_s=motion.tm_s * time_scale)
+
+
+def stroke_trajectory(motion: Motion, geometry) -> JointTrajectory:
+    """The movement's SLS trajectory in strokes (the controller's joint coordinate)."""
     trajectory = motion.joint_trajectory(geometry)
-    platform = PlatformModel(geometry, cfg.kinematics.dk_tolerance_m, cfg.kinematics.dk_max_iterations, PERIOD_S)
-    lengths, rates, accel = (np.empty(6) for _ in range(3))
-    times = np.arange(0.0, trajectory.duration_s, PERIOD_S)
-    forces, velocities = np.empty((len(times), 6)), np.empty((len(times), 6))
-    for k, t in enumerate(times):
-        trajectory.evaluate_into(float(t), lengths, rates, accel)
-        strokes = lengths - geometry.leg_min_m
-        if k == 0:
-            platform.reset_reference(strokes)
-        platform.reference_forces(strokes, rates)
-        forces[k], velocities[k] = platform.force_n, rates
-    forces[0] = forces[1]                            # the first sample's acceleration has no cycle before
-    ratio = capacity.utilisation(forces, velocities)
-    k, leg = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
-    return float(ratio[k, leg]), float(times[k]), int(leg), float(forces[k, leg]), float(velocities[k, leg])
+    segments = trajectory.segments.copy()
+    segments[:, :, Y0] -= geometry.leg_min_m
+    return JointTrajectory(segments)
+
+
+@dataclass
+class Plan:
+    time_scale: float                # the smallest the controller accepts (NaN: none within PLAN_SCALES)
+    rounds: int                      # refusals answered on the way
+    reason: str                      # the last refusal, or "" when accepted
+
+
+def plan(cfg: ControllerConfig, motion: Motion) -> Plan:
+    """The smallest time scale on `motion`'s ta and tm (its approach from home included)
+    whose waypoints the controller's queue accepts, all of them, with `cfg` as declared."""
+    rig = HexapodModel(cfg, PERIOD_S)
+    low, high = PLAN_SCALES
+    scale, reason = low, ""
+    for rounds in range(PLAN_ROUNDS):
+        queue = WaypointQueue(replace(cfg.waypoints, queue=255), rig.check)
+        for seq, w in enumerate(movement_waypoints(scaled(motion, scale))):
+            queue.stage_position(seq, *w.position_m)
+            queue.stage_rotation(seq, 0.0, 0.0, 0.0)
+            result = queue.commit(seq, seq, w.segment_time_s, w.accel_time_s, w.flags, State.READY,
+                                  rig.home_strokes, 0.0)
+            if result is not Ack.ACCEPTED:
+                break
+        else:
+            return Plan(scale, rounds, "")
+        needed = queue.time_scale_needed
+        reason = (f"waypoint {seq + 1} ({np.round(w.position_m * 1e3, 1).tolist()} mm) {result.name}"
+                  + (f", time scale x{needed:.3f}" if result is Ack.BEYOND_CAPACITY else ""))
+        if result is not Ack.BEYOND_CAPACITY or not math.isfinite(needed) or scale * needed > high:
+            return Plan(math.nan, rounds + 1, reason)
+        scale = math.ceil(scale * max(needed, 1.001) * 100.0) / 100.0
+    return Plan(math.nan, PLAN_ROUNDS, reason)
+
+
+@dataclass
+class Utilisation:
+    movement: str
+    payload_kg: float
+    supply_bar: float
+    time_scale: float
+    utilisation: float               # the largest force / capacity ratio over the movement and the legs
+    lag_mm: float                    # the platform's largest error the shortfalls leave (share kept for control)
+    at_s: float                      # where (time into the movement) ...
+    leg: int                         # ... and which leg (1..6)
+    whole_scale: float               # the time scale at which the whole movement's lag is within bound
+    planned_scale: float             # the time scale the controller accepts, waypoint by waypoint
+    planned_s: float                 # the movement's duration (after its approach) at that scale
+    time_optimal_s: float            # TOPP-RA's on the same path within the same share, no lag allowed
+
+    def as_dict(self) -> dict:
+        return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in self.__dict__.items()}
 
 
 def utilisation(cfg: ControllerConfig, name: str, payload_kg: float = 0.0, supply_bar: float | None = None,
-                time_scale: float = 1.0, needed: bool = True) -> Utilisation:
-    """The movement's utilisation at `time_scale`, and (`needed`) the time scale at which it is 1."""
-    supply_pa = cfg.hydraulic_model.supply_pressure_pa if supply_bar is None else supply_bar * 1e5
-    capacity = LegCapacity.of(cfg, supply_pa)
-    peak, at_s, leg, force, velocity = _peak(cfg, capacity, name, payload_kg, time_scale)
-    return Utilisation(name, payload_kg, supply_pa / 1e5, time_scale, peak, at_s, leg + 1, force, velocity,
-                       needed_scale(cfg, capacity, name, payload_kg) if needed else math.nan)
-
-
-def needed_scale(cfg: ControllerConfig, capacity: LegCapacity, name: str, payload_kg: float,
-                 tolerance: float = 0.01) -> float:
-    """The smallest time scale (within SCALE_RANGE, to `tolerance`) at which the movement's
-    utilisation is at most 1; NaN when even the slowest asks too much (a static load beyond
-    the legs) or the fastest is within capacity."""
-    low, high = SCALE_RANGE
-    if _peak(cfg, capacity, name, payload_kg, high)[0] > 1.0 or _peak(cfg, capacity, name, payload_kg, low)[0] <= 1.0:
-        return math.nan
-    while high - low > tolerance:
-        middle = 0.5 * (low + high)
-        if _peak(cfg, capacity, name, payload_kg, middle)[0] <= 1.0:
-            high = middle
-        else:
-            low = middle
-    return round(high, 3)
+                time_scale: float = 1.0, optimal: bool = True) -> Utilisation:
+    """The movement against the legs at `time_scale`, the planned scale, and (`optimal`)
+    TOPP-RA's time-optimal duration beside the planned one."""
+    cfg = declared(cfg, payload_kg, supply_bar)
+    geometry = default_geometry().with_payload(payload_kg)
+    trajectory = stroke_trajectory(movement(name, time_scale), geometry)
+    loads = PlatformLoads(geometry, cfg.kinematics.dk_tolerance_m).loads(trajectory, 0.0, trajectory.duration_s,
+                                                                         PERIOD_S)
+    capacity = leg_capacity(cfg)
+    share, lag_max = cfg.waypoints.capacity_share, cfg.waypoints.lag_max_m
+    verdict = judge(capacity, loads, 1.0, share, lag_max)
+    whole = needed_scale(capacity, loads, share, lag_max) * time_scale
+    thesis = MOTIONS[name](default_geometry())
+    planned = plan(cfg, thesis).time_scale
+    optimal = time_optimal(cfg, thesis, payload_kg) if optimal else [(math.nan, math.nan)]
+    return Utilisation(name, payload_kg, cfg.hydraulic_model.supply_pressure_pa / BAR, time_scale,
+                       verdict.utilisation, verdict.lag_m * 1e3, verdict.sample * PERIOD_S, verdict.leg + 1,
+                       whole, planned, planned * sum(sls for _, sls in optimal), sum(t for t, _ in optimal))
 
 
 def format_utilisation(rows: list[Utilisation]) -> str:
-    lines = ["movement  payload kg  supply bar  time scale  utilisation  where (leg, t s, F N, v mm/s)      "
-             "needs time scale"]
+    lines = ["movement  payload kg  supply bar  time scale  utilisation  error mm  where (leg, t s)  "
+             "whole-movement scale  planned scale  planned s  time-optimal s"]
     for r in rows:
-        needs = "-" if math.isnan(r.needed_scale) else f"{r.needed_scale:.2f}"
+        whole = "-" if not math.isfinite(r.whole_scale) else f"{r.whole_scale:.2f}"
+        planned = "none fits" if not math.isfinite(r.planned_scale) else f"{r.planned_scale:.2f}"
+        lag = "inf" if not math.isfinite(r.lag_mm) else f"{r.lag_mm:.2f}"
+        seconds = "-" if not math.isfinite(r.planned_s) else f"{r.planned_s:.2f}"
+        optimal = "none" if not math.isfinite(r.time_optimal_s) else f"{r.time_optimal_s:.2f}"
         lines.append(f"{r.movement:<9} {r.payload_kg:>10.1f} {r.supply_bar:>11.1f} {r.time_scale:>11.2f} "
-                     f"{r.utilisation:>12.2f}  leg {r.leg}, {r.at_s:5.2f} s, {r.force_n:7.1f} N, "
-                     f"{r.velocity_m_s * 1e3:7.1f}  {needs:>16}")
+                     f"{r.utilisation:>12.2f} {lag:>9}  leg {r.leg}, {r.at_s:5.2f} s  {whole:>20} {planned:>14} "
+                     f"{seconds:>10} {optimal:>15}")
     return "\n".join(lines)

@@ -72,12 +72,12 @@ def _row(values, fmt: str = "{:.4g}") -> str:
 
 
 def computed_torque_toml(spool: np.ndarray, pressure_a_pa: np.ndarray, pressure_b_pa: np.ndarray, gains: dict,
-                         source: str) -> str:
+                         source: str, supply_pa: float) -> str:
     """A controller config file: the [computed_torque] gains and the [valve_map] (thesis units)."""
     lines = [f"# computed-torque plant data from {source} (`hydrapod design computed-torque`)",
              "[computed_torque]"]
     lines += [f"{key} = {value:g}" for key, value in gains.items()]
-    lines += ["", "[valve_map]",
+    lines += ["", "[valve_map]", f"supply_pressure_bar = {supply_pa / BAR:g}",
               f"force_n = {_row(MAP_FORCES_N, '{:g}')}",
               f"velocity_mm_s = {_row(MAP_VELOCITIES_M_S / MM, '{:g}')}"]
     for name, table, scale in (("spool_pct", spool, 100.0), ("pressure_a_bar", pressure_a_pa, 1.0 / BAR),

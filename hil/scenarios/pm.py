@@ -3,6 +3,7 @@ and model-based control; IAE per axis of the end-effector position."""
 
 from __future__ import annotations
 
+import math
 from abc import abstractmethod
 from dataclasses import replace
 from pathlib import Path
@@ -19,15 +20,17 @@ from hil.experiments import (
     Motion,
     circle_motion,
     diagonal_motion,
-    segment_time,
+    movement_waypoints,
 )
 from hil.host import HostError
 from hil.logdata import LogData
 from hil.metrics import iae, split_faults
 from hil.plotting import plt, save
 from hil.reference_rebuild import rebuild
+from hil.runner import merge_sections
 from hil.scenario import Analysis, Check, Figure, Scenario
 from hil.scenarios.common import NAME_OF_CONTROLLER, NEW_CONTROLLER, controller_at
+from program.errors import UserInputError
 from protocol.enums import Fault, State, WaypointFlag
 
 AXES = ("x", "y", "z")
@@ -35,6 +38,7 @@ SETTLE_AFTER_S = 0.5            # the IAE window ends this long after the moveme
 RETURN_TIME_S, RETURN_ACCEL_S = 1.5, 0.3
 THESIS_NAMES = {"adaptive": "iae_pi_plus_p", "model-based": "iae_model_based"}
 THESIS_CONTROLLERS = tuple(THESIS_NAMES)     # at the thesis's timing they may fault: reported
+THESIS_PLATFORM_LIMITS = {"limits": {"platform_error_max_mm": 150.0, "platform_angle_max_deg": 20.0}}
 # realtime: a movement a fault cut short is repeated (after RESET + ENABLE) at most this often;
 # the analysis judges from the log whether a machine stall caused the fault
 MAX_ATTEMPTS = 3
@@ -90,6 +94,32 @@ class PlatformMovement(Scenario):
                 run.recover_from_fault()
                 break
 
+    def configure_for(self, controllers: tuple[str, ...]) -> str | None:
+        """The thesis's per-leg controllers swing the platform up to ~100 mm on these movements
+        (docs/MEASUREMENTS.md "Hexapod gains"): with them in the run, the platform's tracking
+        bound is widened so that the thesis's experiment runs as on its rig."""
+        if not set(controllers) & set(THESIS_CONTROLLERS):
+            return None
+        self.controller_overrides = merge_sections(self.controller_overrides, THESIS_PLATFORM_LIMITS)
+        limits = THESIS_PLATFORM_LIMITS["limits"]
+        return (f"the thesis's controllers in the run: the platform's tracking bound widened to "
+                f"{limits['platform_error_max_mm']:g} mm and {limits['platform_angle_max_deg']:g} deg for all")
+
+    def planned_time_scale(self, controller_sections: dict) -> tuple[float, str]:
+        """The fastest time scale at which the controller, configured with these sections,
+        accepts every waypoint of the movement (`hil.design.capacity.plan`), and how it was
+        found; UserInputError when none within the accepted range does."""
+        from firmware_py.config import load_config
+        from hil.design.capacity import PLAN_SCALES, plan
+        cfg = load_config(overrides=controller_sections)
+        found = plan(cfg, self.thesis_motion())
+        declared = (f"payload {cfg.hexapod.payload_kg:g} kg, supply "
+                    f"{cfg.hydraulic_model.supply_pressure_pa / 1e5:g} bar declared")
+        if not math.isfinite(found.time_scale):
+            raise UserInputError(f"--time-scale auto: no time scale within {PLAN_SCALES[0]:g}-{PLAN_SCALES[1]:g} "
+                                 f"fits {self.name} with {declared}: {found.reason}")
+        return found.time_scale, f"the smallest the controller's capacity check accepts, {declared}"
+
     def _move(self, run, motion: Motion) -> None:
         """To the exact home pose, so the movement starts from a known reference; then the
         movement, queued, and its settling."""
@@ -97,12 +127,10 @@ class PlatformMovement(Scenario):
                           accel_time_s=RETURN_ACCEL_S, flags=WaypointFlag.LAST | WaypointFlag.START)
         run.wait_s(RETURN_TIME_S + 0.3)
         duration = 0.0
-        for p, part in enumerate(motion.parts):
-            for k, point in enumerate(part[1:]):
-                flags = (WaypointFlag.START if k == 0 else 0) | (WaypointFlag.LAST if k == len(part) - 2 else 0)
-                tm = segment_time(motion, p, part[k], point)
-                run.host.waypoint(point, segment_time_s=tm, accel_time_s=motion.ta_s, flags=flags)
-                duration += tm
+        for w in movement_waypoints(motion):
+            run.host.waypoint(w.position_m, segment_time_s=w.segment_time_s, accel_time_s=w.accel_time_s,
+                              flags=w.flags)
+            duration += w.segment_time_s
         run.wait_s(duration + 0.2)
         run.wait_motion_done(5.0)
         run.wait_s(SETTLE_AFTER_S + 0.2)
@@ -110,13 +138,13 @@ class PlatformMovement(Scenario):
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
         period = 1.0 / rate_hz
         geometry = default_geometry()
-        ta = self.motion().ta_s
+        ta = movement_waypoints(self.motion())[0].accel_time_s       # as the controller decoded it
         ref = rebuild(log, "hexapod", period)
         strokes = log.leg_positions(6)
         truth = np.column_stack([log.get("EMU_TRUTH").per_cycle(log.n_cycles, a) for a in ("X", "Y", "Z")])
         runs = {}
         for motion in ref.motions:
-            if motion.step or not np.allclose(motion.trajectory.segments[:, 0, 5], ta):
+            if motion.step or not np.allclose(motion.trajectory.segments[:, 0, 5], ta, rtol=0.0, atol=1e-9):
                 continue                                  # the return to home, not the movement
             controller = controller_at(log, motion.start)
             runs.setdefault(controller, []).append(motion)

@@ -11,7 +11,9 @@ controller's update is timed; the first cycles (caches) are excluded.
 from __future__ import annotations
 
 import gc
+import math
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -25,6 +27,7 @@ from protocol.enums import Command, State, WaypointFlag
 
 GOALS_US = {("hexapod", "model-based"): {"p99": 300.0, "max": 1000.0},
             ("hexapod", "computed-torque"): {"p99": 300.0, "max": 1000.0}}
+THESIS_CONTROLLERS = ("pi", "adaptive", "model-based")
 TIME_SCALE = 2.0                         # the circle at twice the thesis's ta, tm
 STEPS_M = (0.16, 0.15)                   # the test bench's train: up and down by 10 mm, 0.5 s each
 
@@ -33,6 +36,10 @@ class Bench:
     """A controller in RUNNING along its movement, replayed when it ends."""
 
     def __init__(self, cfg: ControllerConfig, emulator_cfg: EmulatorConfig, rig: str, controller: str):
+        if rig == "hexapod" and controller in THESIS_CONTROLLERS:
+            # their per-leg loops swing the platform past its tracking bound on the circle
+            # (docs/MEASUREMENTS.md "Hexapod gains"): the bench times their update, not their tracking
+            cfg = replace(cfg, limits=replace(cfg.limits, platform_error_max_m=1.0, platform_angle_max_rad=math.pi))
         self.loop = loop = InProcessLoop(cfg, emulator_cfg, controller, rig=rig)
         loop.activate(100)
         if rig == "hexapod":

@@ -149,6 +149,6 @@ def test_the_declared_payload_is_in_every_dynamics_model_of_the_controller():
     from firmware_py.rig_model import HexapodModel
     base = default_geometry().platform.mass_kg
     rig = HexapodModel(load_config(overrides={"hexapod": {"payload_kg": 3.0}}), 0.002)
-    for dynamics in (rig.platform.dynamics, rig.computed_torque.dynamics, rig.check.dynamics):
+    for dynamics in (rig.platform.dynamics, rig.computed_torque.dynamics, rig.check.loads.dynamics):
         assert dynamics.masses[0] == pytest.approx(base + 3.0)
     assert default_geometry().with_payload(0.0).platform.mass_kg == base

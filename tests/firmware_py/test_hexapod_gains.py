@@ -64,7 +64,9 @@ def test_scheduled_kp_is_scaled_by_the_hexapod_kp_factor():
 
 
 def test_testbench_gains_diverge_on_the_hexapod_and_the_defaults_hold():
-    state, peak = hold_after_kick({"kp_factor": 1.0, "ki_factor": 1.0})
-    assert state is State.FAULT and peak > 100.0          # the oscillation grew to the error limit
-    state, peak = hold_after_kick({})
-    assert state is State.READY and peak < 50.0           # the push alone moves it ~40 mm
+    """A 20 N push for 50 ms: the bench's gains swing the platform out until its tracking
+    bound (25 mm) faults; the defaults bring it back."""
+    state, peak = hold_after_kick({"kp_factor": 1.0, "ki_factor": 1.0}, push_n=20.0)
+    assert state is State.FAULT and peak < 30.0
+    state, peak = hold_after_kick({}, push_n=20.0)
+    assert state is State.READY and peak < 20.0           # the push alone moves it ~17 mm

@@ -45,14 +45,14 @@ def test_a_commit_waits_for_a_cycle_with_room_before_the_next_sync_but_not_forev
         ctl.after_write(tight)                       # the SYNC is near: the commit waits
     assert not ctl.host.acks and len(ctl.host.queue) == 1
     ctl.after_write(tight)                           # waited its longest: it runs anyway
-    assert list(ctl.host.acks) == [(AckKind.WAYPOINT, 0, int(Ack.ACCEPTED))] and ctl.host.commit_waited == 0
+    assert list(ctl.host.acks) == [(AckKind.WAYPOINT, 0, int(Ack.ACCEPTED), 0.0)] and ctl.host.commit_waited == 0
     for frame in host_frames(1, z + 0.02, flags=1):
         loop.dispatch(frame)
     ctl.host.run_before_update(ctl)
     ctl.after_write(tight)
     assert len(ctl.host.acks) == 1
     ctl.after_write(ctl.cfg.timing.commit_room_s)           # room enough: at once
-    assert list(ctl.host.acks)[-1] == (AckKind.WAYPOINT, 1, int(Ack.ACCEPTED))
+    assert list(ctl.host.acks)[-1] == (AckKind.WAYPOINT, 1, int(Ack.ACCEPTED), 0.0)
 
 
 def test_waypoint_commits_wait_for_the_host_work_slot_and_estop_does_not():
@@ -67,7 +67,7 @@ def test_waypoint_commits_wait_for_the_host_work_slot_and_estop_does_not():
     ctl.host.run_before_update(ctl)                  # in the update: the halves, not the commit
     assert not ctl.host.acks and ctl.status.queue_free == queue_free
     ctl.after_write()                                # one commit per cycle, after the write
-    assert list(ctl.host.acks) == [(AckKind.WAYPOINT, 0, int(Ack.ACCEPTED))]
+    assert list(ctl.host.acks) == [(AckKind.WAYPOINT, 0, int(Ack.ACCEPTED), 0.0)]
     assert ctl.status.queue_free == queue_free - 1
     loop.dispatch(host_command_frame(Command.ESTOP, 2))
     ctl.host.run_before_update(ctl)

@@ -13,6 +13,7 @@ import pytest
 
 from firmware_py.config import load_config as load_controller_config
 from hil.cli import main
+from hil.design.capacity import plan
 from hil.design.closed_loop import hexapod_closed_loop
 from hil.design.ct_gains import MIN_DAMPING, design_gains, operating_set, worst_damping
 from hil.design.simulate import run_movement, thesis_motions
@@ -132,12 +133,14 @@ def _six_kg_controller():
 
 
 @pytest.mark.hil
-def test_six_kg_on_the_platform_completes_both_movements_at_three_times_the_thesis_timing():
+def test_six_kg_on_the_platform_completes_both_movements_at_the_planned_timing():
     """In process, the emulator's hexapod carrying 6 kg (declared to the controller), both
-    movements at 3 x the thesis's timing: no fault, within 10 mm."""
+    movements at the timing the planner finds for them: no fault, within 10 mm."""
     emulator, controller = load_config(), _six_kg_controller()
     for motion in thesis_motions().values():
-        run = run_movement(controller, emulator, motion, payload_kg=6.0, time_scale=3.0)
+        scale = plan(controller, motion).time_scale
+        assert 1.5 < scale < 6.0, (motion.name, scale)
+        run = run_movement(controller, emulator, motion, payload_kg=6.0, time_scale=scale)
         assert run.completed, (motion.name, run.fault)
         assert np.max(run.max_error_m) < 0.010
 
@@ -148,7 +151,8 @@ def test_a_six_kg_platform_stays_physics_at_twice_the_emulators_step():
     FORCE_LIMIT within 0.4 s of the circle) completes under the emulator's Euler integrator
     (docs/MEASUREMENTS.md "The emulator's integrator")."""
     emulator = load_config(overrides={"hexapod": {"mujoco_timestep_us": 500.0, "hydraulic_substeps": 4}})
-    run = run_movement(_six_kg_controller(), emulator, thesis_motions()["circle"], payload_kg=6.0, time_scale=3.0)
+    controller, circle = _six_kg_controller(), thesis_motions()["circle"]
+    run = run_movement(controller, emulator, circle, payload_kg=6.0, time_scale=plan(controller, circle).time_scale)
     assert run.completed, run.fault
     assert np.max(run.max_error_m) < 0.010
 

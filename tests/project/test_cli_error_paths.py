@@ -44,6 +44,7 @@ BAD_TEXT = {
     "--export-dir": ("/nonexistent/dir", "/nonexistent/dir"),
     "spec": ("/nonexistent/campaign.toml", "/nonexistent/campaign.toml"),
     "--scheduler": ("tcp//nohost", "tcp//nohost"),
+    "--time-scale": ("fast", "fast"),
 }
 OUTPUT_DIRS = ("--out", "--plot")          # given a path below a regular file: cannot be created
 # what a command needs before the option under test is reached

@@ -39,7 +39,7 @@ def cycles_until_fault(loop, limit: int) -> int:
 
 
 def _ack(ctl, kind: AckKind, seq: int) -> Ack:
-    for k, s, result in reversed(ctl.host.acks):
+    for k, s, result, _ in reversed(ctl.host.acks):
         if k == kind and s == seq % 256:
             return Ack(result)
     raise AssertionError(f"no acknowledgement of {kind.name} {seq}")

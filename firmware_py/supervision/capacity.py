@@ -1,0 +1,274 @@
+"""What the legs can give against what a reference asks of them.
+
+A leg's force capacity at its velocity (`physics.hydraulics.capacity_table`: the valve fully
+open, the chambers in steady state, the seals' steady friction taken off), a share of it
+kept for the control. Along a joint trajectory: each leg's static force (gravity, eq. 10.5 at
+rest), its dynamic force (inertia and velocity terms) and its velocity. Slowing a path's
+time by a factor s divides the velocities by s and the dynamic forces by s^2, so one
+sampling at s = 1 answers every time scale.
+
+The judgement is the lag a force shortfall leaves: where a leg needs more than its share,
+the missing force over its joint-space inertia accelerates the leg behind its reference;
+where it has spare force, that spare brings the lag's rate back to zero. A brief peak (the
+SLS's 50 ms acceleration) leaves a fraction of a millimetre; a sustained one (a payload's
+weight at speed) grows without bound. A reference whose largest lag stays within the
+configured bound is within capacity. Events only (commits, design): these allocate.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from firmware_py.mechanics.dynamics import gauss_solve_into, platform_wrench_into
+from firmware_py.mechanics.kinematics import dk_solve_into, ik_into, jacobian_into
+from firmware_py.motion_control.trajectory import sls_evaluate_into
+from physics import hydraulics as hy
+from physics import lugre
+
+VELOCITY_GRID_M_S = np.linspace(-3.0, 3.0, 241)     # 25 mm/s apart; the valve's no-load speed is ~3.4 m/s
+SCALE_RANGE = (0.25, 16.0)                         # the time scales a search spans
+
+
+@functools.lru_cache(maxsize=16)
+def _table(ps: float, hp: bytes, friction: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """(push, pull) over the grid; cached: the chambers' steady states take ~0.5 s to solve."""
+    hp_vector, fp = np.frombuffer(hp), np.frombuffer(friction)
+    table = hy.capacity_table(VELOCITY_GRID_M_S, ps, hp_vector)
+    steady = np.array([lugre.steady_friction(float(v), fp) for v in VELOCITY_GRID_M_S])
+    return table[:, 0] - steady, table[:, 1] - steady
+
+
+@dataclass
+class LegCapacity:
+    """One leg's force range [N] over the velocity grid, net of the seals' steady friction."""
+    velocities_m_s: np.ndarray
+    push_n: np.ndarray               # the largest force toward extension (NaN: beyond the valve's speed)
+    pull_n: np.ndarray               # the smallest (most negative)
+
+    @classmethod
+    def of(cls, hydraulics: np.ndarray, friction: np.ndarray, supply_pa: float) -> LegCapacity:
+        push, pull = _table(float(supply_pa), np.asarray(hydraulics, float).tobytes(),
+                            np.asarray(friction, float).tobytes())
+        return cls(VELOCITY_GRID_M_S, push, pull)
+
+    def limits(self, velocity_m_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(push, pull) at each velocity; NaN beyond the grid or the valve's speed."""
+        nan = math.nan
+        return (np.interp(velocity_m_s, self.velocities_m_s, self.push_n, left=nan, right=nan),
+                np.interp(velocity_m_s, self.velocities_m_s, self.pull_n, left=nan, right=nan))
+
+    def utilisation(self, force_n: np.ndarray, velocity_m_s: np.ndarray) -> np.ndarray:
+        """Each force's ratio to what the leg gives at its velocity in its direction (inf
+        where it cannot: beyond the valve's speed, or a side that no longer reaches zero)."""
+        push, pull = self.limits(velocity_m_s)
+        pushing = force_n >= 0.0
+        limit = np.where(pushing, push, pull)
+        reaches = np.isfinite(limit) & np.where(pushing, limit > 0.0, limit < 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(reaches, force_n / limit, np.inf)
+
+
+@dataclass
+class Loads:
+    """A trajectory's demands on the legs at time scale 1, sampled `dt_s` apart."""
+    dt_s: float
+    static_n: np.ndarray             # (n, legs) gravity alone
+    dynamic_n: np.ndarray            # (n, legs) inertia and velocity terms
+    velocity_m_s: np.ndarray         # (n, legs)
+    inertia_kg: np.ndarray           # (n, legs) each leg's joint-space inertia, the others held
+    to_platform: np.ndarray          # (n, 3, legs) the legs' errors to the platform's position (Jx^-1's
+                                     # first rows); (0, 3, legs): no platform, the legs' own
+
+    def at_scale(self, scale: float) -> tuple[np.ndarray, np.ndarray]:
+        """(force, velocity) when the trajectory's time runs `scale` x slower."""
+        return self.static_n + self.dynamic_n / (scale * scale), self.velocity_m_s / scale
+
+
+@dataclass
+class Judgement:
+    within: bool
+    lag_m: float                     # the largest lag a shortfall leaves (inf: a leg cannot at all)
+    utilisation: float               # the largest force / capacity ratio (the share not applied)
+    sample: int                      # where the lag (or the impossibility) peaks ...
+    leg: int                         # ... and which leg (0-based)
+
+
+def shortfall_lag(capacity: LegCapacity, loads: Loads, scale: float, share: float) -> tuple[float, int, int]:
+    """(largest error [m], sample, leg) the legs' shortfalls leave at `scale`, each leg with
+    `share` of its capacity (`lag_of`: the platform's position error where there is one).
+    inf where a leg cannot give that force at all."""
+    force, velocity = loads.at_scale(scale)
+    push, pull = capacity.limits(velocity)
+    push, pull = push * share, pull * share
+    if not (np.isfinite(push).all() and np.isfinite(pull).all()):
+        k, leg = np.unravel_index(int(np.argmax(~(np.isfinite(push) & np.isfinite(pull)))), push.shape)
+        return math.inf, int(k), int(leg)
+    # the force beyond the leg's range (> 0 behind in its direction), or the spare (< 0)
+    excess = np.where(force >= 0.0, force - push, pull - force)
+    return lag_of(excess, force, loads.inertia_kg, loads.dt_s * scale, loads.to_platform)
+
+
+@njit(cache=True)
+def lag_of(excess_n, force_n, inertia_kg, dt_s, to_platform):
+    """(largest error, sample, leg): per leg, the lag's rate grows by the excess over the
+    inertia and never below zero, the lag by the rate and back to zero with it (the position
+    loop takes what is left), behind in the direction of the force it lacked. The error is
+    the platform's position error these lags make (`to_platform[k]` (3, legs): the position
+    rows of Jx^-1), or the largest lag where there is no platform (`to_platform` empty)."""
+    n, legs = excess_n.shape
+    rate, lag, direction = np.zeros(legs), np.zeros(legs), np.ones(legs)
+    worst, at, leg_at = 0.0, 0, 0
+    for k in range(n):
+        for leg in range(legs):
+            if rate[leg] == 0.0 and excess_n[k, leg] > 0.0:      # a shortfall begins: behind which way
+                direction[leg] = 1.0 if force_n[k, leg] >= 0.0 else -1.0
+            rate[leg] = max(rate[leg] + excess_n[k, leg] / inertia_kg[k, leg] * dt_s, 0.0)
+            lag[leg] = lag[leg] + rate[leg] * dt_s if rate[leg] > 0.0 else 0.0
+        error, largest = 0.0, 0
+        for leg in range(legs):
+            if lag[leg] > lag[largest]:
+                largest = leg
+        if to_platform.shape[0] == 0:
+            error = lag[largest]
+        else:
+            for axis in range(3):
+                component = 0.0
+                for leg in range(legs):
+                    component += to_platform[k, axis, leg] * direction[leg] * lag[leg]
+                error += component * component
+            error = math.sqrt(error)
+        if error > worst:
+            worst, at, leg_at = error, k, largest
+    return worst, at, leg_at
+
+
+def judge(capacity: LegCapacity, loads: Loads, scale: float, share: float, lag_max_m: float) -> Judgement:
+    lag, k, leg = shortfall_lag(capacity, loads, scale, share)
+    force, velocity = loads.at_scale(scale)
+    ratio = capacity.utilisation(force, velocity)
+    return Judgement(lag <= lag_max_m, lag, float(np.max(ratio)), k, leg)
+
+
+def needed_scale(capacity: LegCapacity, loads: Loads, share: float, lag_max_m: float,
+                 tolerance: float = 0.005) -> float:
+    """The smallest time scale (within SCALE_RANGE) at which the lag stays within its bound;
+    NaN when even the slowest is beyond (a static load the legs cannot hold)."""
+    low, high = SCALE_RANGE
+    if shortfall_lag(capacity, loads, high, share)[0] > lag_max_m:
+        return math.nan
+    if shortfall_lag(capacity, loads, low, share)[0] <= lag_max_m:
+        return low
+    while high - low > tolerance * low:
+        middle = math.sqrt(low * high)
+        if shortfall_lag(capacity, loads, middle, share)[0] <= lag_max_m:
+            high = middle
+        else:
+            low = middle
+    return high
+
+
+def leg_loads(trajectory, t0_s: float, t1_s: float, dt_s: float, mass_kg: float, gravity_m_s2: float) -> Loads:
+    """The test bench's vertical leg: (m + load)(g + a)."""
+    times = np.arange(t0_s, t1_s + 0.5 * dt_s, dt_s)
+    _, velocity, accel = trajectory.sample(times)
+    static = np.full_like(velocity, mass_kg * gravity_m_s2)
+    return Loads(dt_s, static, mass_kg * accel, velocity, np.full_like(velocity, mass_kg),
+                 np.zeros((0, 3, velocity.shape[1])))
+
+
+@njit(cache=True)
+def platform_loads_into(segments, times, h, leg_min, base, platform, axis1, masses, coms, inertias, gravity,
+                        tolerance, max_iterations, max_step_quat, home, q, dk_scratch, kin_scratch, vectors,
+                        poses, jacobians, static, dynamic, velocity):
+    """Per sample time: the pose (DK warm-started along the path), the twist from Jx xd = L'
+    at t and t + h, eq. 10.5's forces at rest (static) and with the twist and its difference
+    quotient (dynamic: the rest). Returns the first sample where DK or Jx fails, else -1."""
+    rot, world, units, phi, gmat, jac7, normal, y, step, status = dk_scratch
+    rot2, world2, units2, jac, lu = kin_scratch
+    pos, vel, acc, lengths, lengths_ik, twist, twist_h, accel, wrench, force, zero = vectors
+    for k in range(times.shape[0]):
+        for later in (1, 0):                      # t + h first: q ends at the pose of t
+            sls_evaluate_into(segments, times[k] + later * h, pos, vel, acc)
+            for j in range(6):
+                lengths[j] = pos[j] + leg_min
+            dk_solve_into(base, platform, lengths, q, tolerance, max_iterations, max_step_quat,
+                          rot, world, units, phi, gmat, jac7, normal, y, step, status)
+            if status[2] != 1.0:
+                q[:] = home
+                dk_solve_into(base, platform, lengths, q, tolerance, max_iterations, max_step_quat,
+                              rot, world, units, phi, gmat, jac7, normal, y, step, status)
+                if status[2] != 1.0:
+                    return k
+            ik_into(base, platform, q[0:3], q[3:7], rot2, world2, lengths_ik, units2)
+            jacobian_into(units2, world2, jac)
+            if gauss_solve_into(jac, vel, lu, twist_h if later else twist, False) == 0.0:
+                return k
+        poses[k] = q
+        jacobians[k] = jac
+        velocity[k] = vel
+        for j in range(6):
+            accel[j] = (twist_h[j] - twist[j]) / h
+        platform_wrench_into(base, platform, axis1, lengths_ik, units2, world2, rot2, masses, coms, inertias,
+                             gravity, zero, zero, wrench)
+        if gauss_solve_into(jac, wrench, lu, force, True) == 0.0:
+            return k
+        static[k] = force
+        platform_wrench_into(base, platform, axis1, lengths_ik, units2, world2, rot2, masses, coms, inertias,
+                             gravity, twist, accel, wrench)
+        gauss_solve_into(jac, wrench, lu, force, True)
+        for j in range(6):
+            dynamic[k, j] = force[j] - static[k, j]
+    return -1
+
+
+class PlatformLoads:
+    """The hexapod's legs along a joint trajectory of strokes (`platform_loads_into`), and
+    each leg's joint-space inertia at the first, middle and last sample (the smallest)."""
+
+    def __init__(self, geometry, tolerance_m: float, max_iterations: int = 50, h_s: float = 5e-4):
+        from firmware_py.mechanics.dynamics import InverseDynamics
+        from firmware_py.mechanics.kinematics import DirectKinematics
+        self.geometry, self.h_s = geometry, h_s
+        self.dk = DirectKinematics(geometry, tolerance_m, max_iterations)
+        self.dynamics = InverseDynamics(geometry)
+        dk = self.dk
+        self._dk_scratch = (dk._rot, dk._platform_world, dk._units, dk._phi, dk._gmat, dk._jac, dk._normal,
+                            dk._y, dk._step, dk.status)
+        self._kin_scratch = (np.empty((3, 3)), np.empty((6, 3)), np.empty((6, 3)), np.empty((6, 6)),
+                             np.empty((6, 6)))
+        self._vectors = tuple(np.zeros(6) for _ in range(11))
+        self._q = dk.home.copy()
+
+    def loads(self, trajectory, t0_s: float, t1_s: float, dt_s: float) -> Loads:
+        """ValueError naming the time where the path leaves the workspace or passes a singularity."""
+        g, dyn, dk = self.geometry, self.dynamics, self.dk
+        times = np.arange(t0_s, t1_s + 0.5 * dt_s, dt_s)
+        poses, jacobians = np.empty((len(times), 7)), np.empty((len(times), 6, 6))
+        static, dynamic, velocity = (np.empty((len(times), 6)) for _ in range(3))
+        failed = platform_loads_into(trajectory.segments, times, self.h_s, float(g.leg_min_m), dk.base, dk.platform,
+                                     dyn.axis1, dyn.masses, dyn.coms, dyn.inertias, dyn.gravity, dk.tolerance_m,
+                                     dk.max_iterations, dk.max_step_quat, dk.home, self._q, self._dk_scratch,
+                                     self._kin_scratch, self._vectors, poses, jacobians, static, dynamic, velocity)
+        if failed >= 0:
+            raise ValueError(f"the path leaves the workspace or passes a singular pose at t = {times[failed]:.3f} s")
+        inertia = np.min([self._leg_inertia(poses[k]) for k in sorted({0, len(times) // 2, len(times) - 1})],
+                         axis=0)
+        return Loads(dt_s, static, dynamic, velocity, np.broadcast_to(inertia, static.shape),
+                     np.linalg.inv(jacobians)[:, 0:3, :])
+
+    def _leg_inertia(self, pose) -> np.ndarray:
+        """diag(Jx^-T M Jx^-1): each leg's inertia with the other legs held."""
+        dyn = self.dynamics
+        dyn.task_space_terms(pose[0:3], pose[3:7], np.zeros(6))
+        inverse = np.linalg.inv(dyn.jacobian)
+        return np.einsum("ki,kl,li->i", inverse, dyn.mass_matrix, inverse)
+
+
+def leg_capacity(cfg) -> LegCapacity:
+    """The controller's legs: its [actuator] hydraulics and [friction] at the configured supply."""
+    return LegCapacity.of(cfg.hydraulics, cfg.friction.vector, cfg.hydraulic_model.supply_pressure_pa)

@@ -1,0 +1,110 @@
+"""The waypoints' capacity check (supervision/capacity.py, waypoints.py): a segment whose
+reference asks more than the legs give is refused BEYOND_CAPACITY with the smallest time
+scale that fits, and that scale is tight; a brief peak passes where a sustained shortfall
+does not; the blend into a chained segment is judged with it."""
+
+import math
+
+import numpy as np
+import pytest
+
+from firmware_py.config import load_config
+from firmware_py.rig_model import HexapodModel, TestbenchModel
+from firmware_py.supervision.capacity import LegCapacity, Loads, leg_capacity, shortfall_lag
+from firmware_py.supervision.waypoints import WaypointQueue
+from protocol.enums import TIME_SCALE_NONE_FITS, Ack, State, WaypointFlag, time_scale_from_wire, time_scale_to_wire
+
+LAST = int(WaypointFlag.LAST)
+FAST = {"waypoints": {"velocity_max_mm_s": 3000.0}}     # the speed guard out of the way
+NO_PLATFORM = np.zeros((0, 3, 1))                        # a leg alone: its own lag
+
+
+def _queue(rig: str, overrides: dict | None = None):
+    cfg = load_config(overrides={**FAST, **(overrides or {})})
+    model = HexapodModel(cfg, 0.002) if rig == "hexapod" else TestbenchModel(cfg, 0.002)
+    return WaypointQueue(cfg.waypoints, model.check), model
+
+
+def _commit(queue, model, seq: int, pose, segment_s: float, accel_s: float, flags: int = LAST,
+            load_kg: float = 0.0) -> Ack:
+    queue.stage_position(seq, *pose[:3])
+    queue.stage_rotation(seq, *pose[3:])
+    return queue.commit(seq, seq, segment_s, accel_s, flags, State.READY, model.home_strokes, load_kg)
+
+
+def test_a_segment_beyond_capacity_is_refused_with_the_time_scale_that_fits():
+    queue, model = _queue("hexapod")
+    target = (0.1, 0.1, 0.76, 0.0, 0.0, 0.0)               # 250 mm from home in 0.2 s
+    assert _commit(queue, model, 0, target, 0.2, 0.05) is Ack.BEYOND_CAPACITY and not queue.queue
+    scale = queue.time_scale_needed
+    assert 1.0 < scale < 3.0
+    assert _commit(queue, model, 0, target, 0.2 * scale * 0.97, 0.05 * scale * 0.97) is Ack.BEYOND_CAPACITY
+    assert _commit(queue, model, 0, target, 0.2 * scale, 0.05 * scale) is Ack.ACCEPTED
+    assert math.isnan(queue.time_scale_needed)
+
+
+def test_a_payload_or_a_lower_supply_asks_for_more_time():
+    target = (0.1, 0.1, 0.76, 0.0, 0.0, 0.0)
+    scales = {}
+    for name, overrides in (("empty", {}), ("payload", {"hexapod": {"payload_kg": 3.0}}),
+                            ("20 bar", {"hydraulic_model": {"supply_pressure_bar": 20.0}})):
+        queue, model = _queue("hexapod", overrides)
+        assert _commit(queue, model, 0, target, 0.2, 0.05) is Ack.BEYOND_CAPACITY
+        scales[name] = queue.time_scale_needed
+    assert scales["payload"] > 1.2 * scales["empty"] and scales["20 bar"] > 1.1 * scales["empty"]
+
+
+def test_a_load_the_leg_cannot_hold_fits_no_time_scale():
+    queue, model = _queue("testbench")
+    assert _commit(queue, model, 0, (0.0, 0.0, 0.16, 0.0, 0.0, 0.0), 2.0, 0.4, load_kg=5.0) is Ack.ACCEPTED
+    assert _commit(queue, model, 1, (0.0, 0.0, 0.18, 0.0, 0.0, 0.0), 2.0, 0.4, load_kg=40.0) is Ack.BEYOND_CAPACITY
+    assert math.isinf(queue.time_scale_needed)
+    assert time_scale_to_wire(queue.time_scale_needed) == TIME_SCALE_NONE_FITS
+
+
+def test_a_brief_peak_leaves_a_small_lag_a_sustained_shortfall_a_growing_one():
+    capacity = leg_capacity(load_config())
+    push_at_rest = float(capacity.limits(np.zeros(1))[0][0])
+    n = 500                                                  # 1 s at 2 ms, at rest
+    brief = np.zeros((n, 1))
+    brief[100:112] = 2.0 * push_at_rest                      # twice the push for 24 ms
+    sustained = np.zeros((n, 1))
+    sustained[100:] = 1.1 * push_at_rest                     # 10 % beyond it from 0.2 s on
+    zero = np.zeros((n, 1))
+    inertia = np.full((n, 1), 200.0)
+    lag_brief = shortfall_lag(capacity, Loads(0.002, zero, brief, zero, inertia, NO_PLATFORM), 1.0, 1.0)[0]
+    lag_sustained = shortfall_lag(capacity, Loads(0.002, sustained, zero, zero, inertia, NO_PLATFORM), 1.0, 1.0)[0]
+    assert 0.0 < lag_brief < 1e-3             # pushed behind by F/m for 24 ms, braked as hard: (F/m) t^2
+    assert lag_sustained > 10e-3
+    # a share kept for control makes the same peak longer and deeper
+    assert shortfall_lag(capacity, Loads(0.002, zero, brief, zero, inertia, NO_PLATFORM), 1.0, 0.85)[0] > lag_brief
+
+
+def test_the_blend_into_a_chained_segment_is_judged_with_it():
+    """Two segments each fine alone: reversing without stopping asks the blend for twice
+    the velocity change and is refused; ending the first at rest is accepted."""
+    queue, model = _queue("testbench")
+    up, down = (0.0, 0.0, 0.23, 0.0, 0.0, 0.0), (0.0, 0.0, 0.08, 0.0, 0.0, 0.0)
+    home = float(model.home_strokes[0])
+    assert home < 0.23
+    assert _commit(queue, model, 0, up, 0.12, 0.03, flags=0, load_kg=1.0) is Ack.ACCEPTED
+    assert _commit(queue, model, 1, down, 0.12, 0.03, load_kg=1.0) is Ack.BEYOND_CAPACITY
+    queue.clear()
+    assert _commit(queue, model, 0, up, 0.12, 0.03, load_kg=1.0) is Ack.ACCEPTED
+    assert _commit(queue, model, 1, down, 0.12, 0.03, load_kg=1.0) is Ack.ACCEPTED
+
+
+def test_the_time_scale_on_the_wire_rounds_up_and_says_none_and_not_applicable():
+    assert time_scale_to_wire(1.2301) == pytest.approx(1.24)
+    assert time_scale_to_wire(1.23) == pytest.approx(1.23)
+    assert time_scale_to_wire(math.nan) == 0.0 and math.isnan(time_scale_from_wire(0.0))
+    assert time_scale_to_wire(1e9) == TIME_SCALE_NONE_FITS and math.isinf(time_scale_from_wire(TIME_SCALE_NONE_FITS))
+    assert time_scale_from_wire(time_scale_to_wire(2.5)) == pytest.approx(2.5)
+
+
+def test_the_capacity_is_computed_once_per_supply():
+    cfg = load_config()
+    first, again = leg_capacity(cfg), leg_capacity(cfg)
+    assert first.push_n is again.push_n
+    other = LegCapacity.of(cfg.hydraulics, cfg.friction.vector, 40e5)
+    assert np.nanmin(other.push_n - first.push_n) > 0.0

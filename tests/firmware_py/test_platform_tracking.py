@@ -1,0 +1,44 @@
+"""The platform's tracking error (rig_model.HexapodModel.pose_error_exceeds): the legs'
+errors mapped to the platform's pose by the Jacobian at the measured pose, judged in mm and
+degrees. With the legs near vertical a sideways error is several times the legs' own, so
+the per-leg limit alone lets the platform stray."""
+
+import math
+
+import numpy as np
+
+from firmware_py.config import load_config
+from firmware_py.rig_model import HexapodModel
+from hil.in_process import InProcessLoop
+from plant_emulator.params import load_config as load_emulator_config
+from protocol.enums import Fault, State
+
+
+def _legs_for(model: HexapodModel, pose_error) -> np.ndarray:
+    """The legs' errors a platform pose error makes at the measured pose (first order)."""
+    return model.platform.jacobian @ np.asarray(pose_error, dtype=float)
+
+
+def test_a_sideways_error_the_legs_barely_see_is_judged_on_the_platform():
+    cfg = load_config()
+    model = HexapodModel(cfg, 0.002)
+    sideways = _legs_for(model, [0.03, 0.0, 0.0, 0.0, 0.0, 0.0])
+    assert np.max(np.abs(sideways)) < 0.4 * cfg.limits.tracking_error_max_m       # every leg well inside its limit
+    assert model.pose_error_exceeds(sideways)
+    assert abs(model.pose_error[0] - 0.03) < 1e-9                                 # the platform's, recovered
+    assert not model.pose_error_exceeds(_legs_for(model, [0.02, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    assert model.pose_error_exceeds(_legs_for(model, [0.0, 0.0, 0.0, 0.0, 0.0, math.radians(6.0)]))
+    assert not model.pose_error_exceeds(_legs_for(model, [0.0, 0.0, 0.0, math.radians(4.0), 0.0, 0.0]))
+
+
+def test_the_controller_faults_when_the_platform_strays_sideways():
+    loop = InProcessLoop(load_config(), load_emulator_config(), "computed-torque")
+    loop.activate()
+    assert loop.status.state is State.READY
+    ctl = loop.ctl
+    rig = ctl.rig
+    # the reference moved 30 mm sideways at once: each leg a few mm off, the platform 30 mm
+    ctl.reference.hold(ctl.reference.yr + _legs_for(rig, [0.0, 0.03, 0.0, 0.0, 0.0, 0.0]))
+    loop.cycles(1)
+    assert loop.status.state is State.FAULT and loop.status.fault is Fault.TRACKING_ERROR
+    assert np.max(np.abs(ctl.joint.error_m)) < load_config().limits.tracking_error_max_m
