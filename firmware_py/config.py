@@ -343,6 +343,25 @@ class Kinematics(Section):
 
 
 @frozen
+class Payload(Section):
+    """The hexapod's payload identified from the load cells (motion_control/payload.py), from
+    [hexapod] payload_kg as declared, at the platform's centre of mass."""
+    estimate: bool = flag("estimate")
+    forgetting: float = key("forgetting", 0.9, 1.0)
+    covariance_initial: float = key("covariance_initial", 1e-6, 1e6)
+    covariance_max: float = key("covariance_max", 1e-6, 1e9)
+    mass_max_kg: float = key("mass_max_kg", 0.1, 1000.0)
+    com_mass_min_kg: float = key("com_mass_min_kg", 0.0, 100.0)
+    com_reach_m: float = key("com_reach_mm", 1.0, 2000.0, si=MM)
+    accel_gate_m_s2: float = key("accel_gate_m_s2", 0.0, 100.0)
+
+    def validate(self, where, error) -> None:
+        if self.covariance_initial > self.covariance_max:
+            raise error(f"{where}.covariance_initial = {self.covariance_initial} exceeds covariance_max = "
+                        f"{self.covariance_max}")
+
+
+@frozen
 class Waypoints(Section):
     """The host's waypoint queue and each waypoint's admission check."""
     queue: int = key("queue", 1, 255)
@@ -350,6 +369,12 @@ class Waypoints(Section):
     step_max_m: float = key("step_max_mm", 0.0, 300.0, si=MM)
     capacity_share: float = key("capacity_share_pct", 10.0, 100.0, per=PCT)
     lag_max_m: float = key("lag_max_mm", 0.01, 100.0, si=MM)
+    lag_angle_max_rad: float = key("lag_angle_max_deg", 0.01, 90.0, si=math.pi / 180.0)
+
+    @property
+    def angle_weight_m_rad(self) -> float:
+        """A rotation error weighs as this many metres of position error per radian."""
+        return self.lag_max_m / self.lag_angle_max_rad
     path_samples: int = key("path_samples", 2, 1000)
 
 
@@ -385,6 +410,7 @@ class ControllerConfig(ConfigFile):
     supervisor: Supervisor
     kinematics: Kinematics
     waypoints: Waypoints
+    payload: Payload
     plausibility: Plausibility
 
     @cached_property

@@ -137,7 +137,7 @@ class Controller:
             missing_in_row=self.frames.missing, rejected_in_row=self.frames.rejected,
             pose=platform.dk.pose if platform is not None else None,
             reference_pose=platform.ref_dk.pose if platform is not None else None, margins=self.margins,
-            supply_configured_pa=self.supply_at_rest.nominal_pa)
+            supply_configured_pa=self.supply_at_rest.nominal_pa, payload_com_m=rig.payload_com_m)
 
     def new_interfaces(self) -> tuple[Measurements, ValveCommands]:
         """Measurements and commands sized for this rig (allocate once, reuse every cycle)."""
@@ -380,6 +380,7 @@ class Controller:
         elif sup.state not in (State.FAULT, State.ESTOP, State.BOOT):
             sup.fault(self.node_monitor.check_valves(meas.valve_state))
         sup.fault(rig.estimate(meas))
+        rig.update_payload(meas, self.reference.ar)
         # reference
         active = sup.state in ACTIVE
         if self.stop.active and sup.state is not State.FAULT:
@@ -556,6 +557,7 @@ class Controller:
         s.supply_measured_pa = self.supply_at_rest.measured_pa
         if self.rig.platform is not None:
             s.attitude_mismatch_rad = self.rig.attitude_check.angle_rad
+            s.payload_mass_kg = self.rig.payload_mass_kg
 
     # -- linearisation (hil/design/closed_loop.py) ----------------------------------------------
     def checkpoint(self) -> Checkpoint:

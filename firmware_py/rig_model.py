@@ -17,8 +17,9 @@ from firmware_py.mechanics.dynamics import gauss_solve_into
 from firmware_py.mechanics.geometry import Geometry, default_geometry
 from firmware_py.motion_control.computed_torque import ComputedTorque, LegComputedTorque
 from firmware_py.motion_control.excitation import IdentificationSignal
+from firmware_py.motion_control.payload import PayloadEstimator
 from firmware_py.supervision.capacity import leg_capacity
-from firmware_py.supervision.monitors import all_set, pose_beyond
+from firmware_py.supervision.monitors import all_set, any_beyond, pose_beyond
 from firmware_py.supervision.plausibility import AttitudeCrossCheck
 from firmware_py.supervision.waypoints import HexapodCheck, TestbenchCheck
 from physics.constants import GRAVITY_M_S2
@@ -68,6 +69,13 @@ class TestbenchModel:
         """No platform: the leg's own tracking limit is the bound."""
         return False
 
+    def update_payload(self, meas, accel_ref) -> None:
+        """No platform: the leg's load is the adaptive controller's RLS (eq. 7.33-7.37)."""
+
+    payload = None
+    payload_com_m = None
+    payload_mass_kg = float("nan")
+
     def initialise(self, position_m) -> None:
         """Nothing but the leg's own estimators, which the controller starts."""
 
@@ -97,7 +105,8 @@ class HexapodModel:
     def __init__(self, cfg: ControllerConfig, period_s: float, geometry: Geometry | None = None):
         from firmware_py.mechanics.platform import PlatformModel
         kinematics = cfg.kinematics
-        self.geometry = (geometry or default_geometry()).with_payload(cfg.hexapod.payload_kg)
+        bare = geometry or default_geometry()
+        self.geometry = bare.with_payload(cfg.hexapod.payload_kg)
         self.platform = PlatformModel(self.geometry, kinematics.dk_tolerance_m, kinematics.dk_max_iterations,
                                       period_s)
         self.stroke_m = self.geometry.stroke_m
@@ -119,6 +128,14 @@ class HexapodModel:
         self.platform_angle_max_rad = cfg.limits.platform_angle_max_rad
         self.pose_error = np.zeros(6)              # Jx^-1 of the legs' errors: the platform's, first order
         self._lu = np.empty((6, 6))
+        # the payload from the load cells, into every inverse dynamics the controller runs
+        self.payload = (PayloadEstimator(bare, cfg.payload, cfg.hexapod.payload_kg, bare.platform.com_m)
+                        if cfg.payload.estimate else None)
+        self.payload_gate = cfg.payload.accel_gate_m_s2
+        self.payload_com_m = np.full(3, np.nan)    # its centre of mass (platform frame), NaN: not placed
+        self._pose_position, self._pose_quat = self.platform.dk.pose[0:3], self.platform.dk.pose[3:7]
+        self._still = np.zeros(3)
+        self._payload_dynamics = (self.platform.dynamics, self.computed_torque.dynamics, self.check.loads.dynamics)
         self.singularity_ratio_min = kinematics.singularity_ratio_min
         self.dk_failures_fault = kinematics.dk_failures_fault
         self.dk_failures = 0                 # direct kinematics not converged, cycles in a row
@@ -142,6 +159,25 @@ class HexapodModel:
                                                                                       *meas.attitude_rad):
             return Fault.ATTITUDE_MISMATCH
         return Fault.NONE
+
+    def update_payload(self, meas, accel_ref) -> None:
+        """A load-cell sample of the payload while the legs' reference barely accelerates (the
+        platform's pose from this cycle's estimate), into the inverse dynamics."""
+        estimator = self.payload
+        if (estimator is None or not self.platform.converged or not all_set(meas.fresh)
+                or any_beyond(accel_ref, self.payload_gate)):
+            return
+        platform = self.platform
+        if estimator.update(self._pose_position, self._pose_quat, platform.rot, platform.jacobian,
+                            platform.gravity_axial, meas.force_n, self._still):
+            for dynamics in self._payload_dynamics:
+                estimator.apply_to(dynamics)
+            if not estimator.com_into(self.payload_com_m):
+                self.payload_com_m.fill(np.nan)
+
+    @property
+    def payload_mass_kg(self) -> float:
+        return self.payload.mass_kg if self.payload is not None else float("nan")
 
     def pose_error_exceeds(self, joint_error_m) -> bool:
         """The platform's pose error, from the legs' by the Jacobian at the measured pose,

@@ -49,4 +49,6 @@ class ControllerStatus:
     pose: np.ndarray = None             # DK of the measured strokes: position, quaternion (w, x, y, z)
     reference_pose: np.ndarray = None   # DK of the reference strokes
     attitude_mismatch_rad: float = 0.0  # the encoders' DK attitude against the IMU's, last sample
+    payload_mass_kg: float = math.nan   # the payload identified from the load cells (NaN: not estimated)
+    payload_com_m: np.ndarray = None    # ... its centre of mass in the platform's frame (NaN: not placed)
     margins: object = None              # supervision.diagnostics.FalseAlarmMargins

@@ -81,8 +81,9 @@ class Loads:
     dynamic_n: np.ndarray            # (n, legs) inertia and velocity terms
     velocity_m_s: np.ndarray         # (n, legs)
     inertia_kg: np.ndarray           # (n, legs) each leg's joint-space inertia, the others held
-    to_platform: np.ndarray          # (n, 3, legs) the legs' errors to the platform's position (Jx^-1's
-                                     # first rows); (0, 3, legs): no platform, the legs' own
+    to_platform: np.ndarray          # (n, 6, legs) the legs' errors to the platform's pose (Jx^-1);
+                                     # (0, 6, legs): no platform, the legs' own
+    angle_weight: float = 0.0        # m per rad: a rotation error this large counts as that position error
 
     def at_scale(self, scale: float) -> tuple[np.ndarray, np.ndarray]:
         """(force, velocity) when the trajectory's time runs `scale` x slower."""
@@ -110,16 +111,17 @@ def shortfall_lag(capacity: LegCapacity, loads: Loads, scale: float, share: floa
         return math.inf, int(k), int(leg)
     # the force beyond the leg's range (> 0 behind in its direction), or the spare (< 0)
     excess = np.where(force >= 0.0, force - push, pull - force)
-    return lag_of(excess, force, loads.inertia_kg, loads.dt_s * scale, loads.to_platform)
+    return lag_of(excess, force, loads.inertia_kg, loads.dt_s * scale, loads.to_platform, loads.angle_weight)
 
 
 @njit(cache=True)
-def lag_of(excess_n, force_n, inertia_kg, dt_s, to_platform):
+def lag_of(excess_n, force_n, inertia_kg, dt_s, to_platform, angle_weight):
     """(largest error, sample, leg): per leg, the lag's rate grows by the excess over the
     inertia and never below zero, the lag by the rate and back to zero with it (the position
     loop takes what is left), behind in the direction of the force it lacked. The error is
     the platform's position error these lags make (`to_platform[k]` (3, legs): the position
-    rows of Jx^-1), or the largest lag where there is no platform (`to_platform` empty)."""
+    rows of Jx^-1; the rotation's, weighted by `angle_weight` m/rad, as well: the larger of
+    the two), or the largest lag where there is no platform (`to_platform` empty)."""
     n, legs = excess_n.shape
     rate, lag, direction = np.zeros(legs), np.zeros(legs), np.ones(legs)
     worst, at, leg_at = 0.0, 0, 0
@@ -136,12 +138,16 @@ def lag_of(excess_n, force_n, inertia_kg, dt_s, to_platform):
         if to_platform.shape[0] == 0:
             error = lag[largest]
         else:
-            for axis in range(3):
+            position = angle = 0.0
+            for axis in range(6):
                 component = 0.0
                 for leg in range(legs):
                     component += to_platform[k, axis, leg] * direction[leg] * lag[leg]
-                error += component * component
-            error = math.sqrt(error)
+                if axis < 3:
+                    position += component * component
+                else:
+                    angle += component * component
+            error = max(math.sqrt(position), angle_weight * math.sqrt(angle))
         if error > worst:
             worst, at, leg_at = error, k, largest
     return worst, at, leg_at
@@ -178,7 +184,7 @@ def leg_loads(trajectory, t0_s: float, t1_s: float, dt_s: float, mass_kg: float,
     _, velocity, accel = trajectory.sample(times)
     static = np.full_like(velocity, mass_kg * gravity_m_s2)
     return Loads(dt_s, static, mass_kg * accel, velocity, np.full_like(velocity, mass_kg),
-                 np.zeros((0, 3, velocity.shape[1])))
+                 np.zeros((0, 6, velocity.shape[1])))
 
 
 @njit(cache=True)
@@ -230,10 +236,11 @@ class PlatformLoads:
     """The hexapod's legs along a joint trajectory of strokes (`platform_loads_into`), and
     each leg's joint-space inertia at the first, middle and last sample (the smallest)."""
 
-    def __init__(self, geometry, tolerance_m: float, max_iterations: int = 50, h_s: float = 5e-4):
+    def __init__(self, geometry, tolerance_m: float, max_iterations: int = 50, h_s: float = 5e-4,
+                 angle_weight: float = 0.0):
         from firmware_py.mechanics.dynamics import InverseDynamics
         from firmware_py.mechanics.kinematics import DirectKinematics
-        self.geometry, self.h_s = geometry, h_s
+        self.geometry, self.h_s, self.angle_weight = geometry, h_s, angle_weight
         self.dk = DirectKinematics(geometry, tolerance_m, max_iterations)
         self.dynamics = InverseDynamics(geometry)
         dk = self.dk
@@ -259,7 +266,7 @@ class PlatformLoads:
         inertia = np.min([self._leg_inertia(poses[k]) for k in sorted({0, len(times) // 2, len(times) - 1})],
                          axis=0)
         return Loads(dt_s, static, dynamic, velocity, np.broadcast_to(inertia, static.shape),
-                     np.linalg.inv(jacobians)[:, 0:3, :])
+                     np.linalg.inv(jacobians), self.angle_weight)
 
     def _leg_inertia(self, pose) -> np.ndarray:
         """diag(Jx^-T M Jx^-1): each leg's inertia with the other legs held."""

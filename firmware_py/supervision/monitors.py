@@ -59,6 +59,15 @@ def any_above(values, limit):
 
 
 @njit(cache=True)
+def any_beyond(values, limit):
+    """Whether any entry's magnitude exceeds `limit`."""
+    for i in range(values.shape[0]):
+        if abs(values[i]) > limit:
+            return True
+    return False
+
+
+@njit(cache=True)
 def all_set(flags):
     """Whether every entry is true (no reduction's result buffer, as `ndarray.all` makes)."""
     for i in range(flags.shape[0]):

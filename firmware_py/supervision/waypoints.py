@@ -78,7 +78,7 @@ class HexapodCheck:
         from firmware_py.mechanics.workspace import PoseChecker
         self.waypoints, self.geometry, self.capacity = waypoints, geometry, capacity
         self.dk = DirectKinematics(geometry, dk_tolerance_m, 50)
-        self.loads = PlatformLoads(geometry, dk_tolerance_m)
+        self.loads = PlatformLoads(geometry, dk_tolerance_m, angle_weight=waypoints.angle_weight_m_rad)
         self.poses = PoseChecker(geometry)
         self.fractions = np.linspace(1.0, 0.0, waypoints.path_samples)
 

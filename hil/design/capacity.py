@@ -119,8 +119,8 @@ def utilisation(cfg: ControllerConfig, name: str, payload_kg: float = 0.0, suppl
     cfg = declared(cfg, payload_kg, supply_bar)
     geometry = default_geometry().with_payload(payload_kg)
     trajectory = stroke_trajectory(movement(name, time_scale), geometry)
-    loads = PlatformLoads(geometry, cfg.kinematics.dk_tolerance_m).loads(trajectory, 0.0, trajectory.duration_s,
-                                                                         PERIOD_S)
+    loads = PlatformLoads(geometry, cfg.kinematics.dk_tolerance_m, angle_weight=cfg.waypoints.angle_weight_m_rad
+                          ).loads(trajectory, 0.0, trajectory.duration_s, PERIOD_S)
     capacity = leg_capacity(cfg)
     share, lag_max = cfg.waypoints.capacity_share, cfg.waypoints.lag_max_m
     verdict = judge(capacity, loads, 1.0, share, lag_max)

@@ -16,7 +16,7 @@ from protocol.enums import TIME_SCALE_NONE_FITS, Ack, State, WaypointFlag, time_
 
 LAST = int(WaypointFlag.LAST)
 FAST = {"waypoints": {"velocity_max_mm_s": 3000.0}}     # the speed guard out of the way
-NO_PLATFORM = np.zeros((0, 3, 1))                        # a leg alone: its own lag
+NO_PLATFORM = np.zeros((0, 6, 1))                        # a leg alone: its own lag
 
 
 def _queue(rig: str, overrides: dict | None = None):

@@ -1,0 +1,33 @@
+"""The payload identified by the controller (rig_model.HexapodModel.update_payload): an
+undeclared payload on the emulated platform found from the load cells while holding, and
+taken into the inverse dynamics the computed torque and the waypoint check run."""
+
+import numpy as np
+import pytest
+
+from firmware_py.config import load_config
+from hil.in_process import InProcessLoop
+from plant_emulator.params import load_config as load_emulator_config
+from protocol.enums import State
+
+
+@pytest.mark.parametrize("payload_kg", [1.5, 6.0])
+def test_an_undeclared_payload_is_found_within_two_seconds_of_holding(payload_kg):
+    loop = InProcessLoop(load_config(), load_emulator_config(), "computed-torque", load_kg=payload_kg)
+    loop.activate(1000)                                   # 2 s holding at home
+    status, rig = loop.status, loop.ctl.rig
+    assert status.state is State.READY
+    assert status.payload_mass_kg == pytest.approx(payload_kg, rel=0.05)
+    platform_com = np.asarray(rig.geometry.platform.com_m)   # the emulator's payload sits there
+    assert status.payload_com_m[:2] == pytest.approx(platform_com[:2], abs=0.005)
+    for dynamics in (rig.platform.dynamics, rig.computed_torque.dynamics, rig.check.loads.dynamics):
+        assert dynamics.masses[0] == pytest.approx(rig.geometry.platform.mass_kg + payload_kg, rel=0.05)
+
+
+def test_without_estimation_the_declared_payload_stands():
+    cfg = load_config(overrides={"payload": {"estimate": False}, "hexapod": {"payload_kg": 2.0}})
+    loop = InProcessLoop(cfg, load_emulator_config(), "computed-torque", load_kg=4.0)
+    loop.activate(500)
+    rig = loop.ctl.rig
+    assert rig.payload is None and np.isnan(loop.status.payload_mass_kg)
+    assert rig.computed_torque.dynamics.masses[0] == pytest.approx(rig.geometry.platform.mass_kg)
