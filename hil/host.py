@@ -7,6 +7,7 @@ frames this host sends are written too (the multicast bus does not echo them bac
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 from collections.abc import Callable
@@ -15,7 +16,7 @@ import can
 
 from protocol.codec import CODECS, EncodeStatus, FrameDecoder
 from protocol.e2e import RxStatus
-from protocol.enums import Ack, AckKind, Command, EmuCommand, State
+from protocol.enums import Ack, AckKind, Command, EmuCommand, State, time_scale_from_wire
 from protocol.nodes import CONTROLLER_NODE, NODE_IDS
 from protocol.outbox import Outbox
 
@@ -48,6 +49,7 @@ class Host:
         self.fault_code = 0
         self.controller = -1
         self.acks: dict[tuple[int, int], int] = {}
+        self.time_scale = math.nan                # the last CTRL_ACK's TIME_SCALE (NaN: not applicable)
         self.frames_sent = 0
         self.frames_received = 0
         self.node_heartbeats = 0                # CANopen heartbeats of the nodes
@@ -99,7 +101,9 @@ class Host:
                 self.controller = int(v[self._status["CONTROLLER"]])
             elif msg.arbitration_id == CODECS["CTRL_ACK"].frame_id:
                 v = self.decoder.values["CTRL_ACK"]
-                self.acks[(int(v[self._ack["KIND"]]), int(v[self._ack["SEQ"]]))] = int(v[self._ack["RESULT"]])
+                key = (int(v[self._ack["KIND"]]), int(v[self._ack["SEQ"]]))
+                self.acks[key] = int(v[self._ack["RESULT"]])
+                self.time_scale = time_scale_from_wire(float(v[self._ack["TIME_SCALE"]]))
             elif msg.arbitration_id == self._leg1_id:
                 self.leg1_track.append((self.syncs, float(self.decoder.values["LEG_STATE_1"][self._leg1_position])))
         return msg
@@ -203,7 +207,8 @@ class Host:
             self.waypoint_seq = (seq + 1) % 256
         elif expect_ok:
             raise HostError(f"waypoint {seq} at {[round(float(p) * 1e3, 3) for p in position_m]} mm refused: "
-                            f"{result.name}")
+                            f"{result.name}" + (f" (time scale x{self.time_scale:g} fits)"
+                                                 if result is Ack.BEYOND_CAPACITY else ""))
         return result
 
     def emulator(self, command: int, target: int = 0, fault: int = 0, load_kg: float = 0.0,

@@ -308,7 +308,7 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
             scale, how = scenario.planned_time_scale(merge_sections(scenario.controller_overrides,
                                                                     options.controller_config))
             options.notes.append(f"--time-scale auto: {scale:g} x the thesis's timing ({how})")
-            scenario.time_scale = scale
+            scenario.time_scale, scenario.retime_on_refusal = scale, True
         else:
             scenario.time_scale = options.time_scale
     pacing = options.pacing or scenario.pacing

@@ -157,3 +157,15 @@ def valve_command_of(values) -> tuple[bool, bool, bool, bool, float]:
     """A decoded VALVE_CMD as a valve driver takes it: (D, H, M, R, spool setpoint)."""
     return (bool(values[VC_D]), bool(values[VC_H]), bool(values[VC_M]), bool(values[VC_R]),
             float(values[VC_SPOOL]))
+
+
+def payload_values(values, index, mass_kg: float, com_m, declared_kg: float) -> None:
+    """CTRL_PAYLOAD from the controller's estimate (`mass_kg` NaN: not estimated, the declared
+    payload is sent) and its centre of mass (NaN: not placed, COM_PLACED 0)."""
+    estimating = mass_kg == mass_kg
+    values[index["ESTIMATING"]] = estimating
+    values[index["MASS"]] = mass_kg if estimating else declared_kg
+    placed = estimating and com_m[0] == com_m[0]
+    values[index["COM_PLACED"]] = placed
+    for k, name in enumerate(("COM_X", "COM_Y", "COM_Z")):
+        values[index[name]] = com_m[k] if placed else 0.0

@@ -41,7 +41,7 @@ from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import PACINGS, Fault, NmtCommand, NmtState, Pacing
-from protocol.interfaces import attitude_into, leg_pressure_into, leg_state_into, valve_command_values
+from protocol.interfaces import attitude_into, leg_pressure_into, leg_state_into, payload_values, valve_command_values
 from protocol.nodes import CONTROLLER_NODE, IMU_NODE, SENDER_OF_NODE, rig_nodes
 from protocol.outbox import Outbox
 
@@ -113,6 +113,10 @@ class ControllerLoop:
         self.out_heartbeat = Outbox(f"HEARTBEAT_{CONTROLLER_NODE}")
         self.out_emcy = Outbox(f"EMCY_{CONTROLLER_NODE}")
         self._status_schedule = CODECS["CTRL_STATUS"].schedule
+        # the hexapod's payload (its estimate, or the declared payload)
+        self.out_payload = Outbox("CTRL_PAYLOAD") if has_imu else None
+        self._declared_payload_kg = controller.cfg.hexapod.payload_kg
+        self._payload_schedule = CODECS["CTRL_PAYLOAD"].schedule
         self._overflow = sync_counter_overflow()
         self.sync_counter = 0
         self.heartbeat_seen = np.full(len(self.nodes), -np.inf)
@@ -306,6 +310,10 @@ class ControllerLoop:
             self._send(self.out_status)
             self._compute_max = 0.0
             self._period_error_max = 0.0
+        if self.out_payload is not None and self._payload_schedule.due(self.sync_counter):
+            payload_values(self.out_payload.values, self.out_payload.index, status.payload_mass_kg,
+                           status.payload_com_m, self._declared_payload_kg)
+            self._send(self.out_payload)
         self._send_acks()
         if status.restart_requests != self._restarts_seen:
             self._restarts_seen = status.restart_requests

@@ -31,13 +31,14 @@ from hil.runner import merge_sections
 from hil.scenario import Analysis, Check, Figure, Scenario
 from hil.scenarios.common import NAME_OF_CONTROLLER, NEW_CONTROLLER, controller_at
 from program.errors import UserInputError
-from protocol.enums import Fault, State, WaypointFlag
+from protocol.enums import Ack, Command, Fault, State, WaypointFlag
 
 AXES = ("x", "y", "z")
 SETTLE_AFTER_S = 0.5            # the IAE window ends this long after the movement's last point
 RETURN_TIME_S, RETURN_ACCEL_S = 1.5, 0.3
 THESIS_NAMES = {"adaptive": "iae_pi_plus_p", "model-based": "iae_model_based"}
 THESIS_CONTROLLERS = tuple(THESIS_NAMES)     # at the thesis's timing they may fault: reported
+RETIMES = 3                      # `--time-scale auto`: refusals answered by sending the movement slower
 THESIS_PLATFORM_LIMITS = {"limits": {"platform_error_max_mm": 150.0, "platform_angle_max_deg": 20.0}}
 # realtime: a movement a fault cut short is repeated (after RESET + ENABLE) at most this often;
 # the analysis judges from the log whether a machine stall caused the fault
@@ -55,6 +56,7 @@ class PlatformMovement(Scenario):
     # both movements at 2: docs/MEASUREMENTS.md "Hexapod gains")
     time_scale = 1.0
     time_scalable = True
+    retime_on_refusal = False        # `--time-scale auto`: a refusal's TIME_SCALE is taken
 
     @abstractmethod
     def thesis_motion(self) -> Motion:
@@ -66,12 +68,11 @@ class PlatformMovement(Scenario):
         return replace(m, ta_s=m.ta_s * self.time_scale, tm_s=m.tm_s * self.time_scale)
 
     def script(self, run) -> None:
-        motion = self.motion()
         for controller in self.chosen(run):
             run.select(controller)
             for attempt in range(1, MAX_ATTEMPTS + 1):
                 try:
-                    self._move(run, motion)
+                    self._move(run, self.motion())     # retimed by a refusal for the one before
                     if run.host.state is not State.FAULT:
                         break
                     error: Exception = HostError("the controller faulted during the movement")
@@ -126,14 +127,37 @@ class PlatformMovement(Scenario):
         run.host.waypoint(default_geometry().home_position_m, segment_time_s=RETURN_TIME_S,
                           accel_time_s=RETURN_ACCEL_S, flags=WaypointFlag.LAST | WaypointFlag.START)
         run.wait_s(RETURN_TIME_S + 0.3)
-        duration = 0.0
-        for w in movement_waypoints(motion):
-            run.host.waypoint(w.position_m, segment_time_s=w.segment_time_s, accel_time_s=w.accel_time_s,
-                              flags=w.flags)
-            duration += w.segment_time_s
+        duration = self._queue(run, motion)
         run.wait_s(duration + 0.2)
         run.wait_motion_done(5.0)
         run.wait_s(SETTLE_AFTER_S + 0.2)
+
+    def _queue(self, run, motion: Motion) -> float:
+        """The movement's waypoints; its duration. With `--time-scale auto` a waypoint the
+        controller refuses BEYOND_CAPACITY (it carries more than was declared: its estimate)
+        makes the host let what was accepted play out, clear the queue and send the movement
+        again at the time scale CTRL_ACK names, as a host of the rig would."""
+        for _ in range(RETIMES + 1):
+            duration = 0.0
+            for w in movement_waypoints(motion):
+                strict = not self.retime_on_refusal
+                result = run.host.waypoint(w.position_m, segment_time_s=w.segment_time_s,
+                                           accel_time_s=w.accel_time_s, flags=w.flags, expect_ok=strict)
+                if result is not Ack.ACCEPTED:
+                    break
+                duration += w.segment_time_s
+            else:
+                return duration
+            factor = run.host.time_scale
+            if result is not Ack.BEYOND_CAPACITY or not math.isfinite(factor):
+                raise HostError(f"waypoint at {np.round(w.position_m * 1e3, 1).tolist()} mm refused: {result.name}")
+            run.wait_motion_done(duration + 5.0)          # what was accepted plays out, then the queue is cleared
+            run.host.command(Command.CLEAR_WAYPOINTS)
+            self.time_scale = math.ceil(self.time_scale * factor * 100.0) / 100.0
+            run.notes.append(f"a waypoint refused BEYOND_CAPACITY (the controller's payload estimate): the movement "
+                             f"sent again at {self.time_scale:g} x the thesis's timing")
+            motion = self.motion()
+        raise HostError(f"the movement still refused after {RETIMES} retimings")
 
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
         period = 1.0 / rate_hz
