@@ -38,7 +38,7 @@ SETTLE_AFTER_S = 0.5            # the IAE window ends this long after the moveme
 RETURN_TIME_S, RETURN_ACCEL_S = 1.5, 0.3
 THESIS_NAMES = {"adaptive": "iae_pi_plus_p", "model-based": "iae_model_based"}
 THESIS_CONTROLLERS = tuple(THESIS_NAMES)     # at the thesis's timing they may fault: reported
-RETIMES = 3                      # `--time-scale auto`: refusals answered by sending the movement slower
+RETIMES = 8                      # `--time-scale auto`: refusals answered by sending the movement slower
 THESIS_PLATFORM_LIMITS = {"limits": {"platform_error_max_mm": 150.0, "platform_angle_max_deg": 20.0}}
 # realtime: a movement a fault cut short is repeated (after RESET + ENABLE) at most this often;
 # the analysis judges from the log whether a machine stall caused the fault
