@@ -354,6 +354,7 @@ class Payload(Section):
     com_mass_min_kg: float = key("com_mass_min_kg", 0.0, 100.0)
     com_reach_m: float = key("com_reach_mm", 1.0, 2000.0, si=MM)
     accel_gate_m_s2: float = key("accel_gate_m_s2", 0.0, 100.0)
+    innovation_max_n: float = key("innovation_max_n", 1.0, 1e5)
 
     def validate(self, where, error) -> None:
         if self.covariance_initial > self.covariance_max:

@@ -380,7 +380,7 @@ class Controller:
         elif sup.state not in (State.FAULT, State.ESTOP, State.BOOT):
             sup.fault(self.node_monitor.check_valves(meas.valve_state))
         sup.fault(rig.estimate(meas))
-        rig.update_payload(meas, self.reference.ar)
+        rig.update_payload(meas, self.reference.ar, sup.state not in (State.FAULT, State.ESTOP, State.BOOT))
         # reference
         active = sup.state in ACTIVE
         if self.stop.active and sup.state is not State.FAULT:

@@ -69,7 +69,7 @@ class TestbenchModel:
         """No platform: the leg's own tracking limit is the bound."""
         return False
 
-    def update_payload(self, meas, accel_ref) -> None:
+    def update_payload(self, meas, accel_ref, healthy: bool) -> None:
         """No platform: the leg's load is the adaptive controller's RLS (eq. 7.33-7.37)."""
 
     payload = None
@@ -160,11 +160,12 @@ class HexapodModel:
             return Fault.ATTITUDE_MISMATCH
         return Fault.NONE
 
-    def update_payload(self, meas, accel_ref) -> None:
-        """A load-cell sample of the payload while the legs' reference barely accelerates (the
-        platform's pose from this cycle's estimate), into the inverse dynamics."""
+    def update_payload(self, meas, accel_ref, healthy: bool) -> None:
+        """A load-cell sample of the payload while nothing has latched and the legs' reference
+        barely accelerates (the platform's pose from this cycle's estimate), into the inverse
+        dynamics."""
         estimator = self.payload
-        if (estimator is None or not self.platform.converged or not all_set(meas.fresh)
+        if (estimator is None or not healthy or not self.platform.converged or not all_set(meas.fresh)
                 or any_beyond(accel_ref, self.payload_gate)):
             return
         platform = self.platform
@@ -192,8 +193,14 @@ class HexapodModel:
         self.platform.reset_reference(position_m)
 
     def reset(self) -> None:
-        """After a RESET: the direct kinematics' failures are forgotten."""
+        """After a RESET: the direct kinematics' failures are forgotten, and the payload starts
+        again from the declared one (the fault's onset may have fed it a sensor's error)."""
         self.dk_failures = 0
+        if self.payload is not None:
+            self.payload.reset()
+            for dynamics in self._payload_dynamics:
+                self.payload.apply_to(dynamics)
+            self.payload_com_m.fill(np.nan)
 
     def reference_forces(self, reference) -> bool:
         """eq. 10.5's forces along the reference (model-based, computed torque); False: singular."""

@@ -83,6 +83,18 @@ def rls_rows_step(theta, p, phi, y, forgetting, p_max, mass_max, reach, pk, gain
 
 
 @njit(cache=True)
+def innovation_beyond(phi, theta, y, limit) -> bool:
+    """Whether a row of y - Phi theta exceeds `limit` (N, N m)."""
+    for r in range(phi.shape[0]):
+        s = y[r]
+        for k in range(phi.shape[1]):
+            s -= phi[r, k] * theta[k]
+        if abs(s) > limit:
+            return True
+    return False
+
+
+@njit(cache=True)
 def measured_wrench_into(jacobian, force_measured, force_bare, rod_mass_kg, gravity_axial, out) -> None:
     """out = Jx^T (F_cells - (tau_bare - m_rod g_axial)): a load cell on the rod reads the
     actuator's force less the rod's own weight along the leg."""
@@ -141,6 +153,8 @@ class PayloadEstimator:
         measured_wrench_into(jacobian, force_measured, self.bare.force_n, self.rod_mass_kg, gravity_axial, self.y)
         payload_regressor_into(rot, accel_ref, self.gravity, self.declared[1], self.phi)
         cfg = self.cfg
+        if innovation_beyond(self.phi, self.theta, self.y, cfg.innovation_max_n):
+            return False                             # a load cell's fault, not a payload
         rls_rows_step(self.theta, self.p, self.phi, self.y, cfg.forgetting, cfg.covariance_max, cfg.mass_max_kg,
                       cfg.com_reach_m, self._pk, self._gain)
         self.samples += 1

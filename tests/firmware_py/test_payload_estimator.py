@@ -12,8 +12,8 @@ from firmware_py.mechanics.geometry import default_geometry
 from firmware_py.mechanics.rotation import quat_to_matrix_into, rpy_to_quat
 from firmware_py.motion_control.payload import PayloadEstimator, payload_regressor_into
 
-CFG = SimpleNamespace(forgetting=0.999, covariance_initial=0.01, covariance_max=0.01, mass_max_kg=30.0, com_reach_m=0.3,
-                      com_mass_min_kg=0.3)
+CFG = SimpleNamespace(forgetting=0.999, covariance_initial=0.01, covariance_max=0.01, mass_max_kg=30.0,
+                      com_reach_m=0.3, innovation_max_n=300.0, com_mass_min_kg=0.3)
 
 
 def _carrying(mass_kg: float, com_m):
@@ -86,3 +86,16 @@ def test_a_tilt_shows_the_height_and_a_reset_returns_to_the_declared_payload():
     assert estimator.com_into(found) and found == pytest.approx(com, abs=0.002)
     estimator.reset()
     assert estimator.mass_kg == 1.0 and not estimator.samples
+
+
+def test_a_load_cell_out_of_its_range_is_not_taken_for_a_payload():
+    position, quat, rot = _pose()
+    bare = InverseDynamics(default_geometry())
+    bare.forces(position, quat, np.zeros(6), np.zeros(6))
+    cells, gravity_axial = _cells(bare)
+    estimator = PayloadEstimator(default_geometry(), CFG, 0.0, np.zeros(3))
+    broken = cells.copy()
+    broken[3] = 3200.0                                      # FORCE_LIMIT's kind of reading
+    assert not estimator.update(position, quat, rot, bare.jacobian, gravity_axial, broken, np.zeros(3))
+    assert estimator.mass_kg == 0.0 and estimator.samples == 0
+    assert estimator.update(position, quat, rot, bare.jacobian, gravity_axial, cells, np.zeros(3))
