@@ -134,7 +134,7 @@ class HexapodModel:
         self.payload_gate = cfg.payload.accel_gate_m_s2
         self.payload_com_m = np.full(3, np.nan)    # its centre of mass (platform frame), NaN: not placed
         self._pose_position, self._pose_quat = self.platform.dk.pose[0:3], self.platform.dk.pose[3:7]
-        self._still = np.zeros(3)
+        self._still, self._still6 = np.zeros(3), np.zeros(6)
         self._payload_dynamics = (self.platform.dynamics, self.computed_torque.dynamics, self.check.loads.dynamics)
         self.singularity_ratio_min = kinematics.singularity_ratio_min
         self.dk_failures_fault = kinematics.dk_failures_fault
@@ -211,10 +211,18 @@ class HexapodModel:
         self.platform.estimate(self.home_strokes)
         self.platform.reset_reference(self.home_strokes)
         self.platform.reference_forces(self.home_strokes, reference.vr)
+        any_beyond(reference.ar, self.payload_gate)
+        if self.payload is not None:                 # a sample of the bare platform at home
+            platform, estimator = self.platform, self.payload
+            estimator.bare.forces(self._pose_position, self._pose_quat, self._still6, self._still6)
+            estimator.update(self._pose_position, self._pose_quat, platform.rot, platform.jacobian,
+                             platform.gravity_axial, estimator.bare.force_n, self._still)
+            estimator.apply_to(platform.dynamics)
 
     def forget(self) -> None:
-        """The direct kinematics' warm start from the warm-up is dropped."""
+        """The direct kinematics' warm start and the payload's warm-up sample are dropped."""
         self.platform.dk.reset()
+        self.reset()
 
 
 def rig_model(rig: str, cfg: ControllerConfig, period_s: float, geometry: Geometry | None = None):
