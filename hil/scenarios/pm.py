@@ -29,7 +29,7 @@ from hil.plotting import plt, save
 from hil.reference_rebuild import rebuild
 from hil.runner import merge_sections
 from hil.scenario import Analysis, Check, Figure, Scenario
-from hil.scenarios.common import NAME_OF_CONTROLLER, NEW_CONTROLLER, controller_at
+from hil.scenarios.common import NAME_OF_CONTROLLER, NEW_CONTROLLER, THESIS_PLATFORM_LIMITS, controller_at
 from program.errors import UserInputError
 from protocol.enums import Ack, Command, Fault, State, WaypointFlag
 
@@ -39,7 +39,6 @@ RETURN_TIME_S, RETURN_ACCEL_S = 1.5, 0.3
 THESIS_NAMES = {"adaptive": "iae_pi_plus_p", "model-based": "iae_model_based"}
 THESIS_CONTROLLERS = tuple(THESIS_NAMES)     # at the thesis's timing they may fault: reported
 RETIMES = 8                      # `--time-scale auto`: refusals answered by sending the movement slower
-THESIS_PLATFORM_LIMITS = {"limits": {"platform_error_max_mm": 150.0, "platform_angle_max_deg": 20.0}}
 # realtime: a movement a fault cut short is repeated (after RESET + ENABLE) at most this often;
 # the analysis judges from the log whether a machine stall caused the fault
 MAX_ATTEMPTS = 3
