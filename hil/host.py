@@ -20,7 +20,7 @@ from protocol.enums import Ack, AckKind, Command, EmuCommand, State, time_scale_
 from protocol.nodes import CONTROLLER_NODE, NODE_IDS
 from protocol.outbox import Outbox
 
-CONTROLLER_MESSAGES = ["SYNC", "CTRL_STATUS", "CTRL_ACK"]    # what the host reads: all the controller's
+CONTROLLER_MESSAGES = ["SYNC", "CTRL_STATUS", "CTRL_ACK", "CTRL_PAYLOAD"]   # what the host reads: the controller's
 # ... and leg 1's encoder: the identification tests choose their next input from the last
 # one's velocity, as a lab's tool reading the sensor would (scenarios/friction.py)
 HOST_MESSAGES = CONTROLLER_MESSAGES + ["LEG_STATE_1"]
@@ -50,6 +50,7 @@ class Host:
         self.controller = -1
         self.acks: dict[tuple[int, int], int] = {}
         self.time_scale = math.nan                # the last CTRL_ACK's TIME_SCALE (NaN: not applicable)
+        self.payload_kg = math.nan                # the last CTRL_PAYLOAD's MASS (hexapod)
         self.frames_sent = 0
         self.frames_received = 0
         self.node_heartbeats = 0                # CANopen heartbeats of the nodes
@@ -104,6 +105,8 @@ class Host:
                 key = (int(v[self._ack["KIND"]]), int(v[self._ack["SEQ"]]))
                 self.acks[key] = int(v[self._ack["RESULT"]])
                 self.time_scale = time_scale_from_wire(float(v[self._ack["TIME_SCALE"]]))
+            elif msg.arbitration_id == CODECS["CTRL_PAYLOAD"].frame_id:
+                self.payload_kg = float(self.decoder.values["CTRL_PAYLOAD"][CODECS["CTRL_PAYLOAD"].index["MASS"]])
             elif msg.arbitration_id == self._leg1_id:
                 self.leg1_track.append((self.syncs, float(self.decoder.values["LEG_STATE_1"][self._leg1_position])))
         return msg

@@ -135,7 +135,8 @@ class PlatformMovement(Scenario):
         """The movement's waypoints; its duration. With `--time-scale auto` a waypoint the
         controller refuses BEYOND_CAPACITY (it carries more than was declared: its estimate)
         makes the host let what was accepted play out, clear the queue and send the movement
-        again at the time scale CTRL_ACK names, as a host of the rig would."""
+        again at the time scale CTRL_ACK names, or at the whole movement's plan with the payload
+        CTRL_PAYLOAD reports where that is slower, as a host of the rig would."""
         for _ in range(RETIMES + 1):
             duration = 0.0
             for w in movement_waypoints(motion):
@@ -152,11 +153,22 @@ class PlatformMovement(Scenario):
                 raise HostError(f"waypoint at {np.round(w.position_m * 1e3, 1).tolist()} mm refused: {result.name}")
             run.wait_motion_done(duration + 5.0)          # what was accepted plays out, then the queue is cleared
             run.host.command(Command.CLEAR_WAYPOINTS)
-            self.time_scale = math.ceil(self.time_scale * factor * 100.0) / 100.0
+            self.time_scale = max(math.ceil(self.time_scale * factor * 100.0) / 100.0, self._replanned(run))
             run.notes.append(f"a waypoint refused BEYOND_CAPACITY (the controller's payload estimate): the movement "
                              f"sent again at {self.time_scale:g} x the thesis's timing")
             motion = self.motion()
         raise HostError(f"the movement still refused after {RETIMES} retimings")
+
+    def _replanned(self, run) -> float:
+        """The whole movement's plan with the payload CTRL_PAYLOAD reports (0 when none has come
+        or no timing fits: the refusal's own factor stands)."""
+        from firmware_py.config import load_config
+        from hil.design.capacity import declared, plan
+        if not math.isfinite(run.host.payload_kg):
+            return 0.0
+        cfg = load_config(overrides=merge_sections(self.controller_overrides, run.options.controller_config))
+        scale = plan(declared(cfg, run.host.payload_kg), self.thesis_motion()).time_scale
+        return scale if math.isfinite(scale) else 0.0
 
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
         period = 1.0 / rate_hz
