@@ -6,7 +6,7 @@ held to, and the test bench's sine of chapter 7.6.2."""
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -38,6 +38,10 @@ class Motion:
     ta_s: float
     tm_s: float
     description: str
+
+    def scaled(self, time_scale: float) -> Motion:
+        """The same movement `time_scale` times slower (ta and tm scaled)."""
+        return replace(self, ta_s=self.ta_s * time_scale, tm_s=self.tm_s * time_scale)
 
     def waypoints(self) -> np.ndarray:
         return np.concatenate([self.parts[0][:1]] + [part[1:] for part in self.parts])

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from firmware_py.mechanics.dynamics import gauss_solve_into, platform_wrench_into
-from firmware_py.mechanics.kinematics import dk_solve_into, ik_into, jacobian_into
+from firmware_py.mechanics.dynamics import InverseDynamics, gauss_solve_into, platform_wrench_into
+from firmware_py.mechanics.kinematics import DirectKinematics, dk_solve_into, ik_into, jacobian_into
 from firmware_py.motion_control.trajectory import sls_evaluate_into
 from physics import hydraulics as hy
 from physics import lugre
@@ -238,8 +238,6 @@ class PlatformLoads:
 
     def __init__(self, geometry, tolerance_m: float, max_iterations: int = 50, h_s: float = 5e-4,
                  angle_weight: float = 0.0):
-        from firmware_py.mechanics.dynamics import InverseDynamics
-        from firmware_py.mechanics.kinematics import DirectKinematics
         self.geometry, self.h_s, self.angle_weight = geometry, h_s, angle_weight
         self.dk = DirectKinematics(geometry, tolerance_m, max_iterations)
         self.dynamics = InverseDynamics(geometry)

@@ -45,11 +45,7 @@ def declared(cfg: ControllerConfig, payload_kg: float | None = None, supply_bar:
 def movement(name: str, time_scale: float) -> Motion:
     """The thesis's movement (without the approach from home) at `time_scale` x its ta, tm."""
     motion = MOTIONS[name](default_geometry())
-    return replace(motion, parts=motion.parts[1:], ta_s=motion.ta_s * time_scale, tm_s=motion.tm_s * time_scale)
-
-
-def scaled(motion: Motion, time_scale: float) -> Motion:
-    return replace(motion, ta_s=motion.ta_s * time_scale, tm_s=motion.tm_s * time_scale)
+    return replace(motion, parts=motion.parts[1:]).scaled(time_scale)
 
 
 def stroke_trajectory(motion: Motion, geometry) -> JointTrajectory:
@@ -75,7 +71,7 @@ def plan(cfg: ControllerConfig, motion: Motion) -> Plan:
     scale, reason = low, ""
     for rounds in range(PLAN_ROUNDS):
         queue = WaypointQueue(replace(cfg.waypoints, queue=255), rig.check)
-        for seq, w in enumerate(movement_waypoints(scaled(motion, scale))):
+        for seq, w in enumerate(movement_waypoints(motion.scaled(scale))):
             queue.stage_position(seq, *w.position_m)
             queue.stage_rotation(seq, 0.0, 0.0, 0.0)
             result = queue.commit(seq, seq, w.segment_time_s, w.accel_time_s, w.flags, State.READY,

@@ -7,7 +7,7 @@ bench's sine and steps of chapter 7.6.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -83,7 +83,7 @@ def run_movement(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig,
     """One of the thesis's movements from home, `time_scale` x its ta and tm."""
     loop = InProcessLoop(controller_cfg, emulator_cfg, controller, payload_kg, seed)
     loop.activate()
-    return movement(loop, replace(motion, ta_s=motion.ta_s * time_scale, tm_s=motion.tm_s * time_scale))
+    return movement(loop, motion.scaled(time_scale))
 
 
 def thesis_motions() -> dict[str, Motion]:

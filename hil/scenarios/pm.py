@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import math
 from abc import abstractmethod
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -63,8 +62,7 @@ class PlatformMovement(Scenario):
 
     def motion(self) -> Motion:
         """The movement as run: the thesis's, `time_scale` times slower."""
-        m = self.thesis_motion()
-        return replace(m, ta_s=m.ta_s * self.time_scale, tm_s=m.tm_s * self.time_scale)
+        return self.thesis_motion().scaled(self.time_scale)
 
     def script(self, run) -> None:
         for controller in self.chosen(run):
@@ -109,9 +107,8 @@ class PlatformMovement(Scenario):
         """The fastest time scale at which the controller, configured with these sections,
         accepts every waypoint of the movement (`hil.design.capacity.plan`), and how it was
         found; UserInputError when none within the accepted range does."""
-        from firmware_py.config import load_config
         from hil.design.capacity import PLAN_SCALES, plan
-        cfg = load_config(overrides=controller_sections)
+        cfg = self._controller_config(controller_sections)
         found = plan(cfg, self.thesis_motion())
         declared = (f"payload {cfg.hexapod.payload_kg:g} kg, supply "
                     f"{cfg.hydraulic_model.supply_pressure_pa / 1e5:g} bar declared")
@@ -159,14 +156,19 @@ class PlatformMovement(Scenario):
             motion = self.motion()
         raise HostError(f"the movement still refused after {RETIMES} retimings")
 
+    @staticmethod
+    def _controller_config(sections: dict):
+        """The controller's configuration with these sections over its defaults (what it runs with)."""
+        from firmware_py.config import load_config
+        return load_config(overrides=sections)
+
     def _replanned(self, run) -> float:
         """The whole movement's plan with the payload CTRL_PAYLOAD reports (0 when none has come
         or no timing fits: the refusal's own factor stands)."""
-        from firmware_py.config import load_config
         from hil.design.capacity import declared, plan
         if not math.isfinite(run.host.payload_kg):
             return 0.0
-        cfg = load_config(overrides=merge_sections(self.controller_overrides, run.options.controller_config))
+        cfg = self._controller_config(merge_sections(self.controller_overrides, run.options.controller_config))
         scale = plan(declared(cfg, run.host.payload_kg), self.thesis_motion()).time_scale
         return scale if math.isfinite(scale) else 0.0
 

@@ -11,7 +11,7 @@ from firmware_py.config import load_config
 from firmware_py.mechanics.geometry import default_geometry
 from firmware_py.rig_model import HexapodModel
 from firmware_py.supervision.waypoints import WaypointQueue
-from hil.design.capacity import declared, plan, scaled, utilisation
+from hil.design.capacity import declared, plan, utilisation
 from hil.design.time_optimal import time_optimal
 from hil.experiments import MOTIONS, MOVEMENT_OVERRIDES, movement_waypoints
 from hil.scenarios import SCENARIOS
@@ -39,8 +39,8 @@ def test_the_planned_scale_is_the_fastest_the_controller_accepts(payload_kg, sup
     motion = MOTIONS["diagonal"](default_geometry())
     found = plan(cfg, motion)
     assert math.isfinite(found.time_scale) and found.reason == ""
-    assert _accepted(cfg, scaled(motion, found.time_scale))
-    assert not _accepted(cfg, scaled(motion, found.time_scale * 0.97))
+    assert _accepted(cfg, motion.scaled(found.time_scale))
+    assert not _accepted(cfg, motion.scaled(found.time_scale * 0.97))
 
 
 def test_a_payload_needs_more_time_a_higher_supply_less():
