@@ -24,8 +24,8 @@ from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import NmtCommand
 
 LOG_SUFFIXES = (".blf", ".asc")
-# the emulator sends EMU_TRUTH right after the frames of the same SYNC; a stall of it in
-# between has been 27 ms at most here, a restart takes over 0.8 s
+# the emulator sends EMU_TRUTH right after the frames of the same SYNC; its stalls have been
+# 100 ms at most here (between two truths, or a truth and its frames), a restart takes 0.8 s+
 TRUTH_AFTER_FRAMES_MAX_S = 0.25
 
 
@@ -179,12 +179,20 @@ def _assign_cycles(frames: list[tuple]) -> np.ndarray:
     emulator_ids = {c.frame_id for c in CODECS.values()
                     if c.schedule.sender in EMULATOR_SENDERS and c.schedule.sync_period > 0}
     truth_cycle = {}
+    previous, previous_t = None, -math.inf
     for i in truths:
-        guess, phase = by_order[i], frames[i][1][1] >> 4
+        guess, phase, t = by_order[i], frames[i][1][1] >> 4, frames[i][2]
         # only cycles that had a SYNC (a default of -1 would match phase 15: -1 % 16 == 15)
-        candidates = [k for k in range(guess - 8, guess + 8) if k in counter_of_cycle
+        matches = [k for k in range(guess - 8, guess + 8) if k in counter_of_cycle
+                   and counter_of_cycle[k] % 16 == phase]
+        if previous is not None and t - previous_t <= TRUTH_AFTER_FRAMES_MAX_S:
+            # the same process, answering its SYNCs in order: after a stall its backlog
+            # comes in a burst, each answer to the first SYNC of its phase after the last
+            behind = [k for k in range(previous + 1, guess + 8) if k in counter_of_cycle
                       and counter_of_cycle[k] % 16 == phase]
-        truth_cycle[i] = min(candidates, key=lambda k: abs(k - guess)) if candidates else guess
+            matches = behind[:1] or matches
+        truth_cycle[i] = min(matches, key=lambda k: abs(k - guess)) if matches else guess
+        previous, previous_t = truth_cycle[i], t
     # walk backwards: an emulator cyclic frame belongs to the next EMU_TRUTH's cycle, if that
     # comes right after it (an emulator killed between its frames and their EMU_TRUTH left
     # them to the next process's first truth, seconds later: they keep their SYNC's cycle)

@@ -27,6 +27,7 @@ from hil.metrics import (
 )
 from hil.plotting import plt, save
 from hil.scenario import Analysis, Check, Figure, Scenario
+from hil.scenarios.common import THESIS_PLATFORM_LIMITS
 from physics.constants import MM
 from protocol.enums import State, WaypointFlag
 
@@ -149,6 +150,9 @@ class RealtimeHexapod(Realtime):
     chapter = "8.2.3 (500 Hz loop)"
     rig = "hexapod"
     controllers = ("model-based",)
+    # its yaw swings 2-2.5 deg on the rise, 5.6 deg once in three runs (the thesis's per-leg
+    # gains): this run measures the loop's timing, not the thesis's tracking
+    controller_overrides = THESIS_PLATFORM_LIMITS
 
     def points(self):
         home = default_geometry().home_position_m

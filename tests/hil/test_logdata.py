@@ -52,3 +52,27 @@ def test_frames_of_a_killed_emulator_keep_their_sync_not_the_next_processes_firs
     cycles = _assign_cycles(frames)
     legs = [int(c) for (frame_id, *_), c in zip(frames, cycles) if frame_id == LEG]
     assert legs == list(range(11)) + [1011]
+
+
+def test_an_emulator_stalled_for_48_cycles_answers_each_sync_in_its_own_cycle():
+    """Realtime: the emulator's process was not run for ~100 ms, then answered the 48 SYNCs
+    it had missed in one burst. Matched by phase near the SYNC they came after, those answers
+    went to recent cycles (48 = 3 x 16), so they looked neither late nor ever sent, and the
+    SENSOR_TIMEOUT the stall caused read as a fault without a stall before it."""
+    stall = range(31, 79)
+    frames = []
+
+    def answer(k, t):
+        frames.extend([(LEG, bytes(6), t), (TRUTH, bytes([0, ((k + 1) % 16) << 4, 0, 0, 0, 0, 0, 0]), t + 1e-4)])
+
+    for k in range(120):
+        t = k * 0.002
+        frames.append((SYNC, bytes([k % 240 + 1]), t))
+        if k == stall.stop:                           # back: the backlog, then this SYNC's answer
+            for j, late in enumerate(stall):
+                answer(late, t + 1e-3 + j * 4e-4)
+        if k not in stall:
+            answer(k, t + (0.025 if k == stall.stop else 2e-4))
+    cycles = _assign_cycles(frames)
+    legs = [int(c) for (frame_id, *_), c in zip(frames, cycles) if frame_id == LEG]
+    assert sorted(legs) == list(range(120)) and legs[31:79] == list(stall)
