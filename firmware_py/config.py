@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from physics import hydraulics as hy
+from physics import power_unit as pu
 from physics.actuator import (
     ENCODER_RESOLUTION,
     GUIDE_COULOMB,
@@ -406,6 +407,7 @@ class ControllerConfig(ConfigFile):
     computed_torque: ComputedTorque
     valve_map: ValveMap
     hydraulic_model: HydraulicModel
+    power_unit: pu.PowerUnitSection
     residuals: Residuals
     limits: Limits
     supervisor: Supervisor
@@ -420,6 +422,12 @@ class ControllerConfig(ConfigFile):
         [hydraulic_model]: what the residuals and the computed torque's force loops run."""
         return hy.pack(self.actuator, self.hydraulic_model, self.hydraulic_model,
                        self.hydraulic_model.tank_pressure_pa)
+
+    @cached_property
+    def power(self) -> np.ndarray:
+        """The power unit's parameter vector (physics.power_unit PU_*), set at [hydraulic_model]'s
+        supply: what the waypoint check's flow budget runs."""
+        return pu.pack(self.power_unit, self.hydraulic_model.supply_pressure_pa)
 
 
 def load_config(path: str | Path | None = None, overrides: dict | None = None) -> ControllerConfig:

@@ -106,6 +106,19 @@ def valve_flows(spool: float, pa: float, pb: float, ps: float, hp: np.ndarray):
 
 
 @numba.njit(cache=True)
+def supply_flow(spool: float, pa: float, pb: float, ps: float, hp: np.ndarray, ports: float):
+    """The flow the valve draws from the supply through its P edges (eq. 4.4-4.6; negative
+    when a chamber above the supply drives oil back) and its slope d / d ps; nothing through
+    closed load-holding valves (`ports` 0, as `pressure_rates`)."""
+    kv, lam = hp[HP_KV] * ports, hp[HP_LAMINAR]
+    a_pa = max(spool + hp[HP_LAP_P], 0.0)
+    a_pb = max(hp[HP_LAP_P] - spool, 0.0)
+    flow = kv * (a_pa * orifice_root(ps - pa, lam) + a_pb * orifice_root(ps - pb, lam))
+    slope = kv * (a_pa * orifice_root_slope(ps - pa, lam) + a_pb * orifice_root_slope(ps - pb, lam))
+    return flow, slope
+
+
+@numba.njit(cache=True)
 def valve_flow_gains(spool: float, pa: float, pb: float, ps: float, hp: np.ndarray):
     """d QA / d spool and d QB / d spool of `valve_flows` at fixed pressures: each open
     metering edge's kv sqrt|dP| (eq. 4.2)."""

@@ -17,6 +17,7 @@ import numpy as np
 
 from physics import hydraulics as hy
 from physics import lugre
+from physics import power_unit as pu
 from physics.actuator import (
     ENCODER_RESOLUTION,
     GUIDE_COULOMB,
@@ -144,6 +145,7 @@ class EmulatorConfig(ConfigFile):
     actuator: Actuator
     valve: hy.ValveSection
     chambers: hy.ChamberSection
+    power_unit: pu.PowerUnitSection
     friction: lugre.LugreSection
     guide: Guide
     testbench: Testbench
@@ -155,6 +157,11 @@ class EmulatorConfig(ConfigFile):
     def hp(self) -> np.ndarray:
         """Each actuator's hydraulics parameter vector (SI)."""
         return hy.pack(self.actuator, self.valve, self.chambers, self.actuator.tank_pressure_pa)
+
+    @cached_property
+    def pu(self) -> np.ndarray:
+        """The power unit's parameter vector (SI), its relief set at the actuators' supply."""
+        return pu.pack(self.power_unit, self.actuator.supply_pressure_pa)
 
     @property
     def area_a_m2(self) -> float:

@@ -38,6 +38,7 @@ import numba
 import numpy as np
 
 from physics import hydraulics as hy
+from physics import power_unit
 from physics.constants import GRAVITY_M_S2
 from physics.lugre import force_split, z_step
 from plant_emulator.mechanism import Mechanism
@@ -45,6 +46,7 @@ from plant_emulator.params import EmulatorConfig
 from plant_emulator.rig_geometry import RigGeometry, read_rig_geometry
 
 SUPPLY_LOSS_TIME_CONSTANT_S = 0.05    # supply pressure decay when the power unit is lost
+NO_POWER_UNIT = np.zeros(0)           # the kernels hold the supply they are given
 # MuJoCo's warnings that it reset a diverged simulation, or met a non-finite motor force
 MUJOCO_DIVERGED = tuple(int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
                                          mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADCTRL))
@@ -56,8 +58,9 @@ SEIZED_SOLIMP = (0.9999, 0.9999, 0.0001, 0.5, 2.0)
 @numba.njit(cache=True)
 def testbench_advance(st: np.ndarray, command: float, jammed: bool, seized: bool, ports: float, seal_leak: float,
                       n: int, h: float, ps: float, hp: np.ndarray, fp: np.ndarray, gp: np.ndarray, rod_mass: float,
-                      load_mass: float, out: np.ndarray) -> None:
-    """n sub-steps of h of the test bench; out = [acceleration, seal friction, guide friction]."""
+                      load_mass: float, pu: np.ndarray, out: np.ndarray) -> float:
+    """n sub-steps of h of the test bench; out = [acceleration, seal friction, guide friction].
+    Returns the supply pressure after them (the power unit `pu`; empty: `ps` held)."""
     mass = rod_mass + load_mass
     stroke = hp[hy.HP_STROKE]
     y, v = st[hy.S_Y], st[hy.S_V]
@@ -86,10 +89,14 @@ def testbench_advance(st: np.ndarray, command: float, jammed: bool, seized: bool
         st[hy.S_Z] = z_step(st[hy.S_Z], v_new, h, fp)
         st[hy.S_ZG] = z_step(st[hy.S_ZG], v_new, h, gp)
         hy.chamber_step(st, y_new, v_new, ps, h, hp, ports, seal_leak)
+        if pu.shape[0]:
+            drawn, slope = hy.supply_flow(st[hy.S_SPOOL], st[hy.S_PA], st[hy.S_PB], ps, hp, ports)
+            ps = power_unit.supply_step(ps, drawn, slope, h, pu)
         accel = (v_new - v) / h
         y, v = y_new, v_new
     st[hy.S_Y], st[hy.S_V] = y, v
     out[0], out[1], out[2] = accel, seal, guide
+    return ps
 
 
 @numba.njit(cache=True)
@@ -115,16 +122,25 @@ def legs_read_mujoco(qpos: np.ndarray, qvel: np.ndarray, slide_qpos: np.ndarray,
 @numba.njit(cache=True)
 def legs_hydraulics(st: np.ndarray, stroke: np.ndarray, velocity: np.ndarray, command: np.ndarray,
                     jammed: np.ndarray, ports: np.ndarray, seal_leak: np.ndarray, n: int, h: float, ps: float,
-                    hp: np.ndarray, fp: np.ndarray) -> None:
-    """Advance spool, bristles and chambers of every leg by n x h at the given leg motion."""
+                    hp: np.ndarray, fp: np.ndarray, pu: np.ndarray) -> float:
+    """Advance spool, bristles and chambers of every leg by n x h at the given leg motion, and
+    the supply they share (the power unit `pu`; empty: `ps` held). Returns the supply."""
     for i in range(st.shape[0]):
         st[i, hy.S_Y] = stroke[i]
         st[i, hy.S_V] = velocity[i]
-        for _ in range(n):
+    for _ in range(n):
+        drawn = slope = 0.0
+        for i in range(st.shape[0]):
             if not jammed[i]:
                 st[i, hy.S_SPOOL] = hy.spool_step(st[i, hy.S_SPOOL], command[i], h, hp)
             st[i, hy.S_Z] = z_step(st[i, hy.S_Z], velocity[i], h, fp)
             hy.chamber_step(st[i], stroke[i], velocity[i], ps, h, hp, ports[i], seal_leak[i])
+            flow, flow_slope = hy.supply_flow(st[i, hy.S_SPOOL], st[i, hy.S_PA], st[i, hy.S_PB], ps, hp, ports[i])
+            drawn += flow
+            slope += flow_slope
+        if pu.shape[0]:
+            ps = power_unit.supply_step(ps, drawn, slope, h, pu)
+    return ps
 
 
 @numba.njit(cache=True)
@@ -174,15 +190,17 @@ class _RigBase:
             if self.first_unstable_s is None:
                 self.first_unstable_s = self.time_s
 
-    def _supply_for(self, period_s: float) -> float:
+    def _supply_for(self, period_s: float) -> tuple[float, np.ndarray]:
+        """(the supply at the period's start, the power unit that runs it through the period);
+        a failing unit (a supply fault) falls to its share with its own time constant instead."""
         tank = self.cfg.hp[hy.HP_TANK]
         if self.supply_fraction >= 1.0:
-            return self.supply_pressure_pa
+            return self.supply_pressure_pa, self.cfg.pu
         # the power unit delivers part of its pressure (0: it stopped, to the tank's)
         target = tank + self.supply_fraction * (self.cfg.actuator.supply_pressure_pa - tank)
         self.supply_pressure_pa = target + (self.supply_pressure_pa - target) * math.exp(
             -period_s / SUPPLY_LOSS_TIME_CONSTANT_S)
-        return self.supply_pressure_pa
+        return self.supply_pressure_pa, NO_POWER_UNIT
 
     def set_rod_seized(self, leg: int, seized: bool) -> None:
         self.seized[leg] = seized
@@ -229,11 +247,12 @@ class TestbenchRig(_RigBase):
 
     def advance(self, period_s: float) -> None:
         n = max(1, round(period_s / self.cfg.testbench.substep_s))
-        ps = self._supply_for(period_s)
-        testbench_advance(self.state[0], float(self.command[0]), bool(self.jammed[0]), bool(self.seized[0]),
-                          float(self.ports_open[0]), float(self.seal_leak[0]), n, period_s / n, ps,
-                          self.cfg.hp, self.cfg.friction.vector, self.guide_friction,
-                          self.cfg.actuator.piston_rod_mass_kg, self.load_mass_kg, self.out)
+        ps, unit = self._supply_for(period_s)
+        self.supply_pressure_pa = testbench_advance(
+            self.state[0], float(self.command[0]), bool(self.jammed[0]), bool(self.seized[0]),
+            float(self.ports_open[0]), float(self.seal_leak[0]), n, period_s / n, ps, self.cfg.hp,
+            self.cfg.friction.vector, self.guide_friction, self.cfg.actuator.piston_rod_mass_kg, self.load_mass_kg,
+            unit, self.out)
         # the rod carries the load's weight, inertia and guide friction
         self.rod_force_n[0] = self.load_mass_kg * (self.out[0] + GRAVITY_M_S2) + self.out[2]
         self.time_s += period_s
@@ -246,7 +265,7 @@ class TestbenchRig(_RigBase):
                           self.cfg.testbench.substep_s,
                           self.cfg.actuator.supply_pressure_pa,
                           self.cfg.hp, self.cfg.friction.vector, self.guide_friction,
-                          self.cfg.actuator.piston_rod_mass_kg, self.load_mass_kg, np.zeros(3))
+                          self.cfg.actuator.piston_rod_mass_kg, self.load_mass_kg, self.cfg.pu, np.zeros(3))
 
     @property
     def acceleration_m_s2(self) -> float:
@@ -321,7 +340,7 @@ class HexapodRig(_RigBase):
         mech, cfg = self.mechanism, self.cfg
         model, data = mech.model, mech.data
         steps = max(1, round(period_s / model.opt.timestep))
-        ps = self._supply_for(period_s)
+        ps, unit = self._supply_for(period_s)
         sub = cfg.hexapod.hydraulic_substeps
         h = model.opt.timestep / sub
         for _ in range(steps):
@@ -336,9 +355,9 @@ class HexapodRig(_RigBase):
                               model.dof_damping)
             mujoco.mj_step(model, data)
             self._read_legs()
-            legs_hydraulics(self.state, self._stroke, self._velocity, self.command, self.jammed, self.ports_open,
-                            self.seal_leak, sub, h, ps,
-                            cfg.hp, cfg.friction.vector)
+            ps = legs_hydraulics(self.state, self._stroke, self._velocity, self.command, self.jammed,
+                                 self.ports_open, self.seal_leak, sub, h, ps, cfg.hp, cfg.friction.vector, unit)
+        self.supply_pressure_pa = ps
         self._measure_rod_forces()
         self.time_s += steps * model.opt.timestep
         # MuJoCo resets its state where it diverges (and warns on stderr): count it, then clear
@@ -362,7 +381,8 @@ class HexapodRig(_RigBase):
                          np.zeros(6), np.zeros(6))
         legs_hydraulics(state, self._stroke.copy(), self._velocity.copy(), np.zeros(6), self.jammed,
                         self.ports_open, self.seal_leak, 1,
-                        cfg.testbench.substep_s, cfg.actuator.supply_pressure_pa, cfg.hp, cfg.friction.vector)
+                        cfg.testbench.substep_s, cfg.actuator.supply_pressure_pa, cfg.hp, cfg.friction.vector,
+                        cfg.pu)
 
     def _measure_rod_forces(self) -> None:
         """Axial force of each connect constraint (rod end -> platform), compression positive.

@@ -7,6 +7,10 @@ rest), its dynamic force (inertia and velocity terms) and its velocity. Slowing 
 time by a factor s divides the velocities by s and the dynamic forces by s^2, so one
 sampling at s = 1 answers every time scale.
 
+The power unit is shared: the legs' flows (A v extending, alpha A |v| retracting) beyond the
+pump's share empty the accumulator and the line, and the supply may fall no further than the
+same share of its set pressure (`SupplyBudget`: the oil that gives, `physics.power_unit`).
+
 The judgement is the lag a force shortfall leaves: where a leg needs more than its share,
 the missing force over its joint-space inertia accelerates the leg behind its reference;
 where it has spare force, that spare brings the lag's rate back to zero. A brief peak (the
@@ -29,6 +33,7 @@ from firmware_py.mechanics.kinematics import DirectKinematics, dk_solve_into, ik
 from firmware_py.motion_control.trajectory import sls_evaluate_into
 from physics import hydraulics as hy
 from physics import lugre
+from physics import power_unit as pu
 
 VELOCITY_GRID_M_S = np.linspace(-3.0, 3.0, 241)     # 25 mm/s apart; the valve's no-load speed is ~3.4 m/s
 SCALE_RANGE = (0.25, 16.0)                         # the time scales a search spans
@@ -44,17 +49,55 @@ def _table(ps: float, hp: bytes, friction: bytes) -> tuple[np.ndarray, np.ndarra
 
 
 @dataclass
+class SupplyBudget:
+    """The power unit behind the legs (`physics.power_unit` vector `power`, set at the supply)."""
+    power: np.ndarray
+    area_m2: float                   # each leg's piston area; alpha x it on the rod side
+    alpha: float
+
+    def reserve_m3(self, share: float) -> float:
+        """The oil the line and accumulator give before the supply falls to `share` of its set."""
+        set_pa = float(self.power[pu.PU_SET])
+        return pu.usable_volume(self.power, set_pa, share * set_pa)
+
+    def deficit_m3(self, velocity_m_s: np.ndarray, dt_s: float, scale: float, share: float) -> float:
+        """The largest volume the legs draw beyond `share` of the pump's flow at `scale`."""
+        return largest_deficit(velocity_m_s, dt_s, scale, self.area_m2, self.alpha,
+                               share * float(self.power[pu.PU_PUMP]))
+
+
+@njit(cache=True)
+def largest_deficit(velocity_m_s, dt_s, scale, area_m2, alpha, supplied_m3_s):
+    """The legs' flow (each chamber they fill) beyond `supplied_m3_s`, integrated and never
+    below zero (the pump refills the accumulator with its spare): its largest value [m^3]."""
+    deficit = worst = 0.0
+    for k in range(velocity_m_s.shape[0]):
+        drawn = 0.0
+        for leg in range(velocity_m_s.shape[1]):
+            v = velocity_m_s[k, leg] / scale
+            drawn += area_m2 * v if v > 0.0 else -alpha * area_m2 * v
+        deficit = max(deficit + (drawn - supplied_m3_s) * dt_s * scale, 0.0)
+        worst = max(worst, deficit)
+    return worst
+
+
+@dataclass
 class LegCapacity:
-    """One leg's force range [N] over the velocity grid, net of the seals' steady friction."""
+    """One leg's force range [N] over the velocity grid, net of the seals' steady friction, and
+    the power unit all the legs share (None: an ideal supply)."""
     velocities_m_s: np.ndarray
     push_n: np.ndarray               # the largest force toward extension (NaN: beyond the valve's speed)
     pull_n: np.ndarray               # the smallest (most negative)
+    supply: SupplyBudget | None = None
 
     @classmethod
-    def of(cls, hydraulics: np.ndarray, friction: np.ndarray, supply_pa: float) -> LegCapacity:
+    def of(cls, hydraulics: np.ndarray, friction: np.ndarray, supply_pa: float,
+           power: np.ndarray | None = None) -> LegCapacity:
         push, pull = _table(float(supply_pa), np.asarray(hydraulics, float).tobytes(),
                             np.asarray(friction, float).tobytes())
-        return cls(VELOCITY_GRID_M_S, push, pull)
+        budget = None if power is None else SupplyBudget(np.asarray(power, float), float(hydraulics[hy.HP_AREA_A]),
+                                                         float(hydraulics[hy.HP_ALPHA]))
+        return cls(VELOCITY_GRID_M_S, push, pull, budget)
 
     def limits(self, velocity_m_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(push, pull) at each velocity; NaN beyond the grid or the valve's speed."""
@@ -97,6 +140,8 @@ class Judgement:
     utilisation: float               # the largest force / capacity ratio (the share not applied)
     sample: int                      # where the lag (or the impossibility) peaks ...
     leg: int                         # ... and which leg (0-based)
+    deficit_m3: float = 0.0          # the oil drawn beyond the pump's share (0: an ideal supply) ...
+    reserve_m3: float = math.inf     # ... and what the accumulator and line give for it
 
 
 def shortfall_lag(capacity: LegCapacity, loads: Loads, scale: float, share: float) -> tuple[float, int, int]:
@@ -153,25 +198,40 @@ def lag_of(excess_n, force_n, inertia_kg, dt_s, to_platform, angle_weight):
     return worst, at, leg_at
 
 
+def supply_deficit(capacity: LegCapacity, loads: Loads, scale: float, share: float) -> tuple[float, float]:
+    """(the oil drawn beyond the pump's share, the reserve for it) [m^3] at `scale`."""
+    budget = capacity.supply
+    if budget is None:
+        return 0.0, math.inf
+    return budget.deficit_m3(loads.velocity_m_s, loads.dt_s, scale, share), budget.reserve_m3(share)
+
+
+def fits(capacity: LegCapacity, loads: Loads, scale: float, share: float, lag_max_m: float) -> bool:
+    """Within capacity at `scale`: the lag within its bound and the supply within its reserve."""
+    deficit, reserve = supply_deficit(capacity, loads, scale, share)
+    return deficit <= reserve and shortfall_lag(capacity, loads, scale, share)[0] <= lag_max_m
+
+
 def judge(capacity: LegCapacity, loads: Loads, scale: float, share: float, lag_max_m: float) -> Judgement:
     lag, k, leg = shortfall_lag(capacity, loads, scale, share)
+    deficit, reserve = supply_deficit(capacity, loads, scale, share)
     force, velocity = loads.at_scale(scale)
     ratio = capacity.utilisation(force, velocity)
-    return Judgement(lag <= lag_max_m, lag, float(np.max(ratio)), k, leg)
+    return Judgement(lag <= lag_max_m and deficit <= reserve, lag, float(np.max(ratio)), k, leg, deficit, reserve)
 
 
 def needed_scale(capacity: LegCapacity, loads: Loads, share: float, lag_max_m: float,
                  tolerance: float = 0.005) -> float:
-    """The smallest time scale (within SCALE_RANGE) at which the lag stays within its bound;
-    NaN when even the slowest is beyond (a static load the legs cannot hold)."""
+    """The smallest time scale (within SCALE_RANGE) that `fits`; NaN when even the slowest
+    does not (a static load the legs cannot hold)."""
     low, high = SCALE_RANGE
-    if shortfall_lag(capacity, loads, high, share)[0] > lag_max_m:
+    if not fits(capacity, loads, high, share, lag_max_m):
         return math.nan
-    if shortfall_lag(capacity, loads, low, share)[0] <= lag_max_m:
+    if fits(capacity, loads, low, share, lag_max_m):
         return low
     while high - low > tolerance * low:
         middle = math.sqrt(low * high)
-        if shortfall_lag(capacity, loads, middle, share)[0] <= lag_max_m:
+        if fits(capacity, loads, middle, share, lag_max_m):
             high = middle
         else:
             low = middle
@@ -275,5 +335,6 @@ class PlatformLoads:
 
 
 def leg_capacity(cfg) -> LegCapacity:
-    """The controller's legs: its [actuator] hydraulics and [friction] at the configured supply."""
-    return LegCapacity.of(cfg.hydraulics, cfg.friction.vector, cfg.hydraulic_model.supply_pressure_pa)
+    """The controller's legs: its [actuator] hydraulics and [friction] at the configured supply,
+    on its [power_unit]."""
+    return LegCapacity.of(cfg.hydraulics, cfg.friction.vector, cfg.hydraulic_model.supply_pressure_pa, cfg.power)

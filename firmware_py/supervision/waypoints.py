@@ -20,7 +20,7 @@ import numpy as np
 
 from firmware_py.config import Waypoints
 from firmware_py.motion_control.trajectory import JointTrajectory, hold_at, through_points
-from firmware_py.supervision.capacity import LegCapacity, PlatformLoads, leg_loads, needed_scale, shortfall_lag
+from firmware_py.supervision.capacity import LegCapacity, PlatformLoads, fits, leg_loads, needed_scale
 from physics.constants import GRAVITY_M_S2
 from protocol.enums import Ack, State, WaypointFlag
 
@@ -123,7 +123,7 @@ class HexapodCheck:
 def capacity_verdict(waypoints: Waypoints, capacity: LegCapacity, loads, strokes):
     """ACCEPTED, or BEYOND_CAPACITY with the smallest time scale that fits (inf: none)."""
     share, lag_max = waypoints.capacity_share, waypoints.lag_max_m
-    if shortfall_lag(capacity, loads, 1.0, share)[0] <= lag_max:
+    if fits(capacity, loads, 1.0, share, lag_max):
         return Ack.ACCEPTED, strokes, math.nan
     scale = needed_scale(capacity, loads, share, lag_max)
     return Ack.BEYOND_CAPACITY, None, math.inf if math.isnan(scale) else scale

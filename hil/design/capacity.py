@@ -25,7 +25,7 @@ from firmware_py.supervision.capacity import PlatformLoads, judge, leg_capacity,
 from firmware_py.supervision.waypoints import WaypointQueue
 from hil.design.time_optimal import time_optimal
 from hil.experiments import MOTIONS, Motion, movement_waypoints
-from physics.constants import BAR
+from physics.constants import BAR, CM3
 from protocol.enums import Ack, State
 
 PERIOD_S = 0.002
@@ -99,6 +99,8 @@ class Utilisation:
     lag_mm: float                    # the platform's largest error the shortfalls leave (share kept for control)
     at_s: float                      # where (time into the movement) ...
     leg: int                         # ... and which leg (1..6)
+    deficit_cm3: float               # the oil drawn beyond the pump's share ...
+    reserve_cm3: float               # ... and what the accumulator and line give for it
     whole_scale: float               # the time scale at which the whole movement's lag is within bound
     planned_scale: float             # the time scale the controller accepts, waypoint by waypoint
     planned_s: float                 # the movement's duration (after its approach) at that scale
@@ -126,12 +128,13 @@ def utilisation(cfg: ControllerConfig, name: str, payload_kg: float = 0.0, suppl
     optimal = time_optimal(cfg, thesis, payload_kg) if optimal else [(math.nan, math.nan)]
     return Utilisation(name, payload_kg, cfg.hydraulic_model.supply_pressure_pa / BAR, time_scale,
                        verdict.utilisation, verdict.lag_m * 1e3, verdict.sample * PERIOD_S, verdict.leg + 1,
-                       whole, planned, planned * sum(sls for _, sls in optimal), sum(t for t, _ in optimal))
+                       verdict.deficit_m3 / CM3, verdict.reserve_m3 / CM3, whole, planned,
+                       planned * sum(sls for _, sls in optimal), sum(t for t, _ in optimal))
 
 
 def format_utilisation(rows: list[Utilisation]) -> str:
     lines = ["movement  payload kg  supply bar  time scale  utilisation  error mm  where (leg, t s)  "
-             "whole-movement scale  planned scale  planned s  time-optimal s"]
+             "oil beyond pump / reserve cm3  whole-movement scale  planned scale  planned s  time-optimal s"]
     for r in rows:
         whole = "-" if not math.isfinite(r.whole_scale) else f"{r.whole_scale:.2f}"
         planned = "none fits" if not math.isfinite(r.planned_scale) else f"{r.planned_scale:.2f}"
@@ -139,6 +142,7 @@ def format_utilisation(rows: list[Utilisation]) -> str:
         seconds = "-" if not math.isfinite(r.planned_s) else f"{r.planned_s:.2f}"
         optimal = "none" if not math.isfinite(r.time_optimal_s) else f"{r.time_optimal_s:.2f}"
         lines.append(f"{r.movement:<9} {r.payload_kg:>10.1f} {r.supply_bar:>11.1f} {r.time_scale:>11.2f} "
-                     f"{r.utilisation:>12.2f} {lag:>9}  leg {r.leg}, {r.at_s:5.2f} s  {whole:>20} {planned:>14} "
+                     f"{r.utilisation:>12.2f} {lag:>9}  leg {r.leg}, {r.at_s:5.2f} s  "
+                     f"{r.deficit_cm3:>20.1f} / {r.reserve_cm3:<6.1f} {whole:>20} {planned:>14} "
                      f"{seconds:>10} {optimal:>15}")
     return "\n".join(lines)

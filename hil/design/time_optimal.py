@@ -6,8 +6,11 @@ space: the platform's position by direct kinematics of the reference's strokes, 
 held), splined. The constraint is second order in the path parameter: each leg's force
 (eq. 10.5's inverse dynamics with the payload) within `share` of its capacity, the capacity
 fitted as F0 - k v^2 in the direction of motion (the valve's orifice law; F0 at rest, k the
-smallest that keeps the fit below the capacity over the grid) and F0 in the other. No lag
-is allowed here: a bound the controller's check, which lets a brief peak through, may beat.
+smallest that keeps the fit below the capacity over the grid) and F0 in the other. The
+power unit's is first order: the legs' flows (A extending, alpha A retracting) within `share`
+of the pump's, a bound on the path speed at each point (`FlowBound`). No lag and no
+accumulator are allowed here: bounds the controller's check, which lets a brief peak through
+and draws on the accumulator's reserve, may beat; with neither, it cannot.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from firmware_py.mechanics.kinematics import DirectKinematics
 from firmware_py.motion_control.trajectory import through_points
 from firmware_py.supervision.capacity import LegCapacity, leg_capacity
 from hil.experiments import Motion
+from physics.power_unit import PU_PUMP
 
 PATH_SAMPLES = 60                  # spline knots per part
 GRID_POINTS = 200                  # TOPP-RA's grid per part
@@ -74,6 +78,28 @@ class LegForces:
         return self.share * np.concatenate([np.full(6, c.push_rest_n), np.full(6, c.pull_rest_n)])
 
 
+class FlowBound:
+    """toppra's velocity bounds along a task-space path for the pump: the path speed at which
+    the legs' flows take `share` of the pump's flow, as each coordinate's bound there."""
+
+    def __init__(self, geometry, path, capacity: LegCapacity, share: float):
+        self.dynamics, self.path = InverseDynamics(geometry), path
+        budget = capacity.supply
+        self.area, self.alpha = budget.area_m2, budget.alpha
+        self.flow = share * float(budget.power[PU_PUMP])
+        self.twist = np.zeros(6)
+
+    def __call__(self, s: float) -> np.ndarray:
+        x, tangent = self.path(s), self.path(s, 1)
+        self.twist[0:3] = tangent
+        self.dynamics.task_space_terms(np.asarray(x, float), IDENTITY, self.twist)
+        rate = self.dynamics.jacobian @ self.twist                 # the legs' velocities per unit path speed
+        drawn = float(np.sum(np.where(rate > 0.0, self.area * rate, -self.alpha * self.area * rate)))
+        speed = self.flow / drawn if drawn > 0.0 else 1e6
+        bound = np.maximum(np.abs(tangent) * speed, 1e-9)[:, None]
+        return np.hstack([-bound, bound])
+
+
 def part_path(part: np.ndarray, motion: Motion, geometry):
     """The task-space path the SLS reference of one part traces, splined over its length
     (the SLS's own time stands still at both ends: a path parameter must not); and the SLS's
@@ -100,7 +126,8 @@ def time_optimal(cfg: ControllerConfig, motion: Motion, payload_kg: float = 0.0)
     import toppra.constraint
     toppra.setup_logging("WARNING")
     geometry = default_geometry().with_payload(payload_kg)
-    forces = LegForces(geometry, QuadraticCapacity.fit(leg_capacity(cfg)), cfg.waypoints.capacity_share)
+    capacity = leg_capacity(cfg)
+    forces = LegForces(geometry, QuadraticCapacity.fit(capacity), cfg.waypoints.capacity_share)
     identity12, g = np.eye(12), forces.limits()
     constraint = toppra.constraint.SecondOrderConstraint(
         forces, lambda x: identity12, lambda x: g, dof=3,
@@ -108,7 +135,11 @@ def time_optimal(cfg: ControllerConfig, motion: Motion, payload_kg: float = 0.0)
     out = []
     for part in motion.parts[1:]:
         path, sls_s = part_path(part, motion, geometry)
-        instance = toppra.algorithm.TOPPRA([constraint], path,
+        constraints = [constraint]
+        if capacity.supply is not None:
+            constraints.append(toppra.constraint.JointVelocityConstraintVarying(
+                FlowBound(geometry, path, capacity, cfg.waypoints.capacity_share)))
+        instance = toppra.algorithm.TOPPRA(constraints, path,
                                            gridpoints=np.linspace(*path.path_interval, GRID_POINTS))
         timed = instance.compute_trajectory(0.0, 0.0)
         out.append((float("nan") if timed is None else float(timed.duration), sls_s))

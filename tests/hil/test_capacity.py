@@ -68,11 +68,12 @@ def test_the_scenario_plans_with_the_sections_it_runs_the_controller_with():
 
 
 def test_no_timing_the_check_accepts_without_a_lag_beats_the_time_optimal_one():
-    """TOPP-RA (toppra) as the oracle: with (almost) no lag allowed, the controller's check is a
-    strict force bound, and no SLS timing it accepts can be faster than the time-optimal
-    parameterisation of the same path within the same bound."""
+    """TOPP-RA (toppra) as the oracle: with (almost) no lag allowed and no accumulator, the
+    controller's check is a strict force and flow bound, and no SLS timing it accepts can be
+    faster than the time-optimal parameterisation of the same path within the same bounds."""
     strict = load_config(overrides={**MOVEMENT_OVERRIDES, "waypoints": {**MOVEMENT_OVERRIDES["waypoints"],
-                                                                        "lag_max_mm": 0.01}})
+                                                                        "lag_max_mm": 0.01},
+                                    "power_unit": {"accumulator_gas_cm3": 0.0}})
     circle = MOTIONS["circle"](default_geometry())
     (optimal_s, sls_s), = time_optimal(strict, circle)
     planned = plan(strict, circle).time_scale
