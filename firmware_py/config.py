@@ -31,14 +31,13 @@ from physics.actuator import (
     VALVE_FULL_SCALE,
     CylinderSection,
 )
-from physics.constants import BAR, MM
+from physics.constants import BAR, MM, MS, US
 from physics.lugre import LugreSection
 from program.errors import UserInputError
 from program.realtime import CPU_LATENCY, REALTIME_PRIORITY
 from program.sections import ConfigFile, Section, flag, frozen, key, load_file, numbers, table
 from protocol.nodes import HEARTBEAT
 
-US, MS = 1e-6, 1e-3
 PCT = 100.0                         # a percentage is divided by it
 SCHEDULE_LOADS = ("0kg", "3kg", "6kg")
 
@@ -422,6 +421,15 @@ class ControllerConfig(ConfigFile):
         [hydraulic_model]: what the residuals and the computed torque's force loops run."""
         return hy.pack(self.actuator, self.hydraulic_model, self.hydraulic_model,
                        self.hydraulic_model.tank_pressure_pa)
+
+    @property
+    def supply_refill_s(self) -> float:
+        """How long the pump takes to refill the accumulator from the lowest supply a move may
+        leave without a fault (the flow band's edge, `SupplyPressure`: (1 - flow_spread)^2 of
+        the drop over the tank), with half as long again for the relief."""
+        set_pa, tank_pa = self.hydraulic_model.supply_pressure_pa, self.hydraulic_model.tank_pressure_pa
+        lowest = tank_pa + (1.0 - self.residuals.flow_spread) ** 2 * (set_pa - tank_pa)
+        return 1.5 * pu.usable_volume(self.power, set_pa, lowest) / self.power_unit.pump_flow_m3_s
 
     @cached_property
     def power(self) -> np.ndarray:

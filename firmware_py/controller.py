@@ -89,21 +89,23 @@ class Controller:
         self.load_cells = FrozenLoadCells(n, res.load_cell_noise_n, signal_scale("LEG_STATE_1", "FORCE"))
         # each actuator's chamber model against its load cell, while the valves are ACTIVE; the
         # cylinder's own stroke sets its chamber volumes
-        self.residuals = ActuatorResiduals(n, cfg.hydraulics, cfg.friction.vector, supply_pa, period_s,
+        self.residuals = ActuatorResiduals(n, cfg.hydraulics, cfg.friction.vector, period_s,
                                            rig.rod_mass_kg, res.column_stiffness_n_m, encoder_m, res.correction_gain,
                                            res.filter_s, res.persistence_cycles, res.flow_spread)
         self.spool_check = SpoolResidual(n, cfg.hydraulics, period_s, res.spool_floor, res.spool_lag_spread,
                                          res.spool_persistence_cycles, int(ValveState.ACTIVE))
         # each leg's chambers from one LEG_PRESSURE sample to the next
         floor_pa = sample_floor_pa(res.pressure_noise_pa, signal_scale("LEG_PRESSURE_1", "PA") * BAR)
-        self.chambers = ChamberPrediction(n, cfg.hydraulics, supply_pa, period_s, encoder_m, res.flow_spread,
+        self.chambers = ChamberPrediction(n, cfg.hydraulics, period_s, encoder_m, res.flow_spread,
                                           res.leakage_spread, res.stiffness_spread, floor_pa,
                                           res.pressure_persistence_samples, res.pressure_carry,
                                           int(ValveState.ACTIVE))
         self.residuals_running = False
         # the valves' P-port transducers against the supply the model assumes
         self.supply = SupplyPressure(n, supply_pa, cfg.hydraulics[hy.HP_TANK], res.flow_spread, res.supply_legs)
-        self.supply_at_rest = SupplyAtRest(n, supply_pa, res.supply_tolerance_pa, res.supply_legs)
+        # after a move, not at rest until the pump has refilled the accumulator (ControllerConfig.supply_refill_s)
+        self.supply_at_rest = SupplyAtRest(n, supply_pa, res.supply_tolerance_pa, res.supply_legs,
+                                           round(cfg.supply_refill_s / period_s))
         self.resting, self.rest_peak = False, 0.0     # the at-rest check judging, its ratio this cycle
         self.margins = FalseAlarmMargins()
         self.stop = ControlledStop(n, rig.stop_cycles)
@@ -163,13 +165,14 @@ class Controller:
         self.plausibility.update(self.spool_cmd, meas.position_m)
         self.residuals.start(meas.position_m, meas.pressure_valid, meas.pa_pa, meas.pb_pa)
         self.residuals.update(self.spool_applied, meas.fresh, meas.position_m, meas.force_n, rig.gravity_axial,
-                              self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
+                              self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa,
+                              self.supply.latest_pa)
         self.supply.update(meas.ps_pa, meas.pressure_fresh)
         self.supply_at_rest.update(meas.ps_pa, meas.pressure_fresh)
         self.spool_check.update(self.spool_applied, self.spool_late, meas.spool, meas.fresh, meas.valve_state)
         self.chambers.start(meas.position_m)
         self.chambers.update(self.spool_applied, self.spool_late, meas.fresh, meas.position_m, meas.valve_state,
-                             meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
+                             meas.pressure_fresh, meas.pa_pa, meas.pb_pa, self.supply.latest_pa)
         valve_commands(VALVES_HOLD, self.spool_cmd, False, -1, cmd.enable, cmd.hold, cmd.active, cmd.reset,
                        cmd.spool)
         ref.play(through_points(np.array([rig.home_strokes, rig.home_strokes + 1e-3]), 0.1, 0.2), [0], 0)
@@ -180,7 +183,7 @@ class Controller:
         rig.warm_up(ref)
         # the cycle's own arrays: a view of another layout would compile a new signature
         law = self.laws[COMPUTED_TORQUE]
-        law.update(ref, meas.force_n, self.spool_cmd)
+        law.update(ref, meas.force_n, self.supply.latest_pa, self.spool_cmd)
         law.reset()
         self.spool_cmd.fill(0.0)
         rig.forget()
@@ -419,7 +422,7 @@ class Controller:
         joint.update(meas.position_m, meas.fresh, meas.force_n, ref.yr, ref.ar, rig.gravity_axial, rig.tau_n,
                      (following and law.runs_joint_law) or stopping)
         if following:
-            if not law.update(ref, meas.force_n, self.spool_cmd):
+            if not law.update(ref, meas.force_n, self.supply.latest_pa, self.spool_cmd):
                 sup.fault(Fault.SINGULARITY)
                 self.spool_cmd.fill(0.0)
         else:
@@ -456,11 +459,13 @@ class Controller:
             return
         supply_faulty, lone_leg = self.supply.update(meas.ps_pa, meas.pressure_fresh)
         faulty = res.update(self.spool_applied, meas.fresh, meas.position_m, meas.force_n, self.rig.gravity_axial,
-                            self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
+                            self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa,
+                            self.supply.latest_pa)
         spools = self.spool_check.update(self.spool_applied, self.spool_late, meas.spool, meas.fresh,
                                          meas.valve_state) if res_cfg.spool_check else 0
         chambers = self.chambers.update(self.spool_applied, self.spool_late, meas.fresh, meas.position_m,
-                                        meas.valve_state, meas.pressure_fresh, meas.pa_pa, meas.pb_pa)
+                                        meas.valve_state, meas.pressure_fresh, meas.pa_pa, meas.pb_pa,
+                                        self.supply.latest_pa)
         attitude = self.rig.attitude_check.ratio if self.rig.platform is not None else 0.0
         self.margins.record(self.cycles, self.sup.faults > 0, res.peak, max(self.supply.cycle_peak, self.rest_peak),
                             self.spool_check.peak,
@@ -489,7 +494,7 @@ class Controller:
         if not (self.cfg.residuals.enabled and self.sup.state in AT_REST and not self.reference.moving
                 and not testing):
             if self.resting:                         # a move starts: its samples are not at rest
-                check.reset()
+                check.moved()
                 self.resting, self.rest_peak = False, 0.0
             return
         self.resting = True

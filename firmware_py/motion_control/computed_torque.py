@@ -74,7 +74,8 @@ def task_acceleration_into(accel_ref, twist_ref, twist, error, integral, kp, kd,
 @njit(cache=True)
 def spool_commands_into(force_map, force_cmd, force_ref, force_ref_prev, force_measured, velocity_ref, joint_error,
                         strokes_ref, period_s, velocity_gain, force_bandwidth, rate_floor, forces, velocities, spool,
-                        pressure_a, pressure_b, hp, supply_pa, u_max, stiffness, force_gain, out) -> bool:
+                        pressure_a, pressure_b, hp, supply_pa, supply_ratio, u_max, stiffness, force_gain,
+                        out) -> bool:
     """Each valve's spool (fraction of full input, saturated at u_max) from the map at the
     hydraulic force `force_map` and the force loop on the load cell (`force_cmd` its wanted
     reading); True when one saturated. Scheduled per leg on the reference's operating point
@@ -84,25 +85,38 @@ def spool_commands_into(force_map, force_cmd, force_ref, force_ref_prev, force_m
     same bandwidth w_F wherever the leg stands. dF'/dx is taken no lower than `rate_floor`
     (the smallest at rest over the design's operating set): where a chamber nears the tank
     pressure its entrained air makes the rate collapse, and the pressures of a transient
-    are not the map's steady ones."""
+    are not the map's steady ones. The map is `supply_pa`'s; each valve's supply is
+    `supply_ratio[i]` r of it, read through the orifices' similarity (`hy.supply_similarity`:
+    the spool holding F at v at r times the supply holds F / r at v / sqrt(r) at it, every
+    pressure r times)."""
     saturated = False
     for i in range(out.shape[0]):
-        f_ref, v_ref, y_ref = force_ref[i], velocity_ref[i], strokes_ref[i]
-        pa = valve_map_eval(forces, velocities, pressure_a, f_ref, v_ref)
-        pb = valve_map_eval(forces, velocities, pressure_b, f_ref, v_ref)
+        r = supply_ratio[i]
+        root = math.sqrt(r)
+        f_ref, v_ref, y_ref = force_ref[i] / r, velocity_ref[i] / root, strokes_ref[i]
+        pa = r * valve_map_eval(forces, velocities, pressure_a, f_ref, v_ref)
+        pb = r * valve_map_eval(forces, velocities, pressure_b, f_ref, v_ref)
         k = hy.column_stiffness(y_ref, pa, pb, hp)
         stiffness[i] = k
         rate = hy.force_rate_per_spool(y_ref, pa, pb, valve_map_eval(forces, velocities, spool, f_ref, v_ref),
-                                       supply_pa, hp)
-        force_gain[i] = force_bandwidth / max(rate, rate_floor)
-        velocity = v_ref + velocity_gain * joint_error[i] + (f_ref - force_ref_prev[i]) / period_s / k
-        x = (valve_map_eval(forces, velocities, spool, force_map[i], velocity)
+                                       r * supply_pa, hp)
+        force_gain[i] = force_bandwidth / max(rate, root * rate_floor)
+        velocity = velocity_ref[i] + velocity_gain * joint_error[i] + (force_ref[i] - force_ref_prev[i]) / period_s / k
+        x = (valve_map_eval(forces, velocities, spool, force_map[i] / r, velocity / root)
              + force_gain[i] * (force_cmd[i] - force_measured[i]))
         if abs(x) >= u_max:
             saturated = True
             x = u_max if x > 0.0 else -u_max
         out[i] = x
     return saturated
+
+
+@njit(cache=True)
+def supply_ratio_into(supply_pa, nominal_pa, alpha, out) -> None:
+    """out += alpha (p_s / nominal - out) per valve, a reading below a tenth of nominal as 1."""
+    for i in range(out.shape[0]):
+        ratio = supply_pa[i] / nominal_pa
+        out[i] += alpha * ((ratio if ratio > 0.1 else 1.0) - out[i])
 
 
 @njit(cache=True)
@@ -146,6 +160,10 @@ def integrate_into(integral, error, period_s) -> None:
 
 
 FILTER_ZETA = 0.7                     # the measured twist's low-pass: Butterworth-like
+# the supply the map is read at follows the P-port samples this slowly: a sag, not the dips the
+# valves' own draw makes (followed at once, holding ran away through the supply: more opening,
+# more draw, a lower supply)
+SUPPLY_FILTER_S = 0.2
 
 
 class _Gains:
@@ -167,8 +185,16 @@ class _Gains:
         self.u_max = cfg.limits.spool_max
         self.filter_wn, self.filter_zeta = 2 * math.pi * gains.velocity_filter_hz, FILTER_ZETA
         self.filter_ad, self.filter_bd = second_order_filter(period_s, gains.velocity_filter_hz, FILTER_ZETA)
+        self.supply_ratio = np.ones(n_legs)       # each valve's supply over the map's (measured)
+        self.supply_alpha = 1.0 - math.exp(-period_s / SUPPLY_FILTER_S)
         self.stiffness = np.zeros(n_legs)         # each leg's oil column at its operating point, N/m
         self.force_gain = np.zeros(n_legs)        # ... and its force loop's gain, spool fraction per N
+
+    def supply_from(self, supply_pa) -> None:
+        """Each valve's supply (its P-port transducer's latest sample) against the map's,
+        low-passed over SUPPLY_FILTER_S; a reading below a tenth of it (a dead transducer) as
+        the configured supply."""
+        supply_ratio_into(supply_pa, self.supply_pa, self.supply_alpha, self.supply_ratio)
 
     def spool_commands(self, force_map, force_cmd, force_ref, force_ref_prev, force_measured, velocity_ref,
                        joint_error, strokes_ref) -> bool:
@@ -177,7 +203,8 @@ class _Gains:
                                    joint_error, strokes_ref, self.period_s, self.velocity_gain, self.force_bandwidth,
                                    self.rate_floor,
                                    self.forces, self.velocities, self.spool, self.pressure_a, self.pressure_b,
-                                   self.hp, self.supply_pa, self.u_max, self.stiffness, self.force_gain, self.spool_cmd)
+                                   self.hp, self.supply_pa, self.supply_ratio, self.u_max, self.stiffness,
+                                   self.force_gain, self.spool_cmd)
 
 
 class ComputedTorque(_Gains):

@@ -7,7 +7,8 @@ fractions of full input (the valves' unit on the wire), or says it cannot act.
 - `ComputedTorqueLaw`: the task-space PID through the inverse dynamics and the valve map
   (`computed_torque.py`), on the hexapod or the test bench's one leg.
 
-Each update is in place on arrays made at construction.
+Each update is in place on arrays made at construction; `supply_pa` is each valve's supply as
+its P-port transducer last read it.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ class JointSpaceLaw:
     def reset(self) -> None:
         """Nothing of its own: the joint pipeline clears its integrator while inactive."""
 
-    def update(self, reference, force_n, spool_out) -> bool:
+    def update(self, reference, force_n, supply_pa, spool_out) -> bool:
         """The pipeline's input this cycle (V) as spool."""
         np.divide(self.joint.u_v, self.full_scale_v, out=spool_out)
         return True
@@ -51,9 +52,10 @@ class ComputedTorqueLaw:
         """Valves locked or a fault: the integral and the reference-force history start again."""
         self.ct.reset()
 
-    def update(self, reference, force_n, spool_out) -> bool:
+    def update(self, reference, force_n, supply_pa, spool_out) -> bool:
         """False: singular (spool_out untouched)."""
         joint, ct = self.joint, self.ct
+        ct.supply_from(supply_pa)
         if not ct.update(self.platform, reference.yr, joint.velocity_estimate, joint.error_m, reference.vr,
                          reference.ar, force_n):
             return False

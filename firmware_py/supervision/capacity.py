@@ -7,9 +7,10 @@ rest), its dynamic force (inertia and velocity terms) and its velocity. Slowing 
 time by a factor s divides the velocities by s and the dynamic forces by s^2, so one
 sampling at s = 1 answers every time scale.
 
-The power unit is shared: the legs' flows (A v extending, alpha A |v| retracting) beyond the
-pump's share empty the accumulator and the line, and the supply may fall no further than the
-same share of its set pressure (`SupplyBudget`: the oil that gives, `physics.power_unit`).
+The power unit is shared: what the valves draw (at each leg's force and velocity, the valve
+map's steady state: the chamber it fills, the leakage, the underlaps) beyond the pump's flow
+empties the accumulator and the line, and the supply may fall no further than the share of
+its set pressure (`SupplyBudget`: the oil that gives, `physics.power_unit`).
 
 The judgement is the lag a force shortfall leaves: where a leg needs more than its share,
 the missing force over its joint-space inertia accelerates the leg behind its reference;
@@ -30,6 +31,7 @@ from numba import njit
 
 from firmware_py.mechanics.dynamics import InverseDynamics, gauss_solve_into, platform_wrench_into
 from firmware_py.mechanics.kinematics import DirectKinematics, dk_solve_into, ik_into, jacobian_into
+from firmware_py.motion_control.computed_torque import valve_map_eval
 from firmware_py.motion_control.trajectory import sls_evaluate_into
 from physics import hydraulics as hy
 from physics import lugre
@@ -50,33 +52,42 @@ def _table(ps: float, hp: bytes, friction: bytes) -> tuple[np.ndarray, np.ndarra
 
 @dataclass
 class SupplyBudget:
-    """The power unit behind the legs (`physics.power_unit` vector `power`, set at the supply)."""
+    """The power unit behind the legs (`physics.power_unit` vector `power`, set at the supply)
+    and what each valve draws from it: the P edges' flow at the steady state the valve map
+    holds at the leg's force and velocity (the chamber it fills, the leakage, the underlaps)."""
     power: np.ndarray
-    area_m2: float                   # each leg's piston area; alpha x it on the rod side
-    alpha: float
+    hydraulics: np.ndarray
+    friction: np.ndarray             # the seals' (LuGre vector): the piston gives the leg's force and theirs
+    valve_map: tuple                 # (force_n, velocity_m_s, spool, pressure_a_pa, pressure_b_pa) at the supply
 
     def reserve_m3(self, share: float) -> float:
         """The oil the line and accumulator give before the supply falls to `share` of its set."""
         set_pa = float(self.power[pu.PU_SET])
         return pu.usable_volume(self.power, set_pa, share * set_pa)
 
-    def deficit_m3(self, velocity_m_s: np.ndarray, dt_s: float, scale: float, share: float) -> float:
-        """The largest volume the legs draw beyond `share` of the pump's flow at `scale`."""
-        return largest_deficit(velocity_m_s, dt_s, scale, self.area_m2, self.alpha,
-                               share * float(self.power[pu.PU_PUMP]))
+    def deficit_m3(self, force_n: np.ndarray, velocity_m_s: np.ndarray, dt_s: float) -> float:
+        """The largest volume the valves draw beyond the pump's flow (the share is kept on the
+        pressure the accumulator may fall to, `reserve_m3`)."""
+        return largest_deficit(force_n, velocity_m_s, dt_s, *self.valve_map, self.hydraulics, self.friction,
+                               float(self.power[pu.PU_SET]), float(self.power[pu.PU_PUMP]))
 
 
 @njit(cache=True)
-def largest_deficit(velocity_m_s, dt_s, scale, area_m2, alpha, supplied_m3_s):
-    """The legs' flow (each chamber they fill) beyond `supplied_m3_s`, integrated and never
-    below zero (the pump refills the accumulator with its spare): its largest value [m^3]."""
+def largest_deficit(force_n, velocity_m_s, dt_s, forces, velocities, spool, pressure_a, pressure_b, hp, fp,
+                    supply_pa, pump_m3_s):
+    """The valves' draw beyond `pump_m3_s`, integrated and never below zero (the pump refills
+    the accumulator with its spare): its largest value [m^3]."""
     deficit = worst = 0.0
-    for k in range(velocity_m_s.shape[0]):
+    for k in range(force_n.shape[0]):
         drawn = 0.0
-        for leg in range(velocity_m_s.shape[1]):
-            v = velocity_m_s[k, leg] / scale
-            drawn += area_m2 * v if v > 0.0 else -alpha * area_m2 * v
-        deficit = max(deficit + (drawn - supplied_m3_s) * dt_s * scale, 0.0)
+        for leg in range(force_n.shape[1]):
+            v = velocity_m_s[k, leg]
+            f = force_n[k, leg] + lugre.steady_friction(v, fp)
+            flow, _ = hy.supply_flow(valve_map_eval(forces, velocities, spool, f, v),
+                                     valve_map_eval(forces, velocities, pressure_a, f, v),
+                                     valve_map_eval(forces, velocities, pressure_b, f, v), supply_pa, hp, 1.0)
+            drawn += flow
+        deficit = max(deficit + (drawn - pump_m3_s) * dt_s, 0.0)
         worst = max(worst, deficit)
     return worst
 
@@ -92,11 +103,12 @@ class LegCapacity:
 
     @classmethod
     def of(cls, hydraulics: np.ndarray, friction: np.ndarray, supply_pa: float,
-           power: np.ndarray | None = None) -> LegCapacity:
+           power: np.ndarray | None = None, valve_map: tuple | None = None) -> LegCapacity:
+        """`power` and `valve_map` (at `supply_pa`) both or neither (an ideal supply)."""
         push, pull = _table(float(supply_pa), np.asarray(hydraulics, float).tobytes(),
                             np.asarray(friction, float).tobytes())
-        budget = None if power is None else SupplyBudget(np.asarray(power, float), float(hydraulics[hy.HP_AREA_A]),
-                                                         float(hydraulics[hy.HP_ALPHA]))
+        budget = None if power is None else SupplyBudget(np.asarray(power, float), np.asarray(hydraulics, float),
+                                                         np.asarray(friction, float), valve_map)
         return cls(VELOCITY_GRID_M_S, push, pull, budget)
 
     def limits(self, velocity_m_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -203,7 +215,8 @@ def supply_deficit(capacity: LegCapacity, loads: Loads, scale: float, share: flo
     budget = capacity.supply
     if budget is None:
         return 0.0, math.inf
-    return budget.deficit_m3(loads.velocity_m_s, loads.dt_s, scale, share), budget.reserve_m3(share)
+    force, velocity = loads.at_scale(scale)
+    return budget.deficit_m3(force, velocity, loads.dt_s * scale), budget.reserve_m3(share)
 
 
 def fits(capacity: LegCapacity, loads: Loads, scale: float, share: float, lag_max_m: float) -> bool:
@@ -337,4 +350,5 @@ class PlatformLoads:
 def leg_capacity(cfg) -> LegCapacity:
     """The controller's legs: its [actuator] hydraulics and [friction] at the configured supply,
     on its [power_unit]."""
-    return LegCapacity.of(cfg.hydraulics, cfg.friction.vector, cfg.hydraulic_model.supply_pressure_pa, cfg.power)
+    supply_pa = cfg.hydraulic_model.supply_pressure_pa
+    return LegCapacity.of(cfg.hydraulics, cfg.friction.vector, supply_pa, cfg.power, cfg.valve_map.at_supply(supply_pa))

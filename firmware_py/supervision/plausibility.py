@@ -157,17 +157,18 @@ class FrozenLoadCells:
 
 
 @njit(cache=True)
-def supply_step(ps, fresh, tank_pa, drop_pa, flow_spread, ratio, run, legs_needed):
+def supply_step(ps, fresh, tank_pa, drop_pa, flow_spread, ratio, run, legs_needed, latest):
     """Judge each leg's fresh supply sample: the valve's flow goes with the square root of the
     pressure the power unit gives above the tank (the orifice law), so a supply p gives
     sqrt((p - p_T) / (p_S - p_T)) of the model's flow; ratio[i] = |that - 1| / flow_spread, the
     sample beyond the model's flow-gain spread when above 1. Returns (legs whose latest sample
     is beyond, the first leg beyond for two samples in a row or -1, the largest fresh ratio).
     The supply is common to every valve: `legs_needed` legs beyond it mean the power unit, one
-    leg alone its own transducer (or its P line)."""
+    leg alone its own transducer (or its P line). `latest[i]` keeps each leg's last sample."""
     count, lone, peak = 0, -1, 0.0
     for i in range(ps.shape[0]):
         if fresh[i]:
+            latest[i] = ps[i]
             ratio[i] = abs(math.sqrt(max(ps[i] - tank_pa, 0.0) / drop_pa) - 1.0) / flow_spread
             run[i] = run[i] + 1 if ratio[i] > 1.0 else 0
             peak = max(peak, ratio[i])
@@ -182,11 +183,13 @@ class SupplyPressure:
     """The power unit's pressure as each valve's P-port transducer reads it (LEG_PRESSURE's PS,
     every 16th cycle per leg) against the supply the model assumes. `update` returns (supply
     faulty, the leg whose transducer alone disagrees or -1); `cycle_peak` is the largest ratio
-    of the cycle's fresh samples."""
+    of the cycle's fresh samples; `latest_pa` each valve's last sample (the configured supply
+    before any): the supply the chamber models run on."""
 
     def __init__(self, n_legs: int, nominal_pa: float, tank_pa: float, flow_spread: float, legs_needed: int):
         self.tank_pa, self.drop_pa, self.flow_spread = tank_pa, nominal_pa - tank_pa, flow_spread
         self.legs_needed = min(legs_needed, n_legs)
+        self.latest_pa = np.full(n_legs, nominal_pa)
         self.ratio = np.zeros(n_legs)
         self.run = np.zeros(n_legs, dtype=np.int64)
         self.cycle_peak = 0.0
@@ -197,7 +200,7 @@ class SupplyPressure:
 
     def update(self, ps_pa: np.ndarray, fresh: np.ndarray) -> tuple[bool, int]:
         count, lone, self.cycle_peak = supply_step(ps_pa, fresh, self.tank_pa, self.drop_pa, self.flow_spread,
-                                                   self.ratio, self.run, self.legs_needed)
+                                                   self.ratio, self.run, self.legs_needed, self.latest_pa)
         return count >= self.legs_needed, lone
 
 
@@ -232,12 +235,13 @@ class SupplyAtRest:
     rest the valves draw no flow and each P-port transducer reads the set pressure itself, so
     the supply the model assumes is checked directly, far tighter than the flow band a moving
     leg allows. `update` returns (supply off, the leg whose transducer alone disagrees or -1);
-    `measured_pa` is the mean of the legs' latest samples (NaN while none is at rest). `reset()` when a move starts (its
-    samples are not at rest)."""
+    `measured_pa` is the mean of the legs' latest samples (NaN while none is at rest). `moved()` when a move starts (its
+    samples are not at rest, nor those while the accumulator refills after it)."""
 
-    def __init__(self, n_legs: int, nominal_pa: float, tolerance_pa: float, legs_needed: int):
+    def __init__(self, n_legs: int, nominal_pa: float, tolerance_pa: float, legs_needed: int, settle_cycles: int = 0):
         self.nominal_pa, self.tolerance_pa = nominal_pa, tolerance_pa
         self.legs_needed = min(legs_needed, n_legs)
+        self.settle_cycles, self.settling = settle_cycles, 0
         self.latest = np.zeros(n_legs)
         self.seen = np.zeros(n_legs, dtype=np.bool_)
         self.run = np.zeros(n_legs, dtype=np.int64)
@@ -248,8 +252,18 @@ class SupplyAtRest:
         self.seen.fill(False)
         self.run.fill(0)
         self.measured_pa = math.nan
+        self.settling = 0
+
+    def moved(self) -> None:
+        """A move started: after it, the power unit refills what it drew for `settle_cycles`
+        before the samples are at rest again."""
+        self.reset()
+        self.settling = self.settle_cycles
 
     def update(self, ps_pa: np.ndarray, fresh: np.ndarray) -> tuple[bool, int]:
+        if self.settling > 0:
+            self.settling -= 1
+            return False, -1
         count, lone, self.measured_pa, self.peak = supply_at_rest_step(
             ps_pa, fresh, self.nominal_pa, self.tolerance_pa, self.latest, self.seen, self.run, self.legs_needed)
         return count >= self.legs_needed, lone

@@ -76,7 +76,8 @@ def breakaway_force_n(fp: np.ndarray) -> float:
 def residual_step(hp, fp, ps, period_s, substeps, spool_applied, fresh, position, force, gravity_axial,
                   accel, rod_mass, gain, alpha_lp, pressure_fresh, pa_meas, pb_meas, state, seeded, y_prev, stale,
                   residual, flow_velocity) -> None:
-    """One cycle of every leg's chamber model; writes `residual` (low-passed force error, N)
+    """One cycle of every leg's chamber model on its valve's supply `ps[i]` (the P-port
+    transducer's latest sample); writes `residual` (low-passed force error, N)
     and `flow_velocity` (the model's valve flow into A over the piston area, m/s). A leg
     without a fresh frame keeps its residual; its chambers follow the spool at the last
     position, and the next frame's displacement is swept in one cycle (volumes telescope).
@@ -101,7 +102,7 @@ def residual_step(hp, fp, ps, period_s, substeps, spool_applied, fresh, position
             stale[i] += 1
         for j in range(substeps):
             row[hy.S_SPOOL] = hy.spool_step(row[hy.S_SPOOL], spool_applied[i], h, hp)
-            hy.chamber_step(row, y_prev[i] + dy * (j + 1) / substeps, dy / period_s, ps, h, hp, 1.0,
+            hy.chamber_step(row, y_prev[i] + dy * (j + 1) / substeps, dy / period_s, ps[i], h, hp, 1.0,
                             hp[hy.HP_SEAL_LEAK])
         if not fresh[i]:
             continue
@@ -110,7 +111,7 @@ def residual_step(hp, fp, ps, period_s, substeps, spool_applied, fresh, position
             load = row[hy.S_PA] - ratio * row[hy.S_PB]
             row[hy.S_PB] = (pa_meas[i] + pb_meas[i] - load) / (1.0 + ratio)
             row[hy.S_PA] = load + ratio * row[hy.S_PB]
-        qa, _, _, _ = hy.valve_flows(row[hy.S_SPOOL], row[hy.S_PA], row[hy.S_PB], ps, hp)
+        qa, _, _, _ = hy.valve_flows(row[hy.S_SPOOL], row[hy.S_PA], row[hy.S_PB], ps[i], hp)
         flow_velocity[i] = qa / area
         _, sigma2 = lugre.stribeck(v, fp)           # the encoder's own rate: an estimator lags a fast start
         piston = force[i] + rod_mass * (gravity_axial[i] + accel[i]) + sigma2 * v
@@ -165,10 +166,10 @@ class ActuatorResiduals:
     cycle after; `legs_faulty`, `worst_leg` (-1: none), `ratio` (|r| / threshold) and `peak`
     (its largest) say what it saw."""
 
-    def __init__(self, n_legs: int, hp: np.ndarray, friction: np.ndarray, supply_pa: float, period_s: float,
+    def __init__(self, n_legs: int, hp: np.ndarray, friction: np.ndarray, period_s: float,
                  rod_mass_kg: float, stiffness_n_m: float, encoder_m: float, gain: float, filter_s: float,
                  persistence: int, flow_spread: float, substeps: int = 2):
-        self.hp, self.friction, self.supply_pa, self.period_s = hp, friction, supply_pa, period_s
+        self.hp, self.friction, self.period_s = hp, friction, period_s
         self.rod_mass, self.gain, self.persistence, self.substeps = rod_mass_kg, gain, persistence, substeps
         self.alpha_lp = 1.0 - math.exp(-period_s / filter_s)
         self.floor_n = breakaway_force_n(friction) + 0.5 * stiffness_n_m * encoder_m
@@ -191,11 +192,11 @@ class ActuatorResiduals:
         self.legs_faulty, self.worst_leg = 0, -1
 
     def update(self, spool_applied, fresh, position_m, force_n, gravity_axial, accel_m_s2, pressure_fresh, pa_pa,
-               pb_pa) -> int:
+               pb_pa, supply_pa) -> int:
         """One cycle: `spool_applied` the spool each valve applied over the period the
-        measurements close. Returns 0, or once a leg's residual has persisted beyond its
-        threshold, the number of legs beyond theirs this cycle."""
-        residual_step(self.hp, self.friction, self.supply_pa, self.period_s, self.substeps, spool_applied, fresh,
+        measurements close, `supply_pa` each valve's supply. Returns 0, or once a leg's
+        residual has persisted beyond its threshold, the number of legs beyond theirs this cycle."""
+        residual_step(self.hp, self.friction, supply_pa, self.period_s, self.substeps, spool_applied, fresh,
                       position_m, force_n, gravity_axial, accel_m_s2, self.rod_mass, self.gain, self.alpha_lp,
                       pressure_fresh, pa_pa, pb_pa, self.state, self.seeded, self.y_prev, self.stale,
                       self.residual, self.flow_velocity)
@@ -308,7 +309,8 @@ def predict_chambers(row, hp, spool, y_start, dy, ps, period_s, steps):
 def pressure_prediction_step(models, ps, period_s, spool_applied, spool_late, fresh, position, valve_state,
                              active_state, pressure_fresh, pa_meas, pb_meas, floor_pa, encoder_m, state, y_prev,
                              age, ratio, supply_like) -> None:
-    """One cycle of every leg's sample-to-sample chamber prediction: `models` the parameter
+    """One cycle of every leg's sample-to-sample chamber prediction on its valve's supply
+    `ps[i]` (the P-port transducer's latest sample): `models` the parameter
     vectors (PRED_* rows), `state[m, i]` leg i under model m; the prediction in
     PRED_FINE_STEPS per cycle, the parameters' spreads as differences of models all in
     PRED_COARSE_STEPS (their integration error cancels in the difference); PRED_LATE is
@@ -328,11 +330,11 @@ def pressure_prediction_step(models, ps, period_s, spool_applied, spool_late, fr
         if fresh[i]:
             half = 0.5 * encoder_m
             dy = min(max(y_prev[i], position[i] - half), position[i] + half) - y_prev[i]
-        predict_chambers(state[PRED_NOMINAL, i], models[PRED_NOMINAL], spool_applied[i], y_prev[i], dy, ps, period_s,
+        predict_chambers(state[PRED_NOMINAL, i], models[PRED_NOMINAL], spool_applied[i], y_prev[i], dy, ps[i], period_s,
                          PRED_FINE_STEPS)
         for m in range(PRED_REFERENCE, n_models):
             spool = spool_late[i] if m == PRED_LATE else spool_applied[i]
-            predict_chambers(state[m, i], models[m], spool, y_prev[i], dy, ps, period_s, PRED_COARSE_STEPS)
+            predict_chambers(state[m, i], models[m], spool, y_prev[i], dy, ps[i], period_s, PRED_COARSE_STEPS)
         y_prev[i] += dy
         if not (fresh[i] and valve_state[i] == active_state):
             age[i] = -1
@@ -379,10 +381,10 @@ class ChamberPrediction:
     and `peak` (the cycle's largest evidence) as for the others. A leg is faulty after
     `persistence` samples whose evidence is beyond in a row."""
 
-    def __init__(self, n_legs: int, hp: np.ndarray, supply_pa: float, period_s: float, encoder_m: float,
+    def __init__(self, n_legs: int, hp: np.ndarray, period_s: float, encoder_m: float,
                  flow_spread: float, leakage_spread: float, stiffness_spread: float, floor_pa: float,
                  persistence: int, carry: float, active_state: int):
-        self.supply_pa, self.period_s, self.encoder_m = supply_pa, period_s, encoder_m
+        self.period_s, self.encoder_m = period_s, encoder_m
         self.active_state = active_state
         self.floor_pa, self.persistence, self.carry = floor_pa, persistence, carry
         self.models = np.tile(hp, (PRED_LATE + 1, 1))
@@ -409,9 +411,11 @@ class ChamberPrediction:
         self.above.fill(0)
         self.legs_faulty, self.worst_leg = 0, -1
 
-    def update(self, spool_applied, spool_late, fresh, position_m, valve_state, pressure_fresh, pa_pa, pb_pa) -> int:
-        """`spool_applied`, `spool_late` as for `SpoolResidual.update`. Returns the legs faulty."""
-        pressure_prediction_step(self.models, self.supply_pa, self.period_s, spool_applied, spool_late, fresh,
+    def update(self, spool_applied, spool_late, fresh, position_m, valve_state, pressure_fresh, pa_pa, pb_pa,
+               supply_pa) -> int:
+        """`spool_applied`, `spool_late` as for `SpoolResidual.update`, `supply_pa` each valve's
+        supply. Returns the legs faulty."""
+        pressure_prediction_step(self.models, supply_pa, self.period_s, spool_applied, spool_late, fresh,
                                  position_m, valve_state, self.active_state, pressure_fresh, pa_pa, pb_pa,
                                  self.floor_pa, self.encoder_m, self.state, self.y_prev, self.age, self.ratio,
                                  self.supply_like)

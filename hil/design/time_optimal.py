@@ -7,8 +7,9 @@ held), splined. The constraint is second order in the path parameter: each leg's
 (eq. 10.5's inverse dynamics with the payload) within `share` of its capacity, the capacity
 fitted as F0 - k v^2 in the direction of motion (the valve's orifice law; F0 at rest, k the
 smallest that keeps the fit below the capacity over the grid) and F0 in the other. The
-power unit's is first order: the legs' flows (A extending, alpha A retracting) within `share`
-of the pump's, a bound on the path speed at each point (`FlowBound`). No lag and no
+power unit's is first order: the chambers' flows (A extending, alpha A retracting) within the
+pump's, a bound on the path speed at each point (`FlowBound`; the valves' leakage, which the
+controller's check counts as well, left out: a lower bound). No lag and no
 accumulator are allowed here: bounds the controller's check, which lets a brief peak through
 and draws on the accumulator's reserve, may beat; with neither, it cannot.
 """
@@ -26,6 +27,7 @@ from firmware_py.mechanics.kinematics import DirectKinematics
 from firmware_py.motion_control.trajectory import through_points
 from firmware_py.supervision.capacity import LegCapacity, leg_capacity
 from hil.experiments import Motion
+from physics.hydraulics import HP_ALPHA, HP_AREA_A
 from physics.power_unit import PU_PUMP
 
 PATH_SAMPLES = 60                  # spline knots per part
@@ -80,13 +82,13 @@ class LegForces:
 
 class FlowBound:
     """toppra's velocity bounds along a task-space path for the pump: the path speed at which
-    the legs' flows take `share` of the pump's flow, as each coordinate's bound there."""
+    the legs' flows take the pump's flow, as each coordinate's bound there."""
 
-    def __init__(self, geometry, path, capacity: LegCapacity, share: float):
+    def __init__(self, geometry, path, capacity: LegCapacity):
         self.dynamics, self.path = InverseDynamics(geometry), path
         budget = capacity.supply
-        self.area, self.alpha = budget.area_m2, budget.alpha
-        self.flow = share * float(budget.power[PU_PUMP])
+        self.area, self.alpha = float(budget.hydraulics[HP_AREA_A]), float(budget.hydraulics[HP_ALPHA])
+        self.flow = float(budget.power[PU_PUMP])
         self.twist = np.zeros(6)
 
     def __call__(self, s: float) -> np.ndarray:
@@ -138,7 +140,7 @@ def time_optimal(cfg: ControllerConfig, motion: Motion, payload_kg: float = 0.0)
         constraints = [constraint]
         if capacity.supply is not None:
             constraints.append(toppra.constraint.JointVelocityConstraintVarying(
-                FlowBound(geometry, path, capacity, cfg.waypoints.capacity_share)))
+                FlowBound(geometry, path, capacity)))
         instance = toppra.algorithm.TOPPRA(constraints, path,
                                            gridpoints=np.linspace(*path.path_interval, GRID_POINTS))
         timed = instance.compute_trajectory(0.0, 0.0)

@@ -121,7 +121,8 @@ def test_a_leg_without_a_pressure_sample_waits_for_its_first():
     starts from it; a leg with a sample starts at once."""
     cfg = load_config()
     r = cfg.residuals
-    res = ActuatorResiduals(2, cfg.hydraulics, cfg.friction.vector, cfg.hydraulic_model.supply_pressure_pa, PERIOD_S,
+    supply = np.full(2, cfg.hydraulic_model.supply_pressure_pa)
+    res = ActuatorResiduals(2, cfg.hydraulics, cfg.friction.vector, PERIOD_S,
                             0.5, r.column_stiffness_n_m, cfg.actuator.encoder_resolution_m, r.correction_gain,
                             r.filter_s, r.persistence_cycles, r.flow_spread)
     position, force, zeros = np.array([0.1, 0.1]), np.array([200.0, 200.0]), np.zeros(2)
@@ -131,7 +132,7 @@ def test_a_leg_without_a_pressure_sample_waits_for_its_first():
     for k in range(20):
         if k == 10:
             sampled[1], pa[1], pb[1] = True, 12e5, 3e5
-        res.update(np.full(2, 0.02), np.array([True, True]), position, force, zeros, zeros, sampled, pa, pb)
+        res.update(np.full(2, 0.02), np.array([True, True]), position, force, zeros, zeros, sampled, pa, pb, supply)
         sampled[1] = False
         if k < 10:
             assert not res.seeded[1] and res.residual[1] == 0.0 and res.ratio[1] == 0.0
@@ -249,7 +250,7 @@ def _ringing_leg(plant_lag: int, known_late: bool, amplitude: float, hz: float) 
     cfg = load_config(overrides={"hydraulic_model": {"supply_pressure_bar": 40.0}})
     hp, ps = cfg.hydraulics, cfg.hydraulic_model.supply_pressure_pa
     floor = sample_floor_pa(cfg.residuals.pressure_noise_pa, signal_scale("LEG_PRESSURE_1", "PA") * BAR)
-    prediction = ChamberPrediction(1, hp, ps, PERIOD_S, cfg.actuator.encoder_resolution_m, cfg.residuals.flow_spread,
+    prediction = ChamberPrediction(1, hp, PERIOD_S, cfg.actuator.encoder_resolution_m, cfg.residuals.flow_spread,
                                    cfg.residuals.leakage_spread, cfg.residuals.stiffness_spread, floor, 1,
                                    cfg.residuals.pressure_carry, int(ValveState.ACTIVE))
     y = np.array([0.05])
@@ -266,7 +267,7 @@ def _ringing_leg(plant_lag: int, known_late: bool, amplitude: float, hz: float) 
         late = commands[k - 2] if known_late else commands[k - 1]
         prediction.update(np.array([commands[k - 1]]), np.array([late]), np.ones(1, dtype=bool), y,
                           np.array([int(ValveState.ACTIVE)]), np.array([k % 16 == 0]),
-                          plant[hy.S_PA:hy.S_PA + 1].copy(), plant[hy.S_PB:hy.S_PB + 1].copy())
+                          plant[hy.S_PA:hy.S_PA + 1].copy(), plant[hy.S_PB:hy.S_PB + 1].copy(), np.array([ps]))
         if k > 100:
             worst = max(worst, float(prediction.ratio[0]))
     return worst
@@ -318,7 +319,7 @@ def test_the_supply_band_is_the_flow_gains_spread_through_the_orifice_law():
     tank, drop, spread = 0.9e5, 24.1e5, 0.135
     ps = tank + np.array([(1 - spread) ** 2, (1 + spread) ** 2, 1.0, 0.0]) * drop
     ratio, run = np.zeros(4), np.zeros(4, dtype=np.int64)
-    count, lone, peak = supply_step(ps, np.ones(4, dtype=bool), tank, drop, spread, ratio, run, 3)
+    count, lone, peak = supply_step(ps, np.ones(4, dtype=bool), tank, drop, spread, ratio, run, 3, np.zeros(4))
     assert ratio[:3] == pytest.approx([1.0, 1.0, 0.0]) and ratio[3] == pytest.approx(1.0 / spread)
     assert peak == pytest.approx(1.0 / spread)
     assert count == 1 and lone == -1                   # the lone leg's first sample: not yet its fault
