@@ -206,6 +206,7 @@ class ComputedTorqueGains:
     velocity_gain_per_s: float        # joint error -> commanded piston velocity
     force_bandwidth_rad_s: float      # each leg's force loop on its load cell, scheduled on its operating point
     velocity_filter_hz: float         # low-pass of the measured twist / velocity (the D term)
+    force_bandwidth_rest_rad_s: float = math.nan   # ... while the reference rests (NaN: the same)
 
 
 @frozen
@@ -217,6 +218,7 @@ class ComputedTorque(Section):
     integral_fraction: float = key("integral_fraction", 0.0, 5.0)
     velocity_gain_per_s: float = key("velocity_gain_per_s", 0.0, 1000.0)
     force_bandwidth_hz: float = key("force_bandwidth_hz", 0.0, 100.0)
+    force_bandwidth_rest_hz: float = key("force_bandwidth_rest_hz", 0.0, 100.0)
     force_rate_floor: float = key("force_rate_floor_n_s_pct", 1.0, 1e6, si=100.0)   # N/s per unit spool
     velocity_filter_hz: float = key("velocity_filter_hz", 0.5, 200.0)
     testbench_bandwidth_hz: float = key("testbench_bandwidth_hz", 0.1, 50.0)
@@ -230,7 +232,7 @@ class ComputedTorque(Section):
     def hexapod(self) -> ComputedTorqueGains:
         return ComputedTorqueGains(2 * math.pi * self.bandwidth_hz, self.damping, self.integral_fraction,
                                    self.velocity_gain_per_s, 2 * math.pi * self.force_bandwidth_hz,
-                                   self.velocity_filter_hz)
+                                   self.velocity_filter_hz, 2 * math.pi * self.force_bandwidth_rest_hz)
 
     @cached_property
     def testbench(self) -> ComputedTorqueGains:

@@ -112,6 +112,14 @@ def spool_commands_into(force_map, force_cmd, force_ref, force_ref_prev, force_m
 
 
 @njit(cache=True)
+def largest_abs(values) -> float:
+    largest = 0.0
+    for v in values:
+        largest = max(largest, abs(v))
+    return largest
+
+
+@njit(cache=True)
 def supply_ratio_into(supply_pa, nominal_pa, alpha, out) -> None:
     """out += alpha (p_s / nominal - out) per valve, a reading below a tenth of nominal as 1."""
     for i in range(out.shape[0]):
@@ -160,6 +168,9 @@ def integrate_into(integral, error, period_s) -> None:
 
 
 FILTER_ZETA = 0.7                     # the measured twist's low-pass: Butterworth-like
+# the force loops' bandwidth follows the reference: resting below this leg speed, over this time
+RESTING_M_S = 1e-4
+FORCE_SCHEDULE_S = 0.1
 # the supply the map is read at follows the P-port samples this slowly: a sag, not the dips the
 # valves' own draw makes (followed at once, holding ran away through the supply: more opening,
 # more draw, a lower supply)
@@ -181,6 +192,10 @@ class _Gains:
             self.supply_pa)
         _, flow_factor = hy.supply_similarity(self.supply_pa, cfg.valve_map.supply_pressure_pa)
         self.force_bandwidth = gains.force_bandwidth_rad_s
+        rest = gains.force_bandwidth_rest_rad_s
+        self.force_bandwidth_rest = self.force_bandwidth if math.isnan(rest) else rest
+        self.force_bandwidth_now = self.force_bandwidth_rest
+        self.bandwidth_alpha = 1.0 - math.exp(-period_s / FORCE_SCHEDULE_S)
         self.rate_floor = cfg.computed_torque.force_rate_floor * flow_factor
         self.u_max = cfg.limits.spool_max
         self.filter_wn, self.filter_zeta = 2 * math.pi * gains.velocity_filter_hz, FILTER_ZETA
@@ -198,9 +213,14 @@ class _Gains:
 
     def spool_commands(self, force_map, force_cmd, force_ref, force_ref_prev, force_measured, velocity_ref,
                        joint_error, strokes_ref) -> bool:
-        """`spool_commands_into` with this controller's map, gains and scratch: writes spool_cmd."""
+        """`spool_commands_into` with this controller's map, gains and scratch: writes spool_cmd.
+        The force loops' bandwidth moves toward the moving one while the reference moves and
+        toward the resting one while it rests, over FORCE_SCHEDULE_S."""
+        target = self.force_bandwidth if largest_abs(velocity_ref) > RESTING_M_S else self.force_bandwidth_rest
+        self.force_bandwidth_now += self.bandwidth_alpha * (target - self.force_bandwidth_now)
         return spool_commands_into(force_map, force_cmd, force_ref, force_ref_prev, force_measured, velocity_ref,
-                                   joint_error, strokes_ref, self.period_s, self.velocity_gain, self.force_bandwidth,
+                                   joint_error, strokes_ref, self.period_s, self.velocity_gain,
+                                   self.force_bandwidth_now,
                                    self.rate_floor,
                                    self.forces, self.velocities, self.spool, self.pressure_a, self.pressure_b,
                                    self.hp, self.supply_pa, self.supply_ratio, self.u_max, self.stiffness,

@@ -35,10 +35,7 @@ from plant_emulator.params import EmulatorConfig
 GAIN_RANGES = {                      # the search's box, [computed_torque] keys (thesis units)
     "bandwidth_hz": (1.5, 4.5),
     "damping": (0.4, 1.2),
-    # above ~17 Hz the force loop rings at rest in process (a 67 Hz limit cycle, 13-23 % rms spool
-    # that draws the pump's whole flow): at 18 Hz with 3 kg at 25 bar and 6 kg at 40 bar; at 15
-    # quiet (<= 0.9 %) over 0-6 kg x 20-40 bar. The linear closed loop does not show it
-    "force_bandwidth_hz": (3.0, 15.0),
+    "force_bandwidth_hz": (3.0, 30.0),    # while moving; at rest [computed_torque] force_bandwidth_rest_hz
     "velocity_gain_per_s": (5.0, 40.0),
     "velocity_filter_hz": (10.0, 60.0),
     "integral_fraction": (0.1, 0.6),
