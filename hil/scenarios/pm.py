@@ -197,6 +197,8 @@ class PlatformMovement(Scenario):
             first = motions[0].start
             end = motions[-1].end_cycle + int(SETTLE_AFTER_S / period)
             last = min(end, log.n_cycles - 1)
+            if last < first:                             # the log ended before this movement began
+                continue
             cycles = np.arange(first, last + 1)
             # a movement cut short by a fault or by the end of the log has no comparable IAE
             complete = end <= log.n_cycles - 1 and not np.any((fault_cycles >= first) & (fault_cycles <= last))
