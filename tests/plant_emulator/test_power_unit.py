@@ -50,7 +50,7 @@ def test_the_accumulator_gives_what_the_controllers_budget_says():
     small = {"power_unit": {"accumulator_gas_cm3": 300.0}}          # drained before the legs' end stops
     power = load_controller_config(overrides=small).power
     rig = _opened(small)
-    pump, crack = rig.cfg.power_unit.pump_flow_m3_s, (25.0 - 1.0) * BAR
+    pump, crack = rig.cfg.power_unit.pump_flow_m3_s, 25.0 * BAR - rig.cfg.power_unit.relief_override_pa
     given, start = 0.0, None
     for _ in range(2000):
         rig.advance(0.002)
