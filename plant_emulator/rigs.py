@@ -89,13 +89,13 @@ def testbench_advance(st: np.ndarray, command: float, jammed: bool, seized: bool
         st[hy.S_Z] = z_step(st[hy.S_Z], v_new, h, fp)
         st[hy.S_ZG] = z_step(st[hy.S_ZG], v_new, h, gp)
         hy.chamber_step(st, y_new, v_new, ps, h, hp, ports, seal_leak)
-        if pu.shape[0]:
-            drawn, slope = hy.supply_flow(st[hy.S_SPOOL], st[hy.S_PA], st[hy.S_PB], ps, hp, ports)
-            ps = power_unit.supply_step(ps, drawn, slope, h, pu)
         accel = (v_new - v) / h
         y, v = y_new, v_new
     st[hy.S_Y], st[hy.S_V] = y, v
     out[0], out[1], out[2] = accel, seal, guide
+    if pu.shape[0]:                    # one leg far inside the pump's flow: the supply once a period
+        drawn, slope = hy.supply_flow(st[hy.S_SPOOL], st[hy.S_PA], st[hy.S_PB], ps, hp, ports)
+        ps = power_unit.supply_step(ps, drawn, slope, n * h, pu)
     return ps
 
 
