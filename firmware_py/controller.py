@@ -101,7 +101,8 @@ class Controller:
                                           res.pressure_persistence_samples, res.pressure_carry,
                                           int(ValveState.ACTIVE))
         self.residuals_running = False
-        # the valves' P-port transducers against the supply the model assumes
+        # the valves' P-port transducers against the configured supply; their latest samples are
+        # the supply the chamber models and computed torque run on (`SupplyPressure.latest_pa`)
         self.supply = SupplyPressure(n, supply_pa, cfg.hydraulics[hy.HP_TANK], res.flow_spread, res.supply_legs)
         # after a move, not at rest until the pump has refilled the accumulator (ControllerConfig.supply_refill_s)
         self.supply_at_rest = SupplyAtRest(n, supply_pa, res.supply_tolerance_pa, res.supply_legs,

@@ -5,7 +5,7 @@ actuator states of hydraulics.py), `command` (valve input per leg, fraction of f
 input, written by the valve nodes), `jammed` (per-leg spool frozen), `seized` (per-leg rod
 stuck mechanically: `set_rod_seized`), `ports_open` (per leg, 0 when the load-holding valves
 between servo-valve and cylinder are closed: the node layer closes them whenever the valve
-is not ACTIVE), `supply_pressure_pa`,
+is not ACTIVE), `supply_pressure_pa` (the power unit's state, `physics.power_unit`),
 `advance(period_s)` (integrate exactly that much physics), `rod_force_n` (what the load
 cells measure), `set_load(kg)` and `unstable_periods` / `first_unstable_s` (advances after
 which the physics had diverged: MuJoCo reset, or a state not finite).
