@@ -63,24 +63,27 @@ class Plan:
     reason: str                      # the last refusal, or "" when accepted
 
 
-def supply_floor(cfg: ControllerConfig, motion: Motion) -> float:
-    """The smallest time scale at which the whole of `motion` keeps the power unit's budget:
-    the controller judges each chain of waypoints from a full accumulator, the host sees the
-    chains one after the other (NaN: none within the search's range)."""
+def movement_floor(cfg: ControllerConfig, motion: Motion) -> float:
+    """The smallest time scale at which the whole of `motion` after its approach from home (a
+    chain of its own, from rest, at its own speed) keeps the power unit's budget and the legs'
+    lag bound. The controller judges each chain of waypoints from a full
+    accumulator and from legs on their reference; the host sees the chains one after the
+    other: the oil one chain leaves the next, and the lag a deceleration into a waypoint
+    leaves the acceleration out of it (NaN: none within the search's range)."""
     geometry = default_geometry().with_payload(cfg.hexapod.payload_kg)
-    trajectory = stroke_trajectory(motion, geometry)
-    loads = PlatformLoads(geometry, cfg.kinematics.dk_tolerance_m).loads(trajectory, 0.0, trajectory.duration_s,
-                                                                         PERIOD_S)
-    return needed_scale(leg_capacity(cfg), loads, cfg.waypoints.capacity_share, math.inf)
+    trajectory = stroke_trajectory(replace(motion, parts=motion.parts[1:]), geometry)
+    loads = PlatformLoads(geometry, cfg.kinematics.dk_tolerance_m, angle_weight=cfg.waypoints.angle_weight_m_rad
+                          ).loads(trajectory, 0.0, trajectory.duration_s, PERIOD_S)
+    return needed_scale(leg_capacity(cfg), loads, cfg.waypoints.capacity_share, cfg.waypoints.lag_max_m)
 
 
 def plan(cfg: ControllerConfig, motion: Motion) -> Plan:
     """The smallest time scale on `motion`'s ta and tm (its approach from home included)
     whose waypoints the controller's queue accepts, all of them, with `cfg` as declared, and
-    no faster than the whole movement's `supply_floor`."""
+    no faster than the whole movement's `movement_floor`."""
     rig = HexapodModel(cfg, PERIOD_S)
     low, high = PLAN_SCALES
-    floor = supply_floor(cfg, motion)
+    floor = movement_floor(cfg, motion)
     scale, reason = low, ""
     if math.isfinite(floor) and floor > low:
         scale = math.ceil(floor * 100.0) / 100.0
