@@ -18,6 +18,7 @@ class LogView:
         self.sync_t = log.sync_time_s
         truth = log.get("EMU_TRUTH")
         self.truth_t = truth.time_s
+        self.truth_cycle = truth.cycle
         self.truth = np.column_stack([truth["X"], truth["Y"], truth["Z"]]) if n_legs == 6 else truth["Z"][:, None]
         self.status = log.get("CTRL_STATUS")
         self.cmds = [log.get(f"VALVE_CMD_{leg}") for leg in range(1, n_legs + 1)]
@@ -160,6 +161,20 @@ class LogView:
         if not sel.any():
             return None
         return float(np.linalg.norm(self.truth[sel].max(axis=0) - self.truth[sel].min(axis=0)))
+
+    def swing_after(self, k0: int | None, settle_s: float, span_s: float) -> float | None:
+        """What is left of the platform's (or slide's) motion `settle_s` after cycle k0: its
+        largest distance from its mean position over the next `span_s` (truth); None without
+        truth there."""
+        if k0 is None:
+            return None
+        first = k0 + int(round(settle_s / self.period_s))
+        sel = (self.truth_cycle >= first) & (self.truth_cycle < first + int(round(span_s / self.period_s)))
+        window = self.truth[sel]
+        window = window[np.all(np.isfinite(window), axis=1)]
+        if len(window) < 0.9 * span_s / self.period_s:
+            return None
+        return float(np.max(np.linalg.norm(window - window.mean(axis=0), axis=1)))
 
     def excursion(self, t0: float, span: float) -> float | None:
         sel = (self.truth_t >= t0) & (self.truth_t <= t0 + span)

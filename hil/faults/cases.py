@@ -13,6 +13,9 @@ INJECT_AT_S = 0.5                 # into the probe's first segment (moving at ~2
 OBSERVE_S = 1.0                   # excursion window after the injection
 SETTLE_S = 2.0                    # at rest before the next case (the hexapod rings at ~1.5 Hz after a stop)
 TRANSIENT_MAX_M = 1e-3            # transient faults: within 1 mm of the no-fault probe
+# after a fault's reaction the platform is at rest: REST_AFTER_S later, over REST_SPAN_S, it
+# swings at most REST_SWING_MAX_M about where it stands (truth)
+REST_AFTER_S, REST_SPAN_S, REST_SWING_MAX_M = 0.5, 0.4, 5e-3
 # the transient comparison's window after the injection: the fault and the loop's answer to
 # it, at the probe's constant speed (its deceleration starts PROBE_SEGMENT_S - PROBE_ACCEL_S in)
 TRANSIENT_WINDOW_S = 0.5

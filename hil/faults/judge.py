@@ -18,6 +18,9 @@ from hil.faults.cases import (
     INJECT_AT_S,
     OBSERVE_S,
     PROBE_SEGMENT_S,
+    REST_AFTER_S,
+    REST_SPAN_S,
+    REST_SWING_MAX_M,
     TRANSIENT_MAX_M,
     TRANSIENT_WINDOW_S,
     Case,
@@ -68,7 +71,8 @@ def judge_transient(view: LogView, mark: Marks, baseline: Marks | None, run_dir:
                               **rejected}
 
 def judge_fault(view: LogView, mark: Marks, baseline: Marks | None, run_dir: Path | None):
-    """Persistent and plant faults: the reason, the cycles to the reaction, the excursion."""
+    """Persistent and plant faults: the reason, the cycles to the reaction, the excursion, and
+    the platform at rest REST_AFTER_S after the reaction."""
     c = mark.case
     k0 = first_affected_cycle(view, mark, c, run_dir)
     reaction = view.reaction_cycle(k0, "CW_M")
@@ -94,13 +98,18 @@ def judge_fault(view: LogView, mark: Marks, baseline: Marks | None, run_dir: Pat
         leg = view.controller_fault_leg(mark.t_inject, mark.t_inject + OBSERVE_S)
         measured += f" (leg {leg})" if leg else ""
         measured += f"; off the no-fault path {_mm(path)}"
-    measured += f"; excursion {_mm(excursion)}; VALVE_CMD every cycle after it with M = 0: {held}"
+    swing = view.swing_after(reaction, REST_AFTER_S, REST_SPAN_S)
+    at_rest = swing is not None and swing <= REST_SWING_MAX_M
+    passed = passed and at_rest
+    measured += (f"; excursion {_mm(excursion)}; VALVE_CMD every cycle after it with M = 0: {held}"
+                 f"; {REST_AFTER_S:g} s after it swinging {_mm(swing)}")
     if c.kind is CaseKind.PERSISTENT:
         rejected = view.rejected_between(c.target, mark.t_inject, mark.t_end)
         measured += f"; {rejected['rejected']} frames rejected"
     return passed, measured, {"code": code, "cycles": cycles, "detection_ms": None if cycles is None else
                               round(cycles * view.period_s * 1e3, 1), "excursion_m": excursion,
-                              "path_excursion_m": path, "held": held}
+                              "path_excursion_m": path, "held": held, "swing_after_m": swing,
+                              "at_rest": at_rest}
 
 
 def judge_estop(view: LogView, mark: Marks, baseline: Marks | None, run_dir: Path | None):
