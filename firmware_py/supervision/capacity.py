@@ -234,13 +234,16 @@ def judge(capacity: LegCapacity, loads: Loads, scale: float, share: float, lag_m
 
 
 def needed_scale(capacity: LegCapacity, loads: Loads, share: float, lag_max_m: float,
-                 tolerance: float = 0.005) -> float:
+                 tolerance: float = 0.005, beyond: float | None = None) -> float:
     """The smallest time scale (within SCALE_RANGE) that `fits`; NaN when even the slowest
-    does not (a static load the legs cannot hold)."""
+    does not (a static load the legs cannot hold). `beyond`: a scale known not to fit, the
+    search's floor (near the bound `fits` is not monotonic: a refusal at 1 must not name 0.99)."""
     low, high = SCALE_RANGE
     if not fits(capacity, loads, high, share, lag_max_m):
         return math.nan
-    if fits(capacity, loads, low, share, lag_max_m):
+    if beyond is not None:
+        low = beyond
+    elif fits(capacity, loads, low, share, lag_max_m):
         return low
     while high - low > tolerance * low:
         middle = math.sqrt(low * high)

@@ -125,7 +125,7 @@ def capacity_verdict(waypoints: Waypoints, capacity: LegCapacity, loads, strokes
     share, lag_max = waypoints.capacity_share, waypoints.lag_max_m
     if fits(capacity, loads, 1.0, share, lag_max):
         return Ack.ACCEPTED, strokes, math.nan
-    scale = needed_scale(capacity, loads, share, lag_max)
+    scale = needed_scale(capacity, loads, share, lag_max, beyond=1.0)
     return Ack.BEYOND_CAPACITY, None, math.inf if math.isnan(scale) else scale
 
 

@@ -99,3 +99,25 @@ def test_the_commands_print_the_table_and_refuse_bad_arguments():
                  ("hil", "run", "sha-step", "--time-scale", "auto")):
         bad = hydrapod(*argv)
         assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1, (argv, bad.stderr)
+
+
+def test_a_refusal_names_a_slower_timing_even_at_the_checks_edge():
+    """Within ~1 % of its edge the check is not monotonic in the time scale (quantised times,
+    sampled lags); a refusal still names a factor above 1, so a host that sends the movement
+    again at it makes progress (the circle at 40 bar once named 0.99 and was refused again)."""
+    cfg = declared(load_config(overrides=MOVEMENT_OVERRIDES), 0.0, 40.0)
+    rig = HexapodModel(cfg, 0.002)
+    circle = MOTIONS["circle"](default_geometry())
+    refusals = 0
+    for scale in np.arange(0.62, 0.665, 0.005):
+        queue = WaypointQueue(replace(cfg.waypoints, queue=255), rig.check)
+        for seq, w in enumerate(movement_waypoints(circle.scaled(float(scale)))):
+            queue.stage_position(seq, *w.position_m)
+            queue.stage_rotation(seq, 0.0, 0.0, 0.0)
+            result = queue.commit(seq, seq, w.segment_time_s, w.accel_time_s, w.flags, State.READY,
+                                  rig.home_strokes, 0.0)
+            if result is Ack.BEYOND_CAPACITY:
+                refusals += 1
+                assert queue.time_scale_needed > 1.0, (scale, queue.time_scale_needed)
+                break
+    assert refusals >= 5
