@@ -164,7 +164,7 @@ class FrictionSteady(Scenario):
 
     def plan(self, short: bool) -> tuple[tuple[float, ...], int]:
         c = chapter6()["experiments"]
-        return ((0.0, 6.0), 20) if short else (tuple(c["steady_loads_kg"]), int(c["steady_steps_per_load"]))
+        return ((0.0, 6.0), 16) if short else (tuple(c["steady_loads_kg"]), int(c["steady_steps_per_load"]))
 
     def script(self, run) -> None:
         """Per load: steps whose inputs aim at velocities log-spaced over VELOCITY_RANGE_MM_S on
@@ -317,8 +317,8 @@ class FrictionPresliding(Scenario):
         c = chapter6()["experiments"]
         period_s = 1.0 / c["presliding_frequency_hz"]
         # --short: the heaviest load (at 0 kg a 25-30 N sine from breakaway creeps 1.1-1.4 mm,
-        # and once slid to the end stop), at every other amplitude (each sine lasts 25 s)
-        amplitudes = list(np.linspace(5.0, 25.0, 3 if short else 5))
+        # and once slid to the end stop), the smallest and largest amplitude (each sine lasts 25 s)
+        amplitudes = list(np.linspace(5.0, 25.0, 2 if short else 5))
         return ((6.0,) if short else (0.0, 3.0, 6.0)), amplitudes, period_s
 
     def script(self, run) -> None:
