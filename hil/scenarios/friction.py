@@ -164,7 +164,7 @@ class FrictionSteady(Scenario):
 
     def plan(self, short: bool) -> tuple[tuple[float, ...], int]:
         c = chapter6()["experiments"]
-        return ((0.0, 6.0), 16) if short else (tuple(c["steady_loads_kg"]), int(c["steady_steps_per_load"]))
+        return ((0.0, 6.0), 20) if short else (tuple(c["steady_loads_kg"]), int(c["steady_steps_per_load"]))
 
     def script(self, run) -> None:
         """Per load: steps whose inputs aim at velocities log-spaced over VELOCITY_RANGE_MM_S on
