@@ -166,7 +166,7 @@ def test_list_names_the_scenarios():
 SCENARIO_RUNS = {
     "sha-tracking": (["--short"], lambda m: {(r["controller"], r["load_kg"], round(r["w_rad_s"], 1))
                                             for r in m["runs"]} == {(c, load, w) for c in CONTROLLERS
-                                                                    for load in (0.0, 6.0) for w in (0.5, 2.0)}),
+                                                                    for load in (0.0,) for w in (0.5, 2.0)}),
     "sha-perturbation": ([], lambda m: all(len(r["load_changes"]) == 3 for r in m["runs"].values())
                          and set(m["runs"]) == {"pi", "adaptive"}),
     # the thesis's timing. The circle: all three complete, model-based < PI+P is required and

@@ -56,10 +56,9 @@ def test_sha_step_over_socketcan_vcan0_inside_a_vm(tmp_path):
     script = (f"modprobe vcan && ip link add dev vcan0 type vcan && ip link set up vcan0 && cd {ROOT} && "
               f"{exports} {BIN / 'hydrapod'} {' '.join(SCENARIO)} --bus socketcan:vcan0 --start-timeout-s 900 "
               f"--out {work / 'vm'} --json > {work / 'vm.json'} 2> {work / 'vm.stderr'}; echo VM_EXIT=$?")
-    # two vCPUs (each a host thread under software emulation): the three processes inside switch
-    # less; alone on this machine the VM took 153 s against 194 s with one, and less CPU in all
-    # (140 s against 165 s of user time), which the other test worker gets back
-    vm = subprocess.run([str(vng), "--run", kernel, "--disable-kvm", "--cpus", "2", "--memory", "2G",
+    # one vCPU: the run inside is lockstep (one process busy at a time), and under software
+    # emulation each vCPU is a host thread that the other test worker needs
+    vm = subprocess.run([str(vng), "--run", kernel, "--disable-kvm", "--cpus", "1", "--memory", "2G",
                          "--rwdir", str(work),
                          "--exec", script], capture_output=True, text=True, timeout=VM_TIMEOUT_S,
                         env={**os.environ, "PATH": f"{BIN}:{os.environ.get('PATH', '')}"})
