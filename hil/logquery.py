@@ -162,18 +162,26 @@ class LogView:
             return None
         return float(np.linalg.norm(self.truth[sel].max(axis=0) - self.truth[sel].min(axis=0)))
 
+    def truth_window(self, k0: int | None, span: float):
+        """Truth per cycle from cycle k0 on, `span` seconds (NaN rows where it is missing);
+        None when under 90 % of them came."""
+        if k0 is None:
+            return None
+        n = int(round(span / self.period_s))
+        rows = np.full((n, self.truth.shape[1]), np.nan)
+        sel = (self.truth_cycle >= k0) & (self.truth_cycle < k0 + n)
+        rows[self.truth_cycle[sel] - k0] = self.truth[sel]
+        keep = np.all(np.isfinite(rows), axis=1)
+        return rows if keep.mean() > 0.9 else None
+
     def swing_after(self, k0: int | None, settle_s: float, span_s: float) -> float | None:
         """What is left of the platform's (or slide's) motion `settle_s` after cycle k0: its
         largest distance from its mean position over the next `span_s` (truth); None without
         truth there."""
-        if k0 is None:
+        window = None if k0 is None else self.truth_window(k0 + int(round(settle_s / self.period_s)), span_s)
+        if window is None:
             return None
-        first = k0 + int(round(settle_s / self.period_s))
-        sel = (self.truth_cycle >= first) & (self.truth_cycle < first + int(round(span_s / self.period_s)))
-        window = self.truth[sel]
         window = window[np.all(np.isfinite(window), axis=1)]
-        if len(window) < 0.9 * span_s / self.period_s:
-            return None
         return float(np.max(np.linalg.norm(window - window.mean(axis=0), axis=1)))
 
     def excursion(self, t0: float, span: float) -> float | None:

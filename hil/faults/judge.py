@@ -283,7 +283,7 @@ def deviation_from(view: LogView, mark: Marks, baseline: Marks | None) -> tuple[
     k_inject = view.cycle_at(mark.t_inject) if not math.isnan(mark.t_inject) else None
     skip = k_inject - ka if k_inject is not None else int(round(INJECT_AT_S / view.period_s))
     span = TRANSIENT_WINDOW_S + view.period_s                    # from the cycle before the injection
-    a, b = _truth_window(view, ka + skip - 1, span), _truth_window(view, kb + skip - 1, span)
+    a, b = view.truth_window(ka + skip - 1, span), view.truth_window(kb + skip - 1, span)
     platform = None if a is None or b is None else _largest_change(a - b, lambda d: np.linalg.norm(d, axis=1))
     la, lb = _legs_window(view, ka + skip - 1, span), _legs_window(view, kb + skip - 1, span)
     legs = None if la is None or lb is None else _largest_change(la - lb, np.abs)
@@ -301,8 +301,8 @@ def path_excursion(view: LogView, mark: Marks, baseline: Marks | None) -> float 
     if ka is None or kb is None or k_inject is None:
         return None
     span = 2 * PROBE_SEGMENT_S
-    path = _truth_window(view, kb, span)
-    after = _truth_window(view, k_inject - 1, OBSERVE_S + view.period_s)
+    path = view.truth_window(kb, span)
+    after = view.truth_window(k_inject - 1, OBSERVE_S + view.period_s)
     if path is None or after is None:
         return None
     path = path[np.all(np.isfinite(path), axis=1)]
@@ -331,19 +331,6 @@ def waypoint_ack_cycle(view: LogView, mark: Marks) -> int | None:
                 and int(e.values["SEQ"]) == seq):
             return e.cycle
     return None
-
-def _truth_window(view: LogView, k0: int | None, span: float):
-    """Truth per cycle from cycle k0 on."""
-    if k0 is None:
-        return None
-    truth = view.log.get("EMU_TRUTH")
-    n = int(round(span / view.period_s))
-    rows = np.full((n, view.truth.shape[1]), np.nan)
-    sel = (truth.cycle >= k0) & (truth.cycle < k0 + n)
-    rows[truth.cycle[sel] - k0] = view.truth[sel]
-    keep = np.all(np.isfinite(rows), axis=1)
-    return rows if keep.mean() > 0.9 else None
-
 
 JUDGES = {
     CaseKind.BASELINE: judge_baseline,

@@ -20,17 +20,24 @@ from protocol.enums import Ack, State
 from tests.support.cli import hydrapod
 
 
-def _accepted(cfg, motion) -> bool:
-    """Every waypoint of `motion` accepted by a controller's queue configured with `cfg`."""
+def _first_refusal(cfg, motion) -> tuple[Ack, WaypointQueue]:
+    """`motion`'s waypoints committed to a controller's queue configured with `cfg`: the first
+    refusal (ACCEPTED when none) and the queue (its `time_scale_needed`)."""
     rig = HexapodModel(cfg, 0.002)
     queue = WaypointQueue(replace(cfg.waypoints, queue=255), rig.check)
     for seq, w in enumerate(movement_waypoints(motion)):
         queue.stage_position(seq, *w.position_m)
         queue.stage_rotation(seq, 0.0, 0.0, 0.0)
-        if queue.commit(seq, seq, w.segment_time_s, w.accel_time_s, w.flags, State.READY, rig.home_strokes,
-                        0.0) is not Ack.ACCEPTED:
-            return False
-    return True
+        result = queue.commit(seq, seq, w.segment_time_s, w.accel_time_s, w.flags, State.READY, rig.home_strokes,
+                              0.0)
+        if result is not Ack.ACCEPTED:
+            return result, queue
+    return Ack.ACCEPTED, queue
+
+
+def _accepted(cfg, motion) -> bool:
+    """Every waypoint of `motion` accepted by a controller's queue configured with `cfg`."""
+    return _first_refusal(cfg, motion)[0] is Ack.ACCEPTED
 
 
 @pytest.mark.parametrize("payload_kg, supply_bar", [(0.0, 25.0), (3.0, 25.0), (1.5, 20.0)])
@@ -106,18 +113,11 @@ def test_a_refusal_names_a_slower_timing_even_at_the_checks_edge():
     sampled lags); a refusal still names a factor above 1, so a host that sends the movement
     again at it makes progress (the circle at 40 bar once named 0.99 and was refused again)."""
     cfg = declared(load_config(overrides=MOVEMENT_OVERRIDES), 0.0, 40.0)
-    rig = HexapodModel(cfg, 0.002)
     circle = MOTIONS["circle"](default_geometry())
     refusals = 0
     for scale in np.arange(0.62, 0.665, 0.005):
-        queue = WaypointQueue(replace(cfg.waypoints, queue=255), rig.check)
-        for seq, w in enumerate(movement_waypoints(circle.scaled(float(scale)))):
-            queue.stage_position(seq, *w.position_m)
-            queue.stage_rotation(seq, 0.0, 0.0, 0.0)
-            result = queue.commit(seq, seq, w.segment_time_s, w.accel_time_s, w.flags, State.READY,
-                                  rig.home_strokes, 0.0)
-            if result is Ack.BEYOND_CAPACITY:
-                refusals += 1
-                assert queue.time_scale_needed > 1.0, (scale, queue.time_scale_needed)
-                break
+        result, queue = _first_refusal(cfg, circle.scaled(float(scale)))
+        if result is Ack.BEYOND_CAPACITY:
+            refusals += 1
+            assert queue.time_scale_needed > 1.0, (scale, queue.time_scale_needed)
     assert refusals >= 5
