@@ -36,6 +36,7 @@ from physics.lugre import LugreSection
 from program.errors import UserInputError
 from program.realtime import CPU_LATENCY, REALTIME_PRIORITY
 from program.sections import ConfigFile, Section, flag, frozen, key, load_file, numbers, table
+from protocol.devices import IMU_EDS, LEG_EDS, check_files
 from protocol.nodes import HEARTBEAT
 
 PCT = 100.0                         # a percentage is divided by it
@@ -67,6 +68,17 @@ class Timing(Section):
     cpu: int = key("cpu", -1, 1023)
     cpu_latency_us: int = key(CPU_LATENCY)
     stall_fault_periods: float = key("stall_fault_periods", 1.0, 10000.0)
+
+
+@frozen
+class Devices(Section):
+    """Who must answer at each node id (runtime/identify.py): each kind's EDS, read back by SDO."""
+    leg_eds: str = key(LEG_EDS)
+    imu_eds: str = key(IMU_EDS)
+    sdo_timeout_s: float = key("sdo_timeout_ms", 1.0, 10000.0, si=MS)
+
+    def validate(self, where: str, error: type[UserInputError]) -> None:
+        check_files((self.leg_eds, self.imu_eds), where, error)
 
 
 @frozen
@@ -394,6 +406,7 @@ class Plausibility(Section):
 @frozen
 class ControllerConfig(ConfigFile):
     timing: Timing
+    devices: Devices
     actuator: Actuator
     testbench: Testbench
     identification: Identification

@@ -31,6 +31,7 @@ import can
 import numpy as np
 
 from physics import hydraulics as hy
+from plant_emulator.devices import EmulatedDevices
 from plant_emulator.injected import KNOWN_FAULTS
 from plant_emulator.params import EmulatorConfig
 from plant_emulator.simulated_rig import SimulatedRig
@@ -124,6 +125,7 @@ class Emulator:
         self._leg_operational = np.zeros(rig.n_legs, dtype=bool)
         self._overflow = sync_counter_overflow()
         self.phase_s = np.zeros((SYNC_HISTORY, len(SYNC_PHASES)))     # per SYNC, seconds
+        self.devices = EmulatedDevices(self.nodes, cfg.nodes.leg_eds, cfg.nodes.imu_eds, self._send)
 
     @property
     def valves(self) -> dict:
@@ -295,8 +297,17 @@ class Emulator:
             self._send_truth(self.sync_counter)
 
     # -- receive ------------------------------------------------------------------------------
+    def can_filters(self) -> list[dict]:
+        """The nodes' CAN controllers' acceptance filters: the DBC's frames they take, and SDO."""
+        return self.decoder.can_filters() + self.devices.can_filters()
+
     def handle(self, msg: can.Message) -> None:
         self.counters.frames_in += 1
+        node = self.devices.node_of(msg.arbitration_id)
+        if node is not None:                  # SDO: served in every NMT state but STOPPED (CiA 301)
+            if self.nmt[node] != NmtState.STOPPED and not self._fault(node, EmuFault.SILENT):
+                self.devices.answer(msg)
+            return
         status = self.decoder.receive_message(msg)
         frame_id = msg.arbitration_id
         if status is RxStatus.UNKNOWN_ID:

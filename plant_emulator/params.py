@@ -34,6 +34,7 @@ from program import sections
 from program.errors import UserInputError
 from program.realtime import CPU_LATENCY, REALTIME_PRIORITY
 from program.sections import ConfigFile, Section, flag, frozen, key, load_file, load_layered, numbers
+from protocol.devices import IMU_EDS, LEG_EDS, check_files
 from protocol.nodes import HEARTBEAT
 
 US, MS = 1e-6, 1e-3
@@ -138,6 +139,11 @@ class Nodes(Section):
     valve_status_divisor: int = key("valve_status_divisor", 0, 240)
     realtime_priority: int = key(REALTIME_PRIORITY)
     cpu_latency_us: int = key(CPU_LATENCY)
+    leg_eds: str = key(LEG_EDS)
+    imu_eds: str = key(IMU_EDS)
+
+    def validate(self, where: str, error: type[UserInputError]) -> None:
+        check_files((self.leg_eds, self.imu_eds), where, error)
 
 
 @frozen

@@ -88,7 +88,7 @@ def run_emulator(args) -> int:
     stop = StopFlag()
     bus = open_bus(spec)
     emulator = Emulator(bus, rig, cfg, pacing=args.pacing)
-    bus.set_filters(emulator.decoder.can_filters())   # the nodes' CAN controllers' acceptance filters
+    bus.set_filters(emulator.can_filters())   # the nodes' CAN controllers' acceptance filters
     # started: what start-up built leaves the collector's scans, so a collection in the run is short
     freeze_gc(disable=False)
     if args.pacing == "realtime":

@@ -40,6 +40,7 @@ def realtime_teardown() -> None:
 
 def run_daemon(args) -> int:
     from firmware_py.controller import Controller
+    from firmware_py.runtime.identify import IdentityError
     from firmware_py.runtime.loop import ActivationError, ControllerLoop
     from protocol.bus import open_bus, parse_bus_spec
 
@@ -49,7 +50,7 @@ def run_daemon(args) -> int:
     stop = StopFlag()
     bus = open_bus(spec)
     loop = ControllerLoop(bus, controller, args.rate_hz, args.pacing, log=log)
-    bus.set_filters(loop.decoder.can_filters())       # the CAN controller's acceptance filter
+    bus.set_filters(loop.can_filters())               # the CAN controller's acceptance filter
     code = 0
     notes = realtime_setup(cfg, args.pacing == "realtime")
     if notes:
@@ -57,6 +58,9 @@ def run_daemon(args) -> int:
     try:
         try:
             loop.activate(stop)
+        except IdentityError as exc:              # the configuration names a device the bus lacks
+            log(f"activation refused: {exc}")
+            code = 2
         except ActivationError as exc:
             log(f"activation failed: {exc}")
             code = 1

@@ -2,7 +2,9 @@
 run -> shut down) and the fixed-step cycle SYNC -> collect -> read -> update -> write.
 
 configure (constructor): codecs compiled at import, every array and CAN message allocated.
-activate: NMT start (repeated until every node's heartbeat says OPERATIONAL), then
+activate: every node heard (its heartbeat), then identified by SDO (runtime/identify.py: a
+node that is not the configured device is never started), then NMT start (repeated until
+every node's heartbeat says OPERATIONAL), then
 `hold_cycles` cycles with the valves in HOLD (the first with a Reset pulse, clearing faults
 left by an earlier session), then IDLE or READY (auto_enable).
 cycle k: send SYNC k; collect cycle k's LEG_STATE frames until all are in or the window
@@ -34,11 +36,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from firmware_py.controller import Controller
+from firmware_py.runtime.identify import IdentityError, identify
 from firmware_py.supervision.supervisor import LATCHED, emergency_code
 from physics.constants import BAR
 from program.realtime import percentiles_us
-from protocol.codec import CODECS, FrameDecoder
+from protocol.codec import CODECS, STANDARD_ID_MASK, FrameDecoder
 from protocol.dbc import sync_counter_overflow
+from protocol.devices import SDO_RESPONSE_BASE, identity_of
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import PACINGS, Fault, NmtCommand, NmtState, Pacing
 from protocol.interfaces import attitude_into, leg_pressure_into, leg_state_into, payload_values, valve_command_values
@@ -147,7 +151,13 @@ class ControllerLoop:
         self._attitude = np.zeros(3)
         self._stall_s = self.cfg.timing.stall_fault_periods * self.period_s if pacing == "realtime" else math.inf
         self._restarts_seen = 0                     # the controller's restart requests carried out
+        self._booted: set[int] = set()              # nodes that booted since they were identified
         self.state_at_stop = None                   # the controller's state when the shutdown began
+
+    def can_filters(self) -> list[dict]:
+        """The acceptance filter: the DBC's frames this loop takes, and its nodes' SDO answers."""
+        return self.decoder.can_filters() + [{"can_id": SDO_RESPONSE_BASE + node, "can_mask": STANDARD_ID_MASK,
+                                              "extended": False} for node in self.nodes]
 
     # -- receive --------------------------------------------------------------------------
     def dispatch(self, msg) -> None:
@@ -184,6 +194,7 @@ class ControllerLoop:
             node = self.nodes[k]
             if state == NmtState.BOOTUP:             # the node restarted: so did its alive counters
                 self.decoder.restart_sender(SENDER_OF_NODE[node])
+                self._booted.add(node)               # ... and may be another device now
             self.nmt_state[node] = state
             return
         node = self._emcy_of_id.get(frame_id)
@@ -317,7 +328,7 @@ class ControllerLoop:
         self._send_acks()
         if status.restart_requests != self._restarts_seen:
             self._restarts_seen = status.restart_requests
-            if any(self.nmt_state[n] != NmtState.OPERATIONAL for n in self.nodes):
+            if any(self.nmt_state[n] != NmtState.OPERATIONAL for n in self.nodes) and self._identify_booted():
                 self._nmt_start()                    # nodes that rebooted since activation
 
     def _send_acks(self) -> None:
@@ -432,28 +443,65 @@ class ControllerLoop:
 
     # -- lifecycle ------------------------------------------------------------------------
     def activate(self, should_stop=lambda: False) -> None:
-        """NMT start until every node reports OPERATIONAL, then HOLD cycles, then IDLE/READY."""
+        """Every node heard, identified, then NMT start until every node reports OPERATIONAL,
+        then HOLD cycles, then IDLE/READY. A node that is not its configured device:
+        IdentityError naming it, and no node is started."""
         cfg = self.cfg
         give_up = self.clock() + cfg.timing.activation_timeout_s
-        next_start = 0.0
-        while not all(self.nmt_state[n] == NmtState.OPERATIONAL for n in self.nodes):
-            now = self.clock()
-            if now > give_up or should_stop():
-                missing = [n for n in self.nodes if self.nmt_state[n] != NmtState.OPERATIONAL]
-                raise ActivationError(f"no OPERATIONAL heartbeat from node(s) {missing} within "
-                                      f"{cfg.timing.activation_timeout_s:g} s")
-            if now >= next_start:
-                self._nmt_start()
-                next_start = now + 0.2
-            msg = self.bus.recv(timeout=0.02)
-            if msg is not None:
-                self.dispatch(msg)
+        self._wait(lambda state: state != -1, "heartbeat", give_up, should_stop)
+        found = identify(self.bus, self.expected_devices(), self._receive, self.dispatch, self.clock,
+                         cfg.devices.sdo_timeout_s)
+        self._booted.clear()
+        revisions = sorted({f"{identity.revision:#x}" for identity in found.values()})
+        self.log(f"identified node(s) {sorted(found)} as configured ([devices]; revision(s) {', '.join(revisions)})")
+        self._wait(lambda state: state == NmtState.OPERATIONAL, "OPERATIONAL heartbeat", give_up, should_stop,
+                   self._nmt_start)
         self.controller.reset_valves()               # one Reset pulse: clears faults left from before
         self._run_cycles(cfg.timing.hold_cycles, should_stop)
         self.controller.activated(cfg.supervisor.auto_enable)
         status = self.controller.status
         self.log(f"active: rig={status.rig} state={status.state.name} pacing={self.pacing} "
                  f"rate={1.0 / self.period_s:g} Hz")
+
+    def expected_devices(self) -> dict:
+        """Node id -> (the identity its configured EDS gives, that EDS's name)."""
+        devices = self.cfg.devices
+        return {node: (identity_of(eds), eds) for node in self.nodes
+                for eds in [devices.imu_eds if node == IMU_NODE else devices.leg_eds]}
+
+    def _identify_booted(self) -> bool:
+        """Nodes that booted since they were identified, identified again before a restart
+        starts them (a few SDO exchanges inside this cycle, while the controller is latched
+        in FAULT); False, with the refusal logged, when one is not its configured device."""
+        expected = self.expected_devices()
+        try:
+            identify(self.bus, {n: expected[n] for n in sorted(self._booted)}, self._receive, self.dispatch,
+                     self.clock, self.cfg.devices.sdo_timeout_s)
+        except IdentityError as refusal:
+            self.log(f"restart refused: {refusal}")
+            return False
+        self._booted.clear()
+        return True
+
+    def _receive(self, timeout_s: float):
+        return self.bus.recv(timeout=timeout_s)
+
+    def _wait(self, ready, what: str, give_up: float, should_stop, every_200_ms=None) -> None:
+        """Receive until `ready(state)` holds for every node's NMT state (heard: not -1);
+        `every_200_ms` sent meanwhile; ActivationError naming the nodes at `give_up`."""
+        next_send = 0.0
+        while not all(ready(self.nmt_state[n]) for n in self.nodes):
+            now = self.clock()
+            if now > give_up or should_stop():
+                missing = [n for n in self.nodes if not ready(self.nmt_state[n])]
+                raise ActivationError(f"no {what} from node(s) {missing} within "
+                                      f"{self.cfg.timing.activation_timeout_s:g} s")
+            if every_200_ms is not None and now >= next_send:
+                every_200_ms()
+                next_send = now + 0.2
+            msg = self.bus.recv(timeout=0.02)
+            if msg is not None:
+                self.dispatch(msg)
 
     def _run_cycles(self, count: int | None, should_stop) -> None:
         deadline = self.clock()

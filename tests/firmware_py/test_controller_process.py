@@ -1,6 +1,7 @@
 """The controller daemon as a separate process on udp_multicast against a scripted
-python-can peer playing the test bench's leg node: >= 2,000 cycles without an E2E error,
-then SIGTERM -> valves HOLD, then DISABLED, exit 0 with the one-line summary."""
+python-can peer playing the test bench's leg node (its SDO answers canopen's LocalNode from
+the shipped EDS): >= 2,000 cycles without an E2E error, then SIGTERM -> valves HOLD, then
+DISABLED, exit 0 with the one-line summary."""
 
 import json
 import os
@@ -11,10 +12,12 @@ import sys
 import time
 
 import can
+import canopen
 import pytest
 
 from protocol.bus import open_bus
 from protocol.codec import CODECS, FrameDecoder
+from protocol.devices import SDO_REQUEST_BASE, local_node
 from protocol.e2e import RxStatus
 from tests.support.buses import GROUP, free_port
 
@@ -38,6 +41,8 @@ def test_daemon_runs_against_a_scripted_peer_and_shuts_down_safely(tmp_path):
     cmd = CODECS["VALVE_CMD_1"].index
     valve_state, latched = 1, None
     noise = random.Random(3)
+    sdo = canopen.Network(bus)                  # answers the controller's identification
+    sdo.add_node(local_node(1, "hydrapod-leg.eds"))
     syncs, commands, words = 0, 0, []
     next_heartbeat = 0.0
     deadline = time.monotonic() + 120.0
@@ -50,6 +55,9 @@ def test_daemon_runs_against_a_scripted_peer_and_shuts_down_safely(tmp_path):
                 next_heartbeat = now + 0.1
             msg = bus.recv(0.01)
             if msg is None:
+                continue
+            if msg.arbitration_id == SDO_REQUEST_BASE + 1:
+                sdo.notify(msg.arbitration_id, msg.data, msg.timestamp)
                 continue
             status = decoder.receive_message(msg)
             if msg.arbitration_id == 0x000 and status is RxStatus.OK and decoder.values["NMT"][0] == 1:

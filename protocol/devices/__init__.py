@@ -1,0 +1,100 @@
+"""Who answers at a node id: each device's object dictionary from its EDS (CiA 306), read
+with the `canopen` library, and the identity the controller checks by SDO before it starts
+a node (CiA 301: device type 0x1000, identity 0x1018).
+
+The emulated devices' EDS files live here (`hydrapod-leg.eds`, `hydrapod-imu.eds`); on a rig
+the configuration names the vendor's. A device's identity is its EDS's: the device type is
+0x1000's default value, the vendor and product are [DeviceInfo]'s VendorNumber and
+ProductNumber (an EDS often leaves 0x1018's defaults empty: the device fills them in).
+SDO frames (0x600 + node to the node, 0x580 + node back) are CiA 301's and not in the DBC.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+
+import canopen
+
+from program.errors import UserInputError
+from program.sections import STR, Key
+
+DEVICES_DIR = Path(__file__).parent
+SDO_REQUEST_BASE = 0x600                 # client -> server (the node's SDO server receives)
+SDO_RESPONSE_BASE = 0x580                # server -> client
+DEVICE_TYPE = (0x1000, 0)
+VENDOR_ID = (0x1018, 1)
+PRODUCT_CODE = (0x1018, 2)
+REVISION = (0x1018, 3)
+# what must match before a node is started, in the order read (the revision is reported only)
+CHECKED = (("device type", DEVICE_TYPE), ("vendor id", VENDOR_ID), ("product code", PRODUCT_CODE))
+# the configuration's keys naming each kind of node's EDS (controller: what it expects;
+# emulator: what it emulates)
+LEG_EDS = Key("leg_eds", kind=STR)
+IMU_EDS = Key("imu_eds", kind=STR)
+
+
+@dataclass(frozen=True)
+class Identity:
+    device_type: int
+    vendor_id: int
+    product_code: int
+    revision: int
+
+    def value(self, name: str) -> int:
+        return {"device type": self.device_type, "vendor id": self.vendor_id, "product code": self.product_code,
+                "revision": self.revision}[name]
+
+
+def device_file(name: str) -> Path:
+    """An EDS by file name (shipped here) or path; a missing one is one line (UserInputError)."""
+    path = Path(name)
+    if not path.is_absolute() and not path.exists():
+        path = DEVICES_DIR / name
+    if not path.is_file():
+        raise UserInputError(f"{name}: no such EDS file (looked in {DEVICES_DIR} too)")
+    return path
+
+
+@cache
+def object_dictionary(name: str) -> canopen.ObjectDictionary:
+    """The device's object dictionary; an EDS canopen cannot read is one line (UserInputError)."""
+    path = device_file(name)
+    try:
+        return canopen.import_od(str(path))
+    except Exception as error:                     # canopen raises what its parsers raise
+        raise UserInputError(f"{path}: not an EDS canopen can read ({error})") from None
+
+
+def identity_of(name: str) -> Identity:
+    """The identity a device of this EDS reports (module docstring)."""
+    od = object_dictionary(name)
+    info = od.device_information
+    try:
+        device_type = int(od[DEVICE_TYPE[0]].default or 0)
+    except KeyError:
+        raise UserInputError(f"{device_file(name)}: no device type (object 0x1000)") from None
+    return Identity(device_type, int(info.vendor_number or 0), int(info.product_number or 0),
+                    int(info.revision_number or 0))
+
+
+def local_node(node_id: int, name: str, identity: Identity | None = None) -> canopen.LocalNode:
+    """A device of this EDS as a node that answers SDO (canopen's LocalNode: the emulator's
+    devices); 0x1000 and 0x1018 from `identity` (default: the EDS's own)."""
+    identity = identity or identity_of(name)
+    node = canopen.LocalNode(node_id, object_dictionary(name))
+    node.set_data(*DEVICE_TYPE, identity.device_type.to_bytes(4, "little"))
+    for (index, sub), value in ((VENDOR_ID, identity.vendor_id), (PRODUCT_CODE, identity.product_code),
+                                (REVISION, identity.revision)):
+        node.set_data(index, sub, value.to_bytes(4, "little"))
+    return node
+
+
+def check_files(names, where: str, error: type[UserInputError]) -> None:
+    """A configuration's EDS files, each readable with a device type: else one line (`error`)."""
+    for name in names:
+        try:
+            identity_of(name)
+        except UserInputError as problem:
+            raise error(f"{where}: {problem}") from None
