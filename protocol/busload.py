@@ -74,11 +74,12 @@ def _cycle_frames(scheds, slot: int):
 
 
 def bus_budget(rate_hz: float, bitrate: float, *, max_load: float = MAX_LOAD,
-               min_compute_us: float = MIN_COMPUTE_WINDOW_US) -> dict:
-    """The whole budget as a JSON-ready dict (see module docstring for the model)."""
+               min_compute_us: float = MIN_COMPUTE_WINDOW_US, scheds: tuple[Schedule, ...] | None = None) -> dict:
+    """The whole budget as a JSON-ready dict (see module docstring for the model) of the
+    DBC's schedule, or of `scheds` (another layout's frames, `protocol.canopen_layout`)."""
     if not rate_hz > 0 or not bitrate > 0:
         raise ValueError("rate_hz and bitrate must be > 0")
-    scheds = schedules()
+    scheds = scheds or schedules()
     loads = frame_loads(rate_hz, scheds)
     bit_us = 1e6 / bitrate
     period_us = 1e6 / rate_hz

@@ -8,17 +8,28 @@ from dataclasses import asdict
 
 from hil.tools.protocol_bench import format_bench, run_bench
 from program.cliutil import number_in_range
+from program.errors import UserInputError
+from protocol import canopen_layout
 from protocol.busload import MAX_LOAD, MIN_COMPUTE_WINDOW_US, bus_budget, format_budget
 from protocol.codec import CODECS
 from protocol.dbc import dbc_path
 
 CLASSIC_CAN_MAX_BITRATE = 1_000_000
+DEVICES = ("hydrapod", "canopen")
+LEGS_OF_RIG = {"hexapod": 6, "testbench": 1}
 
 
 def add_parsers(sub) -> None:
     p = sub.add_parser("bus-load", help="worst-case bus load and cycle timeline from the DBC",
-                       description="Bus load and cycle timeline of the DBC's schedule on classic CAN. "
-                                   "Exit 0 if it fits the limits, 1 if not.")
+                       description="Bus load and cycle timeline on classic CAN of the DBC's schedule, or of "
+                                   "the CANopen device profile's layout (protocol/devices/canopen-layout.toml, "
+                                   "each device's PDOs from its EDS). Exit 0 if it fits the limits, 1 if not.")
+    p.add_argument("--devices", choices=DEVICES, default="hydrapod",
+                   help="hydrapod: the DBC's nodes (default); canopen: stock CiA 408/406/404 devices")
+    p.add_argument("--rig", choices=tuple(LEGS_OF_RIG), default="hexapod",
+                   help="--devices canopen: the rig whose devices are budgeted (default hexapod)")
+    p.add_argument("--buses", type=number_in_range(int, 1, 6), default=1,
+                   help="--devices canopen: legs split in order across this many buses, one SYNC each (default 1)")
     p.add_argument("--rate-hz", type=number_in_range(float, 0, 10_000, low_open=True), default=500.0,
                    help="SYNC rate (default 500)")
     p.add_argument("--bitrate", type=number_in_range(int, 10_000, CLASSIC_CAN_MAX_BITRATE), default=1_000_000,
@@ -43,9 +54,45 @@ def add_parsers(sub) -> None:
 
 
 def cmd_bus_load(args: argparse.Namespace) -> int:
-    budget = bus_budget(args.rate_hz, args.bitrate, max_load=args.max_load, min_compute_us=args.min_compute_us)
-    print(json.dumps(budget, indent=2) if args.json else format_budget(budget))
-    return 0 if budget["fits"] else 1
+    limits = {"max_load": args.max_load, "min_compute_us": args.min_compute_us}
+    if args.devices == "hydrapod":
+        if args.buses != 1:
+            raise UserInputError(f"--buses {args.buses}: the hydrapod devices' DBC is one bus (--devices canopen "
+                                 "splits the legs)")
+        budget = bus_budget(args.rate_hz, args.bitrate, **limits)
+        print(json.dumps(budget, indent=2) if args.json else format_budget(budget))
+        return 0 if budget["fits"] else 1
+    n_legs = LEGS_OF_RIG[args.rig]
+    if args.buses > n_legs:
+        raise UserInputError(f"--buses {args.buses}: the {args.rig} has {n_legs} leg(s)")
+    budgets = canopen_layout.budgets(args.rate_hz, args.bitrate, n_legs, args.buses, **limits)
+    plan = canopen_layout.split_plan(args.rate_hz, args.bitrate, n_legs, **limits)
+    fits = all(b["fits"] for b in budgets)
+    if args.json:
+        print(json.dumps({"devices": "canopen", "rig": args.rig, "buses": budgets, "plan": plan}, indent=2))
+        return 0 if fits else 1
+    for k, budget in enumerate(budgets):
+        legs = canopen_layout.legs_on_bus(n_legs, args.buses, k)
+        extra = " with the IMU, the host and the controller's status" if k == 0 else ""
+        print(f"# bus {k + 1} of {args.buses}: legs {legs[0]}-{legs[-1]}{extra}\n{format_budget(budget)}\n")
+    print(format_plan(plan, args.bitrate))
+    return 0 if fits else 1
+
+
+def format_plan(plan: dict, bitrate: float) -> str:
+    """What carries the CANopen layout (`canopen_layout.split_plan`), in words."""
+    legs, rate = plan["n_legs"], plan["rate_hz"]
+    head = f"CANopen devices, {legs} leg(s) at {rate:g} Hz, {bitrate:g} bit/s: "
+    if plan["one_bus_fits"]:
+        return head + "one bus carries them"
+    lines = [head + "one bus does not carry them"]
+    if plan["fewest_buses"]:
+        split = " / ".join(f"legs {g[0]}-{g[-1]}" for g in plan["legs_per_bus"])
+        lines.append(f"  {plan['fewest_buses']} buses do ({split}; one SYNC each, in phase): --buses "
+                     f"{plan['fewest_buses']}")
+    if plan["one_bus_rate_hz"] > 0:
+        lines.append(f"  or one bus at {plan['one_bus_rate_hz']:g} Hz at most: --rate-hz {plan['one_bus_rate_hz']:g}")
+    return "\n".join(lines)
 
 
 def _describe() -> list[dict]:

@@ -58,11 +58,12 @@ def device_file(name: str) -> Path:
 
 
 @cache
-def object_dictionary(name: str) -> canopen.ObjectDictionary:
-    """The device's object dictionary; an EDS canopen cannot read is one line (UserInputError)."""
+def object_dictionary(name: str, node_id: int | None = None) -> canopen.ObjectDictionary:
+    """The device's object dictionary (`node_id` resolves the EDS's $NODEID); an EDS canopen
+    cannot read is one line (UserInputError)."""
     path = device_file(name)
     try:
-        return canopen.import_od(str(path))
+        return canopen.import_od(str(path), node_id)
     except Exception as error:                     # canopen raises what its parsers raise
         raise UserInputError(f"{path}: not an EDS canopen can read ({error})") from None
 

@@ -1,0 +1,138 @@
+"""The CANopen device profile's bus (`protocol/devices/canopen-layout.toml`): which stock
+devices sit at which node ids, and what their PDOs put on the bus, read from each device's
+EDS with the `canopen` library: the COB-ID, the mapped objects' bits (the DLC) and the
+transmission type (1..240: every n-th SYNC; its SYNC start value, sub-index 6, the phase).
+RPDOs are the controller's: it sends each one every cycle. The host protocol and the
+controller's own frames (SYNC, CTRL_*, HOST_*, its heartbeat and EMCY) stay the DBC's.
+What `busload.bus_budget` budgets for `hydrapod bus-load --devices canopen`.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+
+from protocol.dbc import CONTROLLER_NODE, Schedule, schedules
+from protocol.devices import DEVICES_DIR, object_dictionary
+
+LAYOUT_FILE = DEVICES_DIR / "canopen-layout.toml"
+COB_ID_INVALID = 0x80000000          # bit 31 of a PDO's COB-ID: the PDO does not exist
+STANDARD_ID_MASK = 0x7FF
+EMCY_DLC = 8
+HEARTBEAT_DLC = 1
+LEG_DEVICES = ("valve", "encoder", "leg_sensors")
+# the controller's and host's frames that are the same on either profile
+OWN_FRAMES = ("SYNC", "CTRL_STATUS", "CTRL_PAYLOAD", "CTRL_ACK", "HOST_CMD", "HOST_TEST", "HOST_WAYPOINT_POS",
+              "HOST_WAYPOINT_ROT", "HOST_WAYPOINT_TIME", "EMCY_16", "HEARTBEAT_16")
+
+
+@dataclass(frozen=True)
+class Device:
+    name: str                  # e.g. LEG3_VALVE, IMU
+    eds: str
+    node: int
+    sync_start: int = 0        # every-n-th-SYNC TPDOs' start value (0: the EDS's)
+
+
+def load_layout(n_legs: int, path=LAYOUT_FILE) -> list[Device]:
+    """The devices of a rig with `n_legs` legs (six: the hexapod, with its IMU)."""
+    with open(path, "rb") as handle:
+        layout = tomllib.load(handle)
+    devices = []
+    for leg in range(1, n_legs + 1):
+        for kind in LEG_DEVICES:
+            entry = layout[kind]
+            starts = entry.get("sync_start", [])
+            devices.append(Device(f"LEG{leg}_{kind.upper()}", entry["eds"], entry["node"] + leg - 1,
+                                  starts[leg - 1] if starts else 0))
+    if n_legs == 6:
+        devices.append(Device("IMU", layout["imu"]["eds"], layout["imu"]["node"]))
+    return devices
+
+
+def _pdos(device: Device, od, comm_base: int, map_base: int, sender: str, kind: str) -> list[Schedule]:
+    out = []
+    for k in range(512):
+        comm, mapping = comm_base + k, map_base + k
+        if comm not in od or mapping not in od:
+            continue
+        cob_id = int(od[comm][1].default)
+        if cob_id & COB_ID_INVALID:
+            continue
+        bits = sum(int(od[mapping][i].default) & 0xFF for i in range(1, int(od[mapping][0].default) + 1))
+        transmission = int(od[comm][2].default)
+        period = 1 if kind == "RPDO" else (transmission if 1 <= transmission <= 240 else 0)
+        start = int(od[comm][6].default) if 6 in od[comm] else 0
+        if device.sync_start and period > 1:
+            start = device.sync_start
+        phase = (start - 1) % period if period > 1 and start else 0
+        out.append(Schedule(f"{device.name}_{kind}{k + 1}", cob_id & STANDARD_ID_MASK, math.ceil(bits / 8), sender,
+                            period, phase, 0, None))
+    return out
+
+
+def device_schedules(device: Device) -> list[Schedule]:
+    """A device's frames: its RPDOs (the controller's), TPDOs, heartbeat and EMCY."""
+    od = object_dictionary(device.eds, device.node)
+    frames = _pdos(device, od, 0x1400, 0x1600, CONTROLLER_NODE, "RPDO")
+    frames += _pdos(device, od, 0x1800, 0x1A00, device.name, "TPDO")
+    heartbeat_ms = int(od[0x1017].default) if 0x1017 in od else 0
+    if heartbeat_ms:
+        frames.append(Schedule(f"{device.name}_HEARTBEAT", 0x700 + device.node, HEARTBEAT_DLC, device.name, 0, 0,
+                               heartbeat_ms, None))
+    frames.append(Schedule(f"{device.name}_EMCY", 0x80 + device.node, EMCY_DLC, device.name, 0, 0, 0, None))
+    return frames
+
+
+def bus_schedules(n_legs: int, buses: int = 1) -> list[tuple[Schedule, ...]]:
+    """Each bus's frames, legs split in order across `buses` (as even as they go); the SYNC
+    on every bus, in phase; the host, the controller's own frames and the IMU on the first."""
+    if not 1 <= buses <= n_legs:
+        raise ValueError(f"buses must be 1..{n_legs}, got {buses}")
+    own = {s.name: s for s in schedules()}
+    devices = load_layout(n_legs)
+    out = []
+    for bus in range(buses):
+        legs = legs_on_bus(n_legs, buses, bus)
+        frames = [own["SYNC"]] + ([own[name] for name in OWN_FRAMES[1:]] if bus == 0 else [])
+        for device in devices:
+            leg = int(device.name[3]) if device.name.startswith("LEG") else None
+            if (leg in legs) or (leg is None and bus == 0):
+                frames += device_schedules(device)
+        out.append(tuple(sorted(frames, key=lambda s: s.frame_id)))
+    return out
+
+
+def legs_on_bus(n_legs: int, buses: int, bus: int) -> range:
+    """The legs on bus `bus` (0-based) when `n_legs` are split in order across `buses`."""
+    per_bus = math.ceil(n_legs / buses)
+    return range(bus * per_bus + 1, min((bus + 1) * per_bus, n_legs) + 1)
+
+
+def budgets(rate_hz: float, bitrate: float, n_legs: int, buses: int, **limits) -> list[dict]:
+    """`busload.bus_budget` of each bus of the layout split across `buses`."""
+    from protocol.busload import bus_budget
+    return [bus_budget(rate_hz, bitrate, scheds=frames, **limits) for frames in bus_schedules(n_legs, buses)]
+
+
+def highest_rate(bitrate: float, n_legs: int, rate_hz: float, **limits) -> float:
+    """The highest whole SYNC rate, at most `rate_hz`, at which one bus carries the layout (0: none)."""
+    low, high = 0, int(rate_hz)
+    while low < high:                        # load and window are monotonic in the rate
+        mid = (low + high + 1) // 2
+        if budgets(mid, bitrate, n_legs, 1, **limits)[0]["fits"]:
+            low = mid
+        else:
+            high = mid - 1
+    return float(low)
+
+
+def split_plan(rate_hz: float, bitrate: float, n_legs: int, **limits) -> dict:
+    """What carries the layout: one bus at `rate_hz`, else the fewest buses that do (legs
+    split in order, one SYNC each, in phase), and the highest rate one bus carries."""
+    fewest = next((b for b in range(1, n_legs + 1)
+                   if all(x["fits"] for x in budgets(rate_hz, bitrate, n_legs, b, **limits))), None)
+    return {"rate_hz": rate_hz, "n_legs": n_legs, "one_bus_fits": fewest == 1, "fewest_buses": fewest,
+            "legs_per_bus": [list(legs_on_bus(n_legs, fewest, k)) for k in range(fewest)] if fewest else [],
+            "one_bus_rate_hz": highest_rate(bitrate, n_legs, rate_hz, **limits)}
