@@ -68,7 +68,7 @@ def _out_dir(text: str | None, default: str) -> Path:
 
 def _robustness(args) -> int:
     from hil.design.plants import plant_set
-    from hil.design.reports import find_plant, format_robustness, plot_uncertainty, robustness_doc
+    from hil.design.reports import find_plant, format_robustness, plot_nyquist, plot_uncertainty, robustness_doc
     out = _out_dir(args.out, "hil-out/design-robustness")
     plants = plant_set(args.plants)
     if args.nominal is not None and find_plant(plants, *args.nominal) is None:
@@ -77,10 +77,12 @@ def _robustness(args) -> int:
                              f"loads {sorted({p.load_kg for p in plants})} kg)")
     doc, arrays = robustness_doc(plants, args.plants, args.kp, args.ki, args.nominal)
     plot_uncertainty(arrays, out / "uncertainty.png")
-    doc["figures"] = ["uncertainty.png"]
+    plot_nyquist(arrays, out / "nyquist.png")
+    doc["figures"] = ["uncertainty.png", "nyquist.png"]
     (out / "robustness.json").write_text(json.dumps(doc, indent=1))
     text = format_robustness(doc)
-    (out / "robustness.md").write_text(text + "\n![Multiplicative uncertainty](uncertainty.png)\n")
+    (out / "robustness.md").write_text(text + "\n![Multiplicative uncertainty](uncertainty.png)\n"
+                                       "\n![Nyquist of the uncertain plant](nyquist.png)\n")
     print(json.dumps(doc, indent=1) if args.json else text + f"\n(written to {out})")
     # the verdict: the nominal loop internally stable and the small-gain test met
     return 0 if doc["pi"]["internally_stable"] and doc["uncertainty"]["robustly_stable"] else 1
@@ -88,13 +90,17 @@ def _robustness(args) -> int:
 
 def _schedule(args) -> int:
     from hil.design.plants import plant_set
-    from hil.design.reports import format_schedule, schedule_doc
+    from hil.design.reports import format_schedule, plot_ki_detuning, schedule_doc
     from hil.design.schedule import schedule_toml, write_schedule
     out = Path(args.out)
     plants = plant_set(args.plants)
     doc, tunings = schedule_doc(plants, args.plants, args.kp_fraction, args.ti_fraction, args.ki_scale)
     write_schedule(out, schedule_toml(tunings, args.plants, args.ki_scale))
     doc["file"] = str(out)
+    if args.plot is not None:
+        figure = _out_dir(args.plot, args.plot) / "ki_detuning.png"
+        plot_ki_detuning(tunings, figure)
+        doc["figures"] = [str(figure)]
     print(json.dumps(doc, indent=1) if args.json else format_schedule(doc, str(out)))
     return 0 if doc["every_loop_stable_with_detuned_ki"] else 1
 
@@ -252,7 +258,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="PI proportional gain, V/mm (default: the thesis's 0.085)")
     p.add_argument("--ki", type=number_in_range(float, 0.0, 1000.0), default=THESIS_KI_V_MM_S,
                    help="PI integral gain, V/(mm s) (default: the thesis's 0.46)")
-    p.add_argument("--out", metavar="DIR", help="robustness.json, robustness.md, uncertainty.png "
+    p.add_argument("--out", metavar="DIR", help="robustness.json, robustness.md, uncertainty.png, nyquist.png "
                                                 "(default: hil-out/design-robustness)")
     p.add_argument("--json", action="store_true", help="print robustness.json")
     p.set_defaults(handler=_robustness)
@@ -268,6 +274,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="Kp = this x Ku (Ziegler-Nichols PI: 0.45)")
     p.add_argument("--ti-fraction", type=number_in_range(float, 0.0, 10.0, low_open=True), default=1.0 / 1.2,
                    help="Ti = this x Tu (Ziegler-Nichols PI: 1/1.2)")
+    p.add_argument("--plot", metavar="DIR", default=None,
+                   help="write ki_detuning.png here: the PI's steps per Ki scale (Fig. 7.12)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_schedule)
 

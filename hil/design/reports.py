@@ -109,8 +109,12 @@ def robustness_doc(plants: list[Plant], source: str, kp_v_mm: float, ki_v_mm_s: 
                    "weights": "W0 and Wdm as printed (eq. 7.23-7.24, mm/N); W1 the fitted one"}
     doc = {"plants": source, "nominal": nominal, "well_posedness": posed, "pi": pi,
            "uncertainty": uncertainty, "performance": performance}
+    disks = nyquist_disks(p0, w1)
+    uncertainty["nyquist"] = {"disks": len(disks["w"]), "w_rad_s": [float(disks["w"][0]), float(disks["w"][-1])],
+                              "plants_inside_disks": int(np.sum(np.all(errors <= np.abs(rb.response(*w1, w)) + 1e-12,
+                                                                         axis=1)))}
     arrays = {"w": w, "errors": errors, "bound": bound, "w1": w1, "printed_w1": printed_w1,
-              "loads": [p.load_kg for p in plants]}
+              "loads": [p.load_kg for p in plants], "p0": p0, "plants": plants, "disks": disks}
     return doc, arrays
 
 
@@ -180,6 +184,42 @@ def plot_uncertainty(arrays: dict, path: Path) -> None:
     save(fig, path)
 
 
+NYQUIST_W_RAD_S = (8.0, 400.0)       # the reduced diagram: P0's integrator leaves the plot below it
+NYQUIST_DISKS = 40
+
+
+def nyquist_disks(p0: Plant, w1: tuple[np.ndarray, np.ndarray]) -> dict:
+    """The set Pi(s) = P0 (1 + W1 Delta) of eq. 7.14 at log-spaced frequencies: centres P0(jw)
+    and radii |W1(jw) P0(jw)| (mm/V)."""
+    w = np.geomspace(*NYQUIST_W_RAD_S, NYQUIST_DISKS)
+    centre = p0.response(w) / MM
+    return {"w": w, "centre": centre, "radius": np.abs(rb.response(*w1, w) * centre)}
+
+
+def plot_nyquist(arrays: dict, path: Path) -> None:
+    """Like Fig. 7.7: the nominal plant's Nyquist curve in red, the uncertainty disks in blue,
+    every plant of the set (colour: load) inside them."""
+    from matplotlib.patches import Circle
+    w = np.geomspace(*NYQUIST_W_RAD_S, 600)
+    fig, ax = plt.subplots(figsize=(6, 6))
+    disks = arrays["disks"]
+    for c, r in zip(disks["centre"], disks["radius"]):
+        ax.add_patch(Circle((c.real, c.imag), r, fill=False, color="tab:blue", lw=0.6, alpha=0.7))
+    for plant in arrays["plants"]:
+        g = plant.response(w) / MM
+        ax.plot(g.real, g.imag, color=colour_for_load(plant.load_kg), lw=0.5, alpha=0.6)
+    g0 = arrays["p0"].response(w) / MM
+    ax.plot(g0.real, g0.imag, "r", lw=1.8, label=f"P0 ({arrays['p0'].label})")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("Re P(jw) [mm/V]")
+    ax.set_ylabel("Im P(jw) [mm/V]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower left")
+    ax.set_title(f"Nyquist of Pi(s) = P0 (1 + W1 Delta), w {NYQUIST_W_RAD_S[0]:g}-{NYQUIST_W_RAD_S[1]:g} rad/s "
+                 "(thesis Fig. 7.7)", fontsize=9)
+    save(fig, path)
+
+
 def schedule_doc(plants: list[Plant], source: str, kp_fraction: float, ti_fraction: float,
                  ki_scale: float = KI_DETUNING) -> tuple[dict, list]:
     tunings = tune(plants, kp_fraction, ti_fraction)
@@ -191,17 +231,52 @@ def schedule_doc(plants: list[Plant], source: str, kp_fraction: float, ti_fracti
 
     zn = ziegler_nichols(thesis_plant(), kp_fraction, ti_fraction)
     stable = all(rb.internally_stable(t.plant, t.kp_v_m, ki_scale * t.ki_v_m_s) for t in tunings)
+    detuning = {}
+    for scale in KI_SCALES_FIG_7_12:                 # Fig. 7.12: the linear loop's 10 mm step per Ki scale
+        steps = [rb.step_on_plant(t.plant, t.kp_v_m, scale * t.ki_v_m_s) for t in tunings]
+        detuning[f"{scale:g}"] = {key: [round(min(s[key] for s in steps), 3), round(max(s[key] for s in steps), 3)]
+                                  for key in ("overshoot_pct", "settling_s")}
     doc = {"plants": source, "rule": {"kp_over_ku": kp_fraction, "ti_over_tu": ti_fraction, "ki_scale": ki_scale},
            "points": len(tunings), "compared_with_table_7_2": rows,
            "kp_ratio": span("kp_ratio"), "ki_ratio": span("ki_ratio"),
            "thesis_kp_over_ku": span("thesis_kp_over_ku"), "thesis_ki_tu_over_kp": span("thesis_ki_tu_over_kp"),
            "every_loop_stable_with_detuned_ki": stable,
+           # overshoot and settling ranges over the set: the thesis's 0.2 Ki gives ~25 % and ~0.5 s
+           "ki_detuning_steps": detuning,
            # chapter 7.4.2's "Ziegler-Nichols on the nominal plant" by the same rule
            "nominal_plant": {"kp_v_mm": zn.kp_v_m * MM, "ki_v_mm_s": zn.ki_v_m_s * MM,
                              "detuned_ki_v_mm_s": ki_scale * zn.ki_v_m_s * MM,
                              "thesis_kp_v_mm": chapter7()["pi"]["kp_v_mm"],
                              "thesis_ki_v_mm_s": chapter7()["pi"]["ki_v_mm_s"]}}
     return doc, tunings
+
+
+KI_SCALES_FIG_7_12 = (1.0, 0.5, 0.2, 0.1)
+STEP_FIG_7_12_M = 0.010
+
+
+def plot_ki_detuning(tunings: list, path: Path) -> None:
+    """Like Fig. 7.12: (a) the Ziegler-Nichols PI's 10 mm step on every plant of the set;
+    (b) on the thesis's nominal plant with Ki scaled by 1, 0.5, 0.2 and 0.1 (linear loop)."""
+    from scipy import signal
+    t = np.linspace(0.0, 0.4, 801)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
+    for tuning in tunings:
+        _, y = signal.step(rb.complementary(tuning.plant, tuning.kp_v_m, tuning.ki_v_m_s), T=t)
+        axes[0].plot(t, 150.0 + y * STEP_FIG_7_12_M / MM, color=colour_for_load(tuning.plant.load_kg), lw=0.6)
+    zn = ziegler_nichols(thesis_plant())
+    for scale in KI_SCALES_FIG_7_12:
+        _, y = signal.step(rb.complementary(zn.plant, zn.kp_v_m, scale * zn.ki_v_m_s), T=t)
+        axes[1].plot(t, 150.0 + y * STEP_FIG_7_12_M / MM, lw=1.2, label=f"{scale:g} Ki")
+    axes[0].set_title("(a) Ziegler-Nichols PI, every plant (colour: load)", fontsize=9)
+    axes[1].set_title(f"(b) {zn.plant.label} (eq. 7.13's plant), Ki detuned", fontsize=9)
+    for ax in axes:
+        ax.set_xlabel("t [s] after the 10 mm step")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("y [mm]")
+    axes[1].legend(fontsize=8)
+    fig.suptitle("PI step responses (thesis Fig. 7.12), linear loop", fontsize=10)
+    save(fig, path)
 
 
 def format_schedule(doc: dict, path: str) -> str:
@@ -215,6 +290,10 @@ def format_schedule(doc: dict, path: str) -> str:
                   f"  Table 7.2 itself is Kp = {doc['thesis_kp_over_ku'][0]}-{doc['thesis_kp_over_ku'][1]} Ku and "
                   f"Ki = ({doc['thesis_ki_tu_over_kp'][0]}-{doc['thesis_ki_tu_over_kp'][1]}) Kp / Tu on this set's "
                   f"plants (the classical rule: 0.45 Ku, 1.2 Kp / Tu)"]
+    steps = doc["ki_detuning_steps"]
+    lines.append("  10 mm step, linear loop, over the set (Fig. 7.12): " + "; ".join(
+        f"{scale} Ki: overshoot {v['overshoot_pct'][0]:.0f}-{v['overshoot_pct'][1]:.0f} %, settling (5 %) "
+        f"{v['settling_s'][0]:.2f}-{v['settling_s'][1]:.2f} s" for scale, v in steps.items()))
     n = doc["nominal_plant"]
     lines.append(f"  nominal plant (eq. 7.13): Kp {n['kp_v_mm']:.4f} V/mm, Ki {n['ki_v_mm_s']:.3f} "
                  f"(x{doc['rule']['ki_scale']:g}: "

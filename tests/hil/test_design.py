@@ -215,6 +215,19 @@ def test_design_robustness_command_writes_its_report(tmp_path):
     assert doc["nominal"]["plant"] == "120 mm, 6 kg" and doc["uncertainty"]["robustly_stable"]
     assert (tmp_path / "uncertainty.png").stat().st_size > 10_000
     assert "||W1 T||inf" in (tmp_path / "robustness.md").read_text()
+    # Fig. 7.7: the uncertain plant's Nyquist disks, every plant of the set inside them
+    assert (tmp_path / "nyquist.png").stat().st_size > 10_000 and doc["figures"] == ["uncertainty.png", "nyquist.png"]
+    assert doc["uncertainty"]["nyquist"]["plants_inside_disks"] == doc["nominal"]["plants"] == 33
+
+
+def test_design_schedule_plots_the_ki_detuning_of_fig_7_12(tmp_path):
+    proc = hydrapod("design", "schedule", "--out", tmp_path / "schedule.toml", "--plot", tmp_path, "--json")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    steps = json.loads(proc.stdout)["ki_detuning_steps"]
+    assert list(steps) == ["1", "0.5", "0.2", "0.1"] and (tmp_path / "ki_detuning.png").stat().st_size > 10_000
+    worst = [steps[k]["overshoot_pct"][1] for k in steps]
+    assert worst == sorted(worst, reverse=True)                 # less integral, less overshoot
+    assert steps["1"]["overshoot_pct"][0] > 50.0 and 20.0 < steps["0.2"]["overshoot_pct"][0] < 35.0
 
 
 @pytest.mark.hil
