@@ -28,16 +28,21 @@ def _dk_eval(args) -> int:
     return _print(args, report, format_evaluation(report))
 
 
+def _plot_dir(text: str) -> Path:
+    out = Path(text)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise UserInputError(f"--plot {text}: cannot create the directory ({error.strerror})") from None
+    return out
+
+
 def _workspace(args) -> int:
     from hil.tools.workspace_figures import workspace_extents
     geometry = _geometry(args)
     report = {"extents": workspace_extents(geometry), "min_condition_index": MIN_CONDITION_INDEX}
     if args.plot:
-        out = Path(args.plot)
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-        except OSError as error:
-            raise UserInputError(f"--plot {args.plot}: cannot create the directory ({error.strerror})") from None
+        out = _plot_dir(args.plot)
         from hil.tools.workspace_plots import plot_workspace
         report["plots"] = [str(p) for p in plot_workspace(geometry, out, int(args.resolution))]
     text = "\n".join([f"{k:>26}: {v:8.1f}" for k, v in report["extents"].items()] +
@@ -46,10 +51,17 @@ def _workspace(args) -> int:
 
 
 def _validate_dynamics(args) -> int:
-    from hil.tools.validate_dynamics import format_validation, validate_all
+    from hil.tools.validate_dynamics import format_validation, plot_validation, validate_all
     from plant_emulator.rig_geometry import read_rig_geometry
-    rows = validate_all(_geometry(args), read_rig_geometry(args.geometry))
-    return _print(args, {"trajectories": rows}, format_validation(rows))
+    series = []
+    rows = validate_all(_geometry(args), read_rig_geometry(args.geometry), series)
+    report = {"trajectories": rows}
+    text = format_validation(rows)
+    if args.plot is not None:
+        out = _plot_dir(args.plot)
+        report["figures"] = [str(out / name) for name in plot_validation(rows, series, out)]
+        text += f"\nwrote {', '.join(report['figures'])}"
+    return _print(args, report, text)
 
 
 def _bench(args) -> int:
@@ -83,6 +95,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=_workspace)
 
     p = kin_sub.add_parser("validate-dynamics", help="inverse dynamics vs the MuJoCo model, Table 10.2")
+    p.add_argument("--plot", metavar="DIR", help="write Fig. 10.3's errors and Figs. E.1-E.6's forces into DIR")
     common(p)
     p.set_defaults(handler=_validate_dynamics)
 

@@ -108,24 +108,48 @@ def _mujoco_state(mech: Mechanism, traj: Trajectory, t: float):
     return qpos, qvel, qacc
 
 
-def validate(geometry: Geometry, rig: RigGeometry, traj: Trajectory, sample_dt_s: float = 0.01) -> ValidationResult:
-    mech = Mechanism(rig)
-    model = InverseDynamics(geometry)
+@dataclass
+class ForceSeries:
+    """Both models' actuator forces along one trajectory (N, per sample and leg)."""
+    times_s: np.ndarray
+    model_n: np.ndarray          # the controller's inverse dynamics (virtual work)
+    mujoco_n: np.ndarray         # MuJoCo's tree dynamics and constraints
+    condition: np.ndarray        # 1/cond(Jx) along it
+    residual: float
+
+    @property
+    def errors_n(self) -> np.ndarray:
+        return self.model_n - self.mujoco_n
+
+
+def force_series(geometry: Geometry, mech: Mechanism, model: InverseDynamics, traj: Trajectory,
+                 sample_dt_s: float = 0.01) -> ForceSeries:
     times = np.arange(0.0, traj.duration_s + 1e-9, sample_dt_s)
-    errors = np.empty((len(times), 6))
-    forces = np.empty((len(times), 6))
+    mujoco_n = np.empty((len(times), 6))
+    model_n = np.empty((len(times), 6))
     residual = 0.0
     poses = np.array([traj.state(t)[0] for t in times])
     quats = np.array([traj.state(t)[1] for t in times])
     condition = check_poses(geometry, poses, quats).condition_index
     for k, t in enumerate(times):
         qpos, qvel, qacc = _mujoco_state(mech, traj, t)
-        reference, res = mech.inverse_forces(qpos, qvel, qacc)
+        mujoco_n[k], res = mech.inverse_forces(qpos, qvel, qacc)
         residual = max(residual, res)
         r, p, v, omega, a, alpha = traj.state(t)
         model.forces(r, p, np.concatenate([v, omega]), np.concatenate([a, alpha]))
-        forces[k] = reference
-        errors[k] = model.force_n - reference
+        model_n[k] = model.force_n
+    return ForceSeries(times, model_n, mujoco_n, condition, residual)
+
+
+def validate(geometry: Geometry, rig: RigGeometry, traj: Trajectory, sample_dt_s: float = 0.01,
+             series: list | None = None) -> ValidationResult:
+    """One trajectory's comparison (its force series appended to `series` when given)."""
+    mech = Mechanism(rig)
+    model = InverseDynamics(geometry)
+    run = force_series(geometry, mech, model, traj, sample_dt_s)
+    if series is not None:
+        series.append(run)
+    times, forces, errors, condition, residual = run.times_s, run.mujoco_n, run.errors_n, run.condition, run.residual
     worst = np.unravel_index(np.argmax(np.abs(errors)), errors.shape)
     max_force = float(np.max(np.abs(forces)))
     if condition.min() >= MIN_CONDITION_INDEX:
@@ -167,10 +191,10 @@ def forward_run(geometry: Geometry, traj: Trajectory, mech: Mechanism, model: In
     return max_leg_error, max_closure
 
 
-def validate_all(geometry: Geometry, rig: RigGeometry) -> list[dict]:
+def validate_all(geometry: Geometry, rig: RigGeometry, series: list | None = None) -> list[dict]:
     """Every Table 10.2 trajectory; `geometry` and `rig` are the controller's and the plant's
-    readings of the same geometry file."""
-    rows = [asdict(validate(geometry, rig, traj)) for traj in table_10_2()]
+    readings of the same geometry file (`series`: each one's ForceSeries appended)."""
+    rows = [asdict(validate(geometry, rig, traj, series=series)) for traj in table_10_2()]
     for row in rows:              # JSON has no NaN: a forward run that was not made is null
         for key in ("forward_max_leg_error_mm", "forward_max_closure_um"):
             if row[key] != row[key]:
@@ -192,3 +216,40 @@ def format_validation(rows: list[dict]) -> str:
     lines.append("Rx and Rz reach 90 deg (2 theta0): beyond the +/-55 deg roll workspace and through det Jx = 0 "
                  "(Rz: Fichter's singularity at yaw 90 deg); both models agree there, but the forces are unbounded.")
     return "\n".join(lines)
+
+
+def plot_validation(rows: list[dict], series: list[ForceSeries], out) -> list[str]:
+    """Fig. 10.3 (each trajectory's largest |dF_i| and dF_i % over time) and Figs. E.1-E.6
+    (each trajectory's six forces, both models); the file names written into `out`."""
+    from hil.plotting import plt, save
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    for row, run in zip(rows, series):
+        worst = np.max(np.abs(run.errors_n), axis=1)
+        scale = np.max(np.abs(run.mujoco_n))
+        axes[0].semilogy(run.times_s, np.maximum(worst, 1e-15), lw=1, label=row["name"])
+        axes[1].semilogy(run.times_s, np.maximum(100.0 * worst / scale, 1e-15), lw=1, label=row["name"])
+    axes[0].set_ylabel("max_i |F_i - F_i,MuJoCo| [N]")
+    axes[1].set_ylabel("... / max |F| [%]")
+    axes[1].set_xlabel("t [s]")
+    for ax in axes:
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7, ncol=6)
+    fig.suptitle("Inverse dynamics vs MuJoCo, Table 10.2's trajectories (thesis Fig. 10.3: vs ADAMS)", fontsize=10)
+    names = ["fig10_3_errors.png"]
+    save(fig, out / names[0])
+    for k, (row, run) in enumerate(zip(rows, series)):
+        fig, ax = plt.subplots(figsize=(8, 4))
+        for leg in range(6):
+            line, = ax.plot(run.times_s, run.mujoco_n[:, leg], lw=2.5, alpha=0.35)
+            ax.plot(run.times_s, run.model_n[:, leg], "--", lw=1, color=line.get_color(), label=f"F{leg + 1}")
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel("F [N] (wide: MuJoCo, dashed: the model)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=6)
+        note = " (crosses the singular surface)" if row["crosses_singularity"] else ""
+        ax.set_title(f"Dynamic model validation, trajectory {row['name']}{note} (thesis Fig. E.{k + 1})", fontsize=9)
+        if row["crosses_singularity"]:
+            ax.set_ylim(-5.0 * row["thesis_absmax_n"] * 100, 5.0 * row["thesis_absmax_n"] * 100)
+        names.append(f"figE_{k + 1}_{row['name']}.png")
+        save(fig, out / names[-1])
+    return names

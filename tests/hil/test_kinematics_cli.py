@@ -1,6 +1,7 @@
 """`hydrapod kinematics ...` from the command line: JSON outputs, plots, one-line errors."""
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -39,8 +40,13 @@ def test_workspace_prints_extents_and_writes_plots(tmp_path):
             assert f.read(8) == b"\x89PNG\r\n\x1a\n"
 
 
-def test_validate_dynamics_json_is_within_the_thesis_error_off_the_singular_surface():
-    rows = json.loads(run("kinematics", "validate-dynamics", "--json").stdout)["trajectories"]
+def test_validate_dynamics_json_is_within_the_thesis_error_off_the_singular_surface(tmp_path):
+    report = json.loads(run("kinematics", "validate-dynamics", "--json", "--plot", str(tmp_path)).stdout)
+    rows = report["trajectories"]
+    # Fig. 10.3 and Figs. E.1-E.6
+    assert [Path(f).name for f in report["figures"]] == ["fig10_3_errors.png"] + [
+        f"figE_{k}_{name}.png" for k, name in enumerate(["Tx", "Ty", "Tz", "Rx", "Ry", "Rz"], 1)]
+    assert all(Path(f).stat().st_size > 10_000 for f in report["figures"])
     assert [r["name"] for r in rows] == ["Tx", "Ty", "Tz", "Rx", "Ry", "Rz"]
     for row in rows:
         assert row["max_abs_error_n"] <= row["thesis_absmax_n"]
