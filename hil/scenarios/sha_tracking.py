@@ -211,7 +211,7 @@ class ShaTracking(Scenario):
                for r in runs if r["fault"]]
         checks.append(Check("no sine cut short by a fault", not cut, "; ".join(cut) or "none", "none",
                             required=False))
-        figures = [self._plot(runs, out)] if out is not None and runs else []
+        figures = [self._plot(runs, out), self._plot_per_load(runs, out)] if out is not None and runs else []
         table = ["| controller | load kg | w rad/s | max error mm | rms error mm | reference vs sine mm | fault |",
                  "|---|---|---|---|---|---|---|"]
         table += [f"| {r['controller']} | {r['load_kg']} | {r['w_rad_s']:g} | {r['max_error_mm']:.2f} | "
@@ -239,6 +239,37 @@ class ShaTracking(Scenario):
         save(fig, path)
         return Figure(path.name, "max |error| per w, per load and controller",
                       "thesis Fig. 7.19: max error vs w, <= 1 mm at low w, adaptive below PI")
+
+
+    PER_LOAD_W_RAD_S = 0.5              # Figs. 7.17-7.18: one period over 12.6 s
+
+    def _plot_per_load(self, runs, out: Path) -> Figure:
+        """Figs. 7.17-7.18: each controller's position and error over one period, per load, at
+        w = 0.5 rad/s (or the sweep's nearest)."""
+        ws = sorted({r["w_rad_s"] for r in runs})
+        w = min(ws, key=lambda v: abs(v - self.PER_LOAD_W_RAD_S))
+        controllers = [c for c in TESTBENCH_CONTROLLERS if any(r["controller"] == c for r in runs)]
+        fig, axes = plt.subplots(2, len(controllers), figsize=(4.5 * len(controllers), 5.5), sharex=True,
+                                 squeeze=False)
+        for col, controller in enumerate(controllers):
+            for r in runs:
+                if r["controller"] != controller or r["w_rad_s"] != w:
+                    continue
+                colour = colour_for_load(r["load_kg"] or 0.0)
+                axes[0, col].plot(r["_t"], r["_y"] * 1e3, color=colour, lw=1, label=f"{r['load_kg'] or 0.0:g} kg")
+                axes[1, col].plot(r["_t"], r["_error"] * 1e3, color=colour, lw=1)
+            axes[0, col].set_title(controller, fontsize=9)
+            axes[0, col].legend(fontsize=7)
+            axes[1, col].set_xlabel("t [s]")
+        axes[0, 0].set_ylabel("y [mm]")
+        axes[1, 0].set_ylabel("y_r - y [mm]")
+        for ax in axes.flat:
+            ax.grid(alpha=0.3)
+        fig.suptitle(f"Tracking per load at w {w:g} rad/s", fontsize=10)
+        path = out / "sha_tracking_per_load.png"
+        save(fig, path)
+        return Figure(path.name, f"position and error per load and controller at w {w:g} rad/s",
+                      "thesis Figs. 7.17 (PI) and 7.18 (adaptive): y and the error over 0-12 s for 0, 3, 6 kg")
 
 
 class ShaPerturbation(Scenario):
