@@ -35,6 +35,14 @@ class HostError(RuntimeError):
     """The run cannot go on: no bus traffic, a refused command, a state never reached."""
 
 
+class WaypointRefused(HostError):
+    """A waypoint the controller refused (`result`; BEYOND_CAPACITY: `time_scale` fits)."""
+
+    def __init__(self, message: str, result: Ack, time_scale: float):
+        super().__init__(message)
+        self.result, self.time_scale = result, time_scale
+
+
 class Host:
     def __init__(self, bus: can.BusABC, log_path: str, watch: Callable[[], None] = lambda: None,
                  stall_timeout_s: float = 10.0):
@@ -209,9 +217,10 @@ class Host:
         if result is Ack.ACCEPTED:
             self.waypoint_seq = (seq + 1) % 256
         elif expect_ok:
-            raise HostError(f"waypoint {seq} at {[round(float(p) * 1e3, 3) for p in position_m]} mm refused: "
-                            f"{result.name}" + (f" (time scale x{self.time_scale:g} fits)"
-                                                 if result is Ack.BEYOND_CAPACITY else ""))
+            raise WaypointRefused(f"waypoint {seq} at {[round(float(p) * 1e3, 3) for p in position_m]} mm refused: "
+                                  f"{result.name}" + (f" (time scale x{self.time_scale:g} fits)"
+                                                       if result is Ack.BEYOND_CAPACITY else ""),
+                                  result, self.time_scale)
         return result
 
     def emulator(self, command: int, target: int = 0, fault: int = 0, load_kg: float = 0.0,

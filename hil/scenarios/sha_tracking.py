@@ -21,7 +21,7 @@ from hil.experiments import SINE_AMPLITUDE_MM as AMPLITUDE_MM
 from hil.experiments import SINE_CENTRE_MM as CENTRE_MM
 from hil.experiments import SINE_POINTS_PER_PERIOD as POINTS_PER_PERIOD
 from hil.experiments import TRACKING_OVERRIDES
-from hil.host import HostError
+from hil.host import HostError, WaypointRefused
 from hil.logdata import LogData
 from hil.plotting import colour_for_load, plt, save
 from hil.reference_rebuild import rebuild
@@ -35,7 +35,7 @@ from hil.scenarios.common import (
     move_stroke,
 )
 from physics.constants import MM
-from protocol.enums import EmuCommand, Fault, State, WaypointFlag
+from protocol.enums import Ack, AckKind, Command, EmuCommand, Fault, State, WaypointFlag, time_scale_from_wire
 
 # The thesis's robust PI (eq. 7.13) on the thesis's own plant at the sine's centre (Table A.3,
 # 150 mm, per load): the linear loop's tracking-error amplitude |S(jw)| A is what Fig. 7.19's
@@ -106,6 +106,24 @@ def sine_runs(log: LogData, period_s: float) -> list[dict]:
     return runs
 
 
+def refused_sines(log: LogData) -> list[dict]:
+    """Each sine the controller refused as beyond the legs' capacity: controller, load, w (from
+    the refused waypoint's SEGMENT_TIME) and the time scale the refusal said fits."""
+    timing = {}
+    out = []
+    for event in log.events_named("HOST_WAYPOINT_TIME", "CTRL_ACK"):
+        v = event.values
+        if event.name == "HOST_WAYPOINT_TIME":
+            timing[int(v["SEQ"])] = v["SEGMENT_TIME"]
+        elif (int(v["KIND"]) == AckKind.WAYPOINT and int(v["RESULT"]) == Ack.BEYOND_CAPACITY
+              and int(v["SEQ"]) in timing):
+            tm = timing[int(v["SEQ"])]
+            out.append({"controller": controller_at(log, event.cycle), "load_kg": load_at(log, event.cycle),
+                        "w_rad_s": round(2 * math.pi / (tm * POINTS_PER_PERIOD), 3),
+                        "time_scale_fits": time_scale_from_wire(v["TIME_SCALE"])})
+    return out
+
+
 NEW_MAX_ERROR_UP_TO_W = 1.0    # rad/s: computed torque reported against the 1 mm up to here
 CLAIM_LOADS_KG = {0.0, 3.0, 6.0}
 
@@ -140,6 +158,12 @@ class ShaTracking(Scenario):
                     here = (CENTRE_MM - AMPLITUDE_MM) * MM
                     run.wait_s(sine_waypoints(run, w) + 0.3)
                     run.wait_motion_done(5.0)
+                except WaypointRefused as refused:
+                    if refused.result is not Ack.BEYOND_CAPACITY:
+                        raise
+                    # beyond the legs' capacity at the sine's timing: nothing moved; the
+                    # analysis reports the point (and the timing that fits), the rest runs
+                    run.host.command(Command.CLEAR_WAYPOINTS)
                 except HostError:
                     if run.host.state is not State.FAULT:
                         raise
@@ -211,6 +235,10 @@ class ShaTracking(Scenario):
                for r in runs if r["fault"]]
         checks.append(Check("no sine cut short by a fault", not cut, "; ".join(cut) or "none", "none",
                             required=False))
+        refused = refused_sines(log)
+        checks.append(Check("no sine refused as beyond the legs' capacity", not refused, "; ".join(
+            f"{r['controller']} {r['load_kg'] or 0.0:g} kg w {r['w_rad_s']:g} (x{r['time_scale_fits']:g} fits)"
+            for r in refused) or "none", "none (the thesis ran w up to 10 rad/s)", required=False))
         figures = [self._plot(runs, out), self._plot_per_load(runs, out)] if out is not None and runs else []
         table = ["| controller | load kg | w rad/s | max error mm | rms error mm | reference vs sine mm | fault |",
                  "|---|---|---|---|---|---|---|"]
@@ -218,7 +246,7 @@ class ShaTracking(Scenario):
                   f"{r['rms_error_mm']:.2f} | {r['reference_vs_sine_mm']:.2f} | "
                   f"{fault_name(r['fault']) if r['fault'] else ''} |" for r in runs]
         metrics = {"runs": [{k: v for k, v in r.items() if not k.startswith("_")} for r in runs],
-                   "max_error_mm_by_w": summary}
+                   "max_error_mm_by_w": summary, "refused": refused}
         return Analysis(metrics, self.thesis, checks, figures, ["\n".join(table)])
 
     def _plot(self, runs, out: Path) -> Figure:

@@ -87,6 +87,7 @@ def test_sha_tracking_reports_a_sweep_whose_light_load_at_the_lowest_w_was_cut(m
 
     runs = [run("pi", 0.0, 0.5, 3.0), run("pi", 3.0, 0.1, 1.0), run("pi", 6.0, 0.1, 1.2)]
     monkeypatch.setattr(sha_tracking, "sine_runs", lambda log, period: runs)
+    monkeypatch.setattr(sha_tracking, "refused_sines", lambda log: [])
     analysis = SCENARIOS["sha-tracking"].analyze(None, None)
     light = next(c for c in analysis.checks if c.name.startswith("pi: rms error at the lowest w (0.1 rad/s)"))
     assert light.name.endswith("3 kg") and light.measured == "0.50 mm"
@@ -108,3 +109,19 @@ def test_an_analysis_models_the_plant_its_run_emulated(tmp_path):
     default = run_emulator_config(log_at(tmp_path / "run.blf"))
     assert default.hexapod.payload_kg == load_config().hexapod.payload_kg == 0.0
     assert default.actuator.supply_pressure_pa == load_config().actuator.supply_pressure_pa
+
+
+def test_sha_tracking_names_a_sine_refused_as_beyond_capacity_with_the_timing_that_fits():
+    """The sweep goes on past a refused sine (nothing moved); the analysis finds it in the log:
+    its w from the refused waypoint's SEGMENT_TIME, the timing from the acknowledgement."""
+    from hil.scenarios.sha_tracking import POINTS_PER_PERIOD, refused_sines
+    from protocol.enums import EmuCommand, time_scale_to_wire
+    tm = 2 * np.pi / 9.8 / POINTS_PER_PERIOD
+    events = [Event(0, 0.0, "EMU_CTRL", {"COMMAND": int(EmuCommand.SET_LOAD), "TARGET": 0, "FAULT": 0,
+                                         "LOAD_MASS": 3.0, "FAULT_PARAM": 0})]
+    events += _events(5, 40, 0.1, tm, tm / 2, 0, Ack.ACCEPTED)[:3]
+    events.append(Event(5, 0.0, "CTRL_ACK", {"KIND": AckKind.WAYPOINT, "SEQ": 40, "RESULT": int(Ack.BEYOND_CAPACITY),
+                                             "QUEUE_FREE": 0, "TIME_SCALE": time_scale_to_wire(1.1)}))
+    status = Series("CTRL_STATUS", np.array([0]), np.zeros(1), np.array([[0.0]]), {"CONTROLLER": 0})
+    log = LogData("synthetic", 10, np.zeros(10), {"CTRL_STATUS": status}, events, 0, {}, {}, 0)
+    assert refused_sines(log) == [{"controller": "pi", "load_kg": 3.0, "w_rad_s": 9.8, "time_scale_fits": 1.1}]
