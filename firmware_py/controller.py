@@ -124,6 +124,10 @@ class Controller:
         self.time_s = 0.0
         self.cycles = 0
         self.restart_requests = 0
+        # the oil the last trajectory left drawn from the supply when it ended, and when: the
+        # pump refills it while nothing moves (the capacity check starts the next one from it)
+        self._drawn_at_end_m3, self._ended_s = 0.0, 0.0
+        self._pump_m3_s = cfg.power_unit.pump_flow_m3_s
         self.initialised = False
         self.reinitialise = False              # a RESET waits for a complete fresh set of measurements
         self.status = self._new_status()
@@ -258,8 +262,10 @@ class Controller:
         """HOST_WAYPOINT_TIME: check the staged pose and queue it (or say why not)."""
         ref = self.reference
         previous = ref.target() if ref.moving else ref.yr.copy()
+        refilled = self._pump_m3_s * (self.time_s - self._ended_s)
+        drawn = self.waypoints.taken_drawn_m3 if ref.moving else max(self._drawn_at_end_m3 - refilled, 0.0)
         result = self.waypoints.commit(tag, seq, segment_time, accel_time, flags, self.state, previous,
-                                       float(self.joint.mass_kg[0]))
+                                       float(self.joint.mass_kg[0]), drawn)
         if (result is Ack.ACCEPTED and self.waypoints.queue[-1].flags & WaypointFlag.START
                 and self.state is State.READY):
             self.host_command(Command.START, 0)
@@ -406,6 +412,7 @@ class Controller:
         elif active and ref.moving:
             if ref.advance(self.cycles):
                 sup.motion_done()
+                self._drawn_at_end_m3, self._ended_s = self.waypoints.taken_drawn_m3, self.time_s
                 if self.waypoints.head_starts_now() and sup.state is State.READY:
                     self._start_queue()              # queued "start now": as soon as the last one ends
         elif active:

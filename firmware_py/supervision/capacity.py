@@ -65,19 +65,26 @@ class SupplyBudget:
         set_pa = float(self.power[pu.PU_SET])
         return pu.usable_volume(self.power, set_pa, share * set_pa)
 
-    def deficit_m3(self, force_n: np.ndarray, velocity_m_s: np.ndarray, dt_s: float) -> float:
-        """The largest volume the valves draw beyond the pump's flow (the share is kept on the
-        pressure the accumulator may fall to, `reserve_m3`)."""
+    def deficit_m3(self, force_n: np.ndarray, velocity_m_s: np.ndarray, dt_s: float,
+                   initial_m3: float = 0.0) -> tuple[float, float]:
+        """(the largest volume the valves draw beyond the pump's flow, the volume at the end),
+        from `initial_m3` already drawn (the share is kept on the pressure the accumulator may
+        fall to, `reserve_m3`)."""
         return largest_deficit(force_n, velocity_m_s, dt_s, *self.valve_map, self.hydraulics, self.friction,
-                               float(self.power[pu.PU_SET]), float(self.power[pu.PU_PUMP]))
+                               float(self.power[pu.PU_SET]), float(self.power[pu.PU_PUMP]), initial_m3)
+
+    def drawn_m3(self, supply_pa: float) -> float:
+        """What the line and accumulator miss at a measured supply (0 at or above the set)."""
+        set_pa = float(self.power[pu.PU_SET])
+        return pu.usable_volume(self.power, set_pa, supply_pa) if supply_pa < set_pa else 0.0
 
 
 @njit(cache=True)
 def largest_deficit(force_n, velocity_m_s, dt_s, forces, velocities, spool, pressure_a, pressure_b, hp, fp,
-                    supply_pa, pump_m3_s):
-    """The valves' draw beyond `pump_m3_s`, integrated and never below zero (the pump refills
-    the accumulator with its spare): its largest value [m^3]."""
-    deficit = worst = 0.0
+                    supply_pa, pump_m3_s, initial_m3):
+    """The valves' draw beyond `pump_m3_s`, integrated from `initial_m3` and never below zero
+    (the pump refills the accumulator with its spare): (its largest value, its last) [m^3]."""
+    deficit = worst = initial_m3
     for k in range(force_n.shape[0]):
         drawn = 0.0
         for leg in range(force_n.shape[1]):
@@ -89,7 +96,7 @@ def largest_deficit(force_n, velocity_m_s, dt_s, forces, velocities, spool, pres
             drawn += flow
         deficit = max(deficit + (drawn - pump_m3_s) * dt_s, 0.0)
         worst = max(worst, deficit)
-    return worst
+    return worst, deficit
 
 
 @dataclass
@@ -153,7 +160,8 @@ class Judgement:
     sample: int                      # where the lag (or the impossibility) peaks ...
     leg: int                         # ... and which leg (0-based)
     deficit_m3: float = 0.0          # the oil drawn beyond the pump's share (0: an ideal supply) ...
-    reserve_m3: float = math.inf     # ... and what the accumulator and line give for it
+    reserve_m3: float = math.inf     # ... and what the accumulator and line give for it ...
+    end_deficit_m3: float = 0.0      # ... and what is still drawn at the end
 
 
 def shortfall_lag(capacity: LegCapacity, loads: Loads, scale: float, share: float) -> tuple[float, int, int]:
@@ -210,44 +218,51 @@ def lag_of(excess_n, force_n, inertia_kg, dt_s, to_platform, angle_weight):
     return worst, at, leg_at
 
 
-def supply_deficit(capacity: LegCapacity, loads: Loads, scale: float, share: float) -> tuple[float, float]:
-    """(the oil drawn beyond the pump's share, the reserve for it) [m^3] at `scale`."""
+def supply_deficit(capacity: LegCapacity, loads: Loads, scale: float, share: float,
+                   initial_m3: float = 0.0) -> tuple[float, float, float]:
+    """(the oil drawn beyond the pump's share, the reserve for it, what is drawn at the end)
+    [m^3] at `scale`, from `initial_m3` drawn before (the motions before it)."""
     budget = capacity.supply
     if budget is None:
-        return 0.0, math.inf
+        return 0.0, math.inf, 0.0
     force, velocity = loads.at_scale(scale)
-    return budget.deficit_m3(force, velocity, loads.dt_s * scale), budget.reserve_m3(share)
+    worst, end = budget.deficit_m3(force, velocity, loads.dt_s * scale, initial_m3)
+    return worst, budget.reserve_m3(share), end
 
 
-def fits(capacity: LegCapacity, loads: Loads, scale: float, share: float, lag_max_m: float) -> bool:
+def fits(capacity: LegCapacity, loads: Loads, scale: float, share: float, lag_max_m: float,
+         initial_m3: float = 0.0) -> bool:
     """Within capacity at `scale`: the lag within its bound and the supply within its reserve."""
-    deficit, reserve = supply_deficit(capacity, loads, scale, share)
+    deficit, reserve, _ = supply_deficit(capacity, loads, scale, share, initial_m3)
     return deficit <= reserve and shortfall_lag(capacity, loads, scale, share)[0] <= lag_max_m
 
 
-def judge(capacity: LegCapacity, loads: Loads, scale: float, share: float, lag_max_m: float) -> Judgement:
+def judge(capacity: LegCapacity, loads: Loads, scale: float, share: float, lag_max_m: float,
+          initial_m3: float = 0.0) -> Judgement:
     lag, k, leg = shortfall_lag(capacity, loads, scale, share)
-    deficit, reserve = supply_deficit(capacity, loads, scale, share)
+    deficit, reserve, end = supply_deficit(capacity, loads, scale, share, initial_m3)
     force, velocity = loads.at_scale(scale)
     ratio = capacity.utilisation(force, velocity)
-    return Judgement(lag <= lag_max_m and deficit <= reserve, lag, float(np.max(ratio)), k, leg, deficit, reserve)
+    return Judgement(lag <= lag_max_m and deficit <= reserve, lag, float(np.max(ratio)), k, leg, deficit, reserve,
+                     end)
 
 
 def needed_scale(capacity: LegCapacity, loads: Loads, share: float, lag_max_m: float,
-                 tolerance: float = 0.005, beyond: float | None = None) -> float:
+                 tolerance: float = 0.005, beyond: float | None = None, initial_m3: float = 0.0) -> float:
     """The smallest time scale (within SCALE_RANGE) that `fits`; NaN when even the slowest
-    does not (a static load the legs cannot hold). `beyond`: a scale known not to fit, the
-    search's floor (near the bound `fits` is not monotonic: a refusal at 1 must not name 0.99)."""
+    does not (a static load the legs cannot hold, or a supply already drawn below its share).
+    `beyond`: a scale known not to fit, the search's floor (near the bound `fits` is not
+    monotonic: a refusal at 1 must not name 0.99)."""
     low, high = SCALE_RANGE
-    if not fits(capacity, loads, high, share, lag_max_m):
+    if not fits(capacity, loads, high, share, lag_max_m, initial_m3):
         return math.nan
     if beyond is not None:
         low = beyond
-    elif fits(capacity, loads, low, share, lag_max_m):
+    elif fits(capacity, loads, low, share, lag_max_m, initial_m3):
         return low
     while high - low > tolerance * low:
         middle = math.sqrt(low * high)
-        if fits(capacity, loads, middle, share, lag_max_m):
+        if fits(capacity, loads, middle, share, lag_max_m, initial_m3):
             high = middle
         else:
             low = middle

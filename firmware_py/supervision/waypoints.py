@@ -20,7 +20,7 @@ import numpy as np
 
 from firmware_py.config import Waypoints
 from firmware_py.motion_control.trajectory import JointTrajectory, hold_at, through_points
-from firmware_py.supervision.capacity import LegCapacity, PlatformLoads, fits, leg_loads, needed_scale
+from firmware_py.supervision.capacity import LegCapacity, PlatformLoads, judge, leg_loads, needed_scale
 from physics.constants import GRAVITY_M_S2
 from protocol.enums import Ack, State, WaypointFlag
 
@@ -38,6 +38,7 @@ class Waypoint:
     flags: WaypointFlag
     pose: tuple                  # (x, y, z, roll, pitch, yaw) as sent, SI
     start: np.ndarray            # the joint position its segment starts from [m]
+    drawn_after_m3: float = 0.0  # the oil its segment leaves drawn from the supply (the next one's start)
 
 
 class TestbenchCheck:
@@ -55,16 +56,16 @@ class TestbenchCheck:
         margin = self.margin_m
         if max(abs(pos[0]), abs(pos[1]), *(abs(r) for r in rot)) > 1e-9 or not (
                 margin <= pos[2] <= self.stroke_m - margin):
-            return Ack.OUTSIDE_WORKSPACE, None, math.nan
+            return Ack.OUTSIDE_WORKSPACE, None, math.nan, chain.drawn_m3
         strokes = np.array([pos[2]])
         if not peak_velocity_ok(self.waypoints, chain, strokes, step):
-            return Ack.TOO_FAST, None, math.nan
+            return Ack.TOO_FAST, None, math.nan, chain.drawn_m3
         if step:
-            return Ack.ACCEPTED, strokes, math.nan
+            return Ack.ACCEPTED, strokes, math.nan, chain.drawn_m3
         trajectory, t0 = chain.trajectory(strokes)
         loads = leg_loads(trajectory, t0, trajectory.duration_s, chain.sample_dt_s(),
                           self.moving_mass_kg + load_kg, GRAVITY_M_S2)
-        return capacity_verdict(self.waypoints, self.capacity, loads, strokes)
+        return capacity_verdict(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3)
 
 
 class HexapodCheck:
@@ -90,12 +91,12 @@ class HexapodCheck:
         target, quat = np.array(pos, dtype=float), rpy_to_quat(*rot)
         report = self.poses.check(target, quat)
         if not report[OUT_REACHABLE]:
-            return Ack.OUTSIDE_WORKSPACE, None, math.nan
+            return Ack.OUTSIDE_WORKSPACE, None, math.nan, chain.drawn_m3
         if report[OUT_CONDITION] < MIN_CONDITION_INDEX:
-            return Ack.SINGULAR, None, math.nan
+            return Ack.SINGULAR, None, math.nan, chain.drawn_m3
         strokes = self.poses.lengths - g.leg_min_m
         if not peak_velocity_ok(self.waypoints, chain, strokes, step):
-            return Ack.TOO_FAST, None, math.nan
+            return Ack.TOO_FAST, None, math.nan, chain.drawn_m3
         # the joint-space path between the waypoints, back from the target
         dk, previous = self.dk, chain.start
         dk.pose[0:3], dk.pose[3:7] = target, quat
@@ -103,30 +104,33 @@ class HexapodCheck:
         for s in self.fractions:
             dk.solve(g.leg_min_m + previous + s * (strokes - previous))
             if not dk.converged:
-                return Ack.OUTSIDE_WORKSPACE, None, math.nan
+                return Ack.OUTSIDE_WORKSPACE, None, math.nan, chain.drawn_m3
             report = self.poses.check(dk.pose[0:3], dk.pose[3:7])
             if not report[OUT_REACHABLE]:
-                return Ack.OUTSIDE_WORKSPACE, None, math.nan
+                return Ack.OUTSIDE_WORKSPACE, None, math.nan, chain.drawn_m3
             singular |= report[OUT_CONDITION] < MIN_CONDITION_INDEX
         if singular:
-            return Ack.SINGULAR, None, math.nan
+            return Ack.SINGULAR, None, math.nan, chain.drawn_m3
         if step:
-            return Ack.ACCEPTED, strokes, math.nan
+            return Ack.ACCEPTED, strokes, math.nan, chain.drawn_m3
         trajectory, t0 = chain.trajectory(strokes)
         try:
             loads = self.loads.loads(trajectory, t0, trajectory.duration_s, chain.sample_dt_s())
         except ValueError:                 # a pose between the checked ones: DK lost or singular
-            return Ack.SINGULAR, None, math.nan
-        return capacity_verdict(self.waypoints, self.capacity, loads, strokes)
+            return Ack.SINGULAR, None, math.nan, chain.drawn_m3
+        return capacity_verdict(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3)
 
 
-def capacity_verdict(waypoints: Waypoints, capacity: LegCapacity, loads, strokes):
-    """ACCEPTED, or BEYOND_CAPACITY with the smallest time scale that fits (inf: none)."""
+def capacity_verdict(waypoints: Waypoints, capacity: LegCapacity, loads, strokes, drawn_m3: float = 0.0):
+    """(ACCEPTED, strokes, NaN, the oil drawn at the segment's end), or (BEYOND_CAPACITY, None,
+    the smallest time scale that fits (inf: none), `drawn_m3`); `drawn_m3`: the oil the supply
+    misses when the segment starts (the motions before it)."""
     share, lag_max = waypoints.capacity_share, waypoints.lag_max_m
-    if fits(capacity, loads, 1.0, share, lag_max):
-        return Ack.ACCEPTED, strokes, math.nan
-    scale = needed_scale(capacity, loads, share, lag_max, beyond=1.0)
-    return Ack.BEYOND_CAPACITY, None, math.inf if math.isnan(scale) else scale
+    verdict = judge(capacity, loads, 1.0, share, lag_max, drawn_m3)
+    if verdict.within:
+        return Ack.ACCEPTED, strokes, math.nan, verdict.end_deficit_m3
+    scale = needed_scale(capacity, loads, share, lag_max, beyond=1.0, initial_m3=drawn_m3)
+    return Ack.BEYOND_CAPACITY, None, math.inf if math.isnan(scale) else scale, drawn_m3
 
 
 @dataclass
@@ -137,6 +141,7 @@ class Chain:
     points: list                   # the chain's start, then each queued waypoint's strokes
     accel_times: list
     segment_times: list
+    drawn_m3: float = 0.0          # the oil the supply misses when this segment starts
 
     @property
     def start(self) -> np.ndarray:
@@ -167,6 +172,7 @@ class WaypointQueue:
         self._staged_pos: dict[int, tuple] = {}
         self._staged_rot: dict[int, tuple] = {}
         self.time_scale_needed = math.nan          # the last refusal's, for CTRL_ACK (NaN: none)
+        self.taken_drawn_m3 = 0.0                  # the oil the last trajectory taken leaves drawn at its end
 
     def stage_position(self, tag: int, x: float, y: float, z: float) -> None:
         self._staged_pos[tag & 0x0F] = (x, y, z)
@@ -182,9 +188,10 @@ class WaypointQueue:
         self.expected_seq = None
 
     def commit(self, tag: int, seq: int, segment_time: float, accel_time: float, flags: int, state: State,
-               previous, load_kg: float) -> Ack:
+               previous, load_kg: float, drawn_m3: float = 0.0) -> Ack:
         """Check the staged pose with this TAG and queue it, or say why not; `previous` is the
-        joint position the segment starts from."""
+        joint position the segment starts from, `drawn_m3` the oil the supply misses then when
+        nothing is queued before it (queued, the one before it leaves its own)."""
         tag &= 0x0F
         self.time_scale_needed = math.nan
         pos = self._staged_pos.pop(tag, None)
@@ -206,10 +213,12 @@ class WaypointQueue:
         if step and (not flags & WaypointFlag.LAST or (self.queue and not self.queue[-1].flags & WaypointFlag.LAST)):
             return Ack.BAD_ARGUMENT                         # a step is a trajectory of its own
         chain = self.chain(previous, segment_time, accel_time)
-        result, strokes, self.time_scale_needed = self.check(chain, pos, rot, step, load_kg)
+        chain.drawn_m3 = self.queue[-1].drawn_after_m3 if self.queue else drawn_m3
+        result, strokes, self.time_scale_needed, drawn_after = self.check(chain, pos, rot, step, load_kg)
         if result is not Ack.ACCEPTED:
             return result
-        self.queue.append(Waypoint(seq, strokes, segment_time, accel_time, flags, pos + rot, chain.start))
+        self.queue.append(Waypoint(seq, strokes, segment_time, accel_time, flags, pos + rot, chain.start,
+                                   drawn_after))
         self.expected_seq = (seq + 1) % 256
         return Ack.ACCEPTED
 
@@ -238,6 +247,7 @@ class WaypointQueue:
             return None
         take = next((k + 1 for k, w in enumerate(self.queue) if w.flags & WaypointFlag.LAST), len(self.queue))
         chosen, self.queue = self.queue[:take], self.queue[take:]
+        self.taken_drawn_m3 = chosen[-1].drawn_after_m3
         if chosen[0].flags & WaypointFlag.STEP:           # a step reference (chapters 5.4, 7.6.1)
             return hold_at(chosen[0].strokes, chosen[0].segment_time_s), [chosen[0].seq]
         points = np.array([start] + [w.strokes for w in chosen])
