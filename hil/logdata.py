@@ -20,8 +20,10 @@ import numpy as np
 from program.errors import UserInputError
 from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow
+from protocol.devices import SDO_REQUEST_BASE, SDO_RESPONSE_BASE
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import NmtCommand
+from protocol.nodes import NODE_IDS
 
 LOG_SUFFIXES = (".blf", ".asc")
 # the emulator sends EMU_TRUTH right after the frames of the same SYNC; its stalls have been
@@ -114,8 +116,11 @@ SENDER_GROUPS = ("controller", "emulator", "host", "not in the DBC")
 
 def frames_by_sender(path: str | Path) -> dict[str, int]:
     """Frames in a log per sender group (the DBC's sender of each id): controller, emulator
-    (its leg, IMU and emulator nodes), host, and ids the DBC does not know."""
+    (its leg, IMU and emulator nodes), host, and ids the DBC does not know. SDO (CiA 301,
+    not in the DBC): requests are the controller's, answers the nodes'."""
     sender = {c.frame_id: c.schedule.sender for c in CODECS.values()}
+    for node in NODE_IDS.values():
+        sender[SDO_REQUEST_BASE + node], sender[SDO_RESPONSE_BASE + node] = "CONTROLLER", "EMULATOR"
     counts = dict.fromkeys(SENDER_GROUPS, 0)
     for frame_id, _, _ in _read_frames(Path(path)):
         name = sender.get(frame_id)

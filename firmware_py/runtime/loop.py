@@ -63,6 +63,17 @@ class ActivationError(RuntimeError):
     """The nodes did not come up (no heartbeat) within the activation timeout."""
 
 
+class _CountedSend:
+    """The loop's bus for canopen's SDO client: what it sends is counted as the loop's own."""
+
+    def __init__(self, loop):
+        self.loop = loop
+
+    def send(self, msg, timeout=None) -> None:
+        self.loop.bus.send(msg)
+        self.loop.stats.frames_sent += 1
+
+
 @dataclass
 class Stats:
     cycles: int = 0
@@ -449,11 +460,12 @@ class ControllerLoop:
         cfg = self.cfg
         give_up = self.clock() + cfg.timing.activation_timeout_s
         self._wait(lambda state: state != -1, "heartbeat", give_up, should_stop)
-        found = identify(self.bus, self.expected_devices(), self._receive, self.dispatch, self.clock,
+        found = identify(_CountedSend(self), self.expected_devices(), self._receive, self.dispatch, self.clock,
                          cfg.devices.sdo_timeout_s)
         self._booted.clear()
         revisions = sorted({f"{identity.revision:#x}" for identity in found.values()})
         self.log(f"identified node(s) {sorted(found)} as configured ([devices]; revision(s) {', '.join(revisions)})")
+        self._nmt_start()                 # always: a new master's frames start their E2E counters afresh
         self._wait(lambda state: state == NmtState.OPERATIONAL, "OPERATIONAL heartbeat", give_up, should_stop,
                    self._nmt_start)
         self.controller.reset_valves()               # one Reset pulse: clears faults left from before
@@ -475,7 +487,7 @@ class ControllerLoop:
         in FAULT); False, with the refusal logged, when one is not its configured device."""
         expected = self.expected_devices()
         try:
-            identify(self.bus, {n: expected[n] for n in sorted(self._booted)}, self._receive, self.dispatch,
+            identify(_CountedSend(self), {n: expected[n] for n in sorted(self._booted)}, self._receive, self.dispatch,
                      self.clock, self.cfg.devices.sdo_timeout_s)
         except IdentityError as refusal:
             self.log(f"restart refused: {refusal}")

@@ -9,38 +9,22 @@ import numpy as np
 import pytest
 
 from firmware_py.config import load_config
-from firmware_py.rig_model import HexapodModel, TestbenchModel
 from firmware_py.supervision.capacity import LegCapacity, Loads, leg_capacity, shortfall_lag
-from firmware_py.supervision.waypoints import WaypointQueue
-from protocol.enums import TIME_SCALE_NONE_FITS, Ack, State, WaypointFlag, time_scale_from_wire, time_scale_to_wire
+from protocol.enums import TIME_SCALE_NONE_FITS, Ack, time_scale_from_wire, time_scale_to_wire
+from tests.support.queues import commit, waypoint_queue
 
-LAST = int(WaypointFlag.LAST)
-FAST = {"waypoints": {"velocity_max_mm_s": 3000.0}}     # the speed guard out of the way
 NO_PLATFORM = np.zeros((0, 6, 1))                        # a leg alone: its own lag
 AMPLE_PUMP = {"power_unit": {"pump_flow_l_min": 1000.0}}  # the forces alone decide
 
 
-def _queue(rig: str, overrides: dict | None = None):
-    cfg = load_config(overrides={**FAST, **(overrides or {})})
-    model = HexapodModel(cfg, 0.002) if rig == "hexapod" else TestbenchModel(cfg, 0.002)
-    return WaypointQueue(cfg.waypoints, model.check), model
-
-
-def _commit(queue, model, seq: int, pose, segment_s: float, accel_s: float, flags: int = LAST,
-            load_kg: float = 0.0) -> Ack:
-    queue.stage_position(seq, *pose[:3])
-    queue.stage_rotation(seq, *pose[3:])
-    return queue.commit(seq, seq, segment_s, accel_s, flags, State.READY, model.home_strokes, load_kg)
-
-
 def test_a_segment_beyond_capacity_is_refused_with_the_time_scale_that_fits():
-    queue, model = _queue("hexapod")
+    queue, model = waypoint_queue("hexapod")
     target = (0.1, 0.1, 0.76, 0.0, 0.0, 0.0)               # 250 mm from home in 0.2 s
-    assert _commit(queue, model, 0, target, 0.2, 0.05) is Ack.BEYOND_CAPACITY and not queue.queue
+    assert commit(queue, model, 0, target, 0.2, 0.05) is Ack.BEYOND_CAPACITY and not queue.queue
     scale = queue.time_scale_needed
     assert 1.0 < scale < 8.0
-    assert _commit(queue, model, 0, target, 0.2 * scale * 0.97, 0.05 * scale * 0.97) is Ack.BEYOND_CAPACITY
-    assert _commit(queue, model, 0, target, 0.2 * scale, 0.05 * scale) is Ack.ACCEPTED
+    assert commit(queue, model, 0, target, 0.2 * scale * 0.97, 0.05 * scale * 0.97) is Ack.BEYOND_CAPACITY
+    assert commit(queue, model, 0, target, 0.2 * scale, 0.05 * scale) is Ack.ACCEPTED
     assert math.isnan(queue.time_scale_needed)
 
 
@@ -49,8 +33,8 @@ def test_a_payload_or_a_lower_supply_asks_for_more_time():
     scales = {}
     for name, overrides in (("empty", {}), ("payload", {"hexapod": {"payload_kg": 3.0}}),
                             ("20 bar", {"hydraulic_model": {"supply_pressure_bar": 20.0}})):
-        queue, model = _queue("hexapod", {**AMPLE_PUMP, **overrides})
-        assert _commit(queue, model, 0, target, 0.2, 0.05) is Ack.BEYOND_CAPACITY
+        queue, model = waypoint_queue("hexapod", {**AMPLE_PUMP, **overrides})
+        assert commit(queue, model, 0, target, 0.2, 0.05) is Ack.BEYOND_CAPACITY
         scales[name] = queue.time_scale_needed
     assert scales["payload"] > 1.2 * scales["empty"] and scales["20 bar"] > 1.1 * scales["empty"]
 
@@ -64,23 +48,23 @@ def test_six_legs_drawing_together_beyond_the_pump_and_accumulator_are_refused()
     for name, overrides in (("0.3 l", small), ("ample pump", {"power_unit": {"accumulator_gas_cm3": 300.0,
                                                                             "pump_flow_l_min": 1000.0}}),
                             ("2.5 l", {})):
-        queue, model = _queue("hexapod", overrides)
+        queue, model = waypoint_queue("hexapod", overrides)
         x, y, z = model.home_pose
         rise = (x, y, z + 0.15, 0.0, 0.0, 0.0)
-        accepted[name] = _commit(queue, model, 0, rise, 0.5, 0.05)
+        accepted[name] = commit(queue, model, 0, rise, 0.5, 0.05)
         if name == "0.3 l":
             scale = queue.time_scale_needed
     assert accepted == {"0.3 l": Ack.BEYOND_CAPACITY, "ample pump": Ack.ACCEPTED, "2.5 l": Ack.ACCEPTED}
     assert 1.0 < scale < 2.0
-    queue, model = _queue("hexapod", small)
-    assert _commit(queue, model, 0, rise, 0.5 * scale * 0.97, 0.05 * scale * 0.97) is Ack.BEYOND_CAPACITY
-    assert _commit(queue, model, 0, rise, 0.5 * scale, 0.05 * scale) is Ack.ACCEPTED
+    queue, model = waypoint_queue("hexapod", small)
+    assert commit(queue, model, 0, rise, 0.5 * scale * 0.97, 0.05 * scale * 0.97) is Ack.BEYOND_CAPACITY
+    assert commit(queue, model, 0, rise, 0.5 * scale, 0.05 * scale) is Ack.ACCEPTED
 
 
 def test_a_load_the_leg_cannot_hold_fits_no_time_scale():
-    queue, model = _queue("testbench")
-    assert _commit(queue, model, 0, (0.0, 0.0, 0.16, 0.0, 0.0, 0.0), 2.0, 0.4, load_kg=5.0) is Ack.ACCEPTED
-    assert _commit(queue, model, 1, (0.0, 0.0, 0.18, 0.0, 0.0, 0.0), 2.0, 0.4, load_kg=40.0) is Ack.BEYOND_CAPACITY
+    queue, model = waypoint_queue("testbench")
+    assert commit(queue, model, 0, (0.0, 0.0, 0.16, 0.0, 0.0, 0.0), 2.0, 0.4, load_kg=5.0) is Ack.ACCEPTED
+    assert commit(queue, model, 1, (0.0, 0.0, 0.18, 0.0, 0.0, 0.0), 2.0, 0.4, load_kg=40.0) is Ack.BEYOND_CAPACITY
     assert math.isinf(queue.time_scale_needed)
     assert time_scale_to_wire(queue.time_scale_needed) == TIME_SCALE_NONE_FITS
 
@@ -106,15 +90,15 @@ def test_a_brief_peak_leaves_a_small_lag_a_sustained_shortfall_a_growing_one():
 def test_the_blend_into_a_chained_segment_is_judged_with_it():
     """Two segments each fine alone: reversing without stopping asks the blend for twice
     the velocity change and is refused; ending the first at rest is accepted."""
-    queue, model = _queue("testbench")
+    queue, model = waypoint_queue("testbench")
     up, down = (0.0, 0.0, 0.23, 0.0, 0.0, 0.0), (0.0, 0.0, 0.08, 0.0, 0.0, 0.0)
     home = float(model.home_strokes[0])
     assert home < 0.23
-    assert _commit(queue, model, 0, up, 0.12, 0.03, flags=0, load_kg=1.0) is Ack.ACCEPTED
-    assert _commit(queue, model, 1, down, 0.12, 0.03, load_kg=1.0) is Ack.BEYOND_CAPACITY
+    assert commit(queue, model, 0, up, 0.12, 0.03, flags=0, load_kg=1.0) is Ack.ACCEPTED
+    assert commit(queue, model, 1, down, 0.12, 0.03, load_kg=1.0) is Ack.BEYOND_CAPACITY
     queue.clear()
-    assert _commit(queue, model, 0, up, 0.12, 0.03, load_kg=1.0) is Ack.ACCEPTED
-    assert _commit(queue, model, 1, down, 0.12, 0.03, load_kg=1.0) is Ack.ACCEPTED
+    assert commit(queue, model, 0, up, 0.12, 0.03, load_kg=1.0) is Ack.ACCEPTED
+    assert commit(queue, model, 1, down, 0.12, 0.03, load_kg=1.0) is Ack.ACCEPTED
 
 
 def test_the_time_scale_on_the_wire_rounds_up_and_says_none_and_not_applicable():

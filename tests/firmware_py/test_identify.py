@@ -151,3 +151,16 @@ def test_a_node_that_reboots_as_another_device_is_not_started_again_on_reset():
     assert [line for line in lines if line.startswith("restart refused")] == [
         "restart refused: node 1 (LEG1): product code (0x1018:2) is 0x00000D63, hydrapod-leg.eds says "
         "0x00000408: not started"]
+
+
+def test_a_controller_started_again_starts_nodes_already_operational():
+    """A new master (a restarted controller) identifies the nodes, then sends NMT start even
+    though they are OPERATIONAL: the nodes restart its frames' E2E counters there."""
+    loop, bus, _ = _loop("testbench")
+    loop.activate()
+    again = ControllerLoop(bus, Controller(load_config(), "testbench", 0.002, CONTROLLER_NAMES["pi"]), 500.0,
+                           "lockstep", clock=bus.clock, log=lambda _: None)
+    bus.order.clear()
+    again.activate()
+    assert SDO_REQUEST_BASE + 1 in bus.order
+    assert bus.order.index(SDO_REQUEST_BASE + 1) < bus.order.index(NMT) < bus.order.index(VALVE_CMD_1)

@@ -6,18 +6,18 @@ from firmware_py.config import load_config
 from hil.in_process import PERIOD_S, InProcessLoop
 from plant_emulator.params import load_config as load_emulator_config
 from protocol.enums import Ack, WaypointFlag
-from tests.firmware_py.test_capacity_check import _commit, _queue
+from tests.support.queues import commit, waypoint_queue
 
 CHAIN = int(WaypointFlag.START | WaypointFlag.LAST)
 RISE_M, MOVE_S, ACCEL_S = 0.15, 0.5, 0.05
 
 
 def test_back_to_back_motions_that_each_fit_drain_the_accumulator_together():
-    queue, model = _queue("hexapod")
+    queue, model = waypoint_queue("hexapod")
     x, y, z = model.home_pose
     results, drawn = [], []
     for k in range(8):
-        results.append(_commit(queue, model, k, (x, y, z + (RISE_M if k % 2 == 0 else 0.0), 0.0, 0.0, 0.0),
+        results.append(commit(queue, model, k, (x, y, z + (RISE_M if k % 2 == 0 else 0.0), 0.0, 0.0, 0.0),
                                MOVE_S, ACCEL_S, CHAIN))
         if results[-1] is not Ack.ACCEPTED:
             break
@@ -25,8 +25,8 @@ def test_back_to_back_motions_that_each_fit_drain_the_accumulator_together():
     assert results[:-1] == [Ack.ACCEPTED] * (len(results) - 1) and results[-1] is Ack.BEYOND_CAPACITY
     assert drawn == sorted(drawn) and drawn[0] > 0.0 and queue.time_scale_needed > 1.0
     assert len(results) % 2 == 1                         # the refused one is a rise from home ...
-    fresh, model = _queue("hexapod")                     # ... which alone, the supply full, fits
-    assert _commit(fresh, model, 0, (x, y, z + RISE_M, 0.0, 0.0, 0.0), MOVE_S, ACCEL_S, CHAIN) is Ack.ACCEPTED
+    fresh, model = waypoint_queue("hexapod")                     # ... which alone, the supply full, fits
+    assert commit(fresh, model, 0, (x, y, z + RISE_M, 0.0, 0.0, 0.0), MOVE_S, ACCEL_S, CHAIN) is Ack.ACCEPTED
 
 
 SMALL_ACCUMULATOR = {"power_unit": {"accumulator_gas_cm3": 900.0}}    # a rise and a descent leave too little
