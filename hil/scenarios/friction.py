@@ -54,6 +54,8 @@ VELOCITY_RANGE_MM_S = (2.0, 200.0) # the steps aim at these speeds on each side 
 TRIES = 3                          # steps per target speed, when one lands at rest
 PROBES_V = (0.2, -0.2, 0.5, -0.5)  # the first steps at each load, before any velocity is known
 VALVE_MAX_V = 0.9                  # 0.9 V: ~250 mm/s, as far as the stroke allows for a 1 s window
+SMOOTH_S = 0.05                    # Fig. 6.3's velocity: the encoder's record averaged over this
+FIG_6_3_MM_S = 15.0                # ... and its step's speed
 STUCK_MM_S = 0.5                   # slower than 2 encoder counts over the window: at rest, no point
 MIN_POINTS = 4                     # moving steps per load and side (eq. 6.4 has 4 parameters a side)
 SINE_PERIOD_S = 25.0               # 0.04 Hz
@@ -239,7 +241,7 @@ class FrictionSteady(Scenario):
                                          cfg.testbench.guide_coulomb_n, cfg.testbench.guide_viscous_ns_m)
             points.append({"valve_v": u, "load_kg": load, "velocity_mm_s": velocity / MM, "accel_m_s2": accel,
                            "friction_n": float(friction), "pressure_samples": int(samples.sum()),
-                           "window_s": round((hi - lo) * period, 3)})
+                           "window_s": round((hi - lo) * period, 3), "_cycles": (test["cycle"], end)})
         v = np.array([p["velocity_mm_s"] for p in points]) * MM
         f = np.array([p["friction_n"] for p in points])
         truth, thesis = _truth_steady(log), _table_6_1()
@@ -271,10 +273,11 @@ class FrictionSteady(Scenario):
                                bool(per_side) and min(per_side.values()) >= MIN_POINTS,
                                f"{per_side} of {steps} steps ({stuck} at rest, {skipped} too short or without data)",
                                f">= {MIN_POINTS} each"))
-        figures = [self._plot(points, fits, out)] if out is not None and points else []
+        figures = [self._plot(points, fits, out), self._plot_step(log, cfg, points, spool, y, p_cycle, fp, period,
+                                                                  out)] if out is not None and points else []
         table = ["| parameter | identified | emulator | Table 6.1 | error |", "|---|---|---|---|---|"] + rows
-        metrics = {"points": points, "fits": fits, "loads_kg": loads, "steps": steps, "at_rest": stuck,
-                   "too_short": skipped}
+        metrics = {"points": [{k: v for k, v in p.items() if not k.startswith("_")} for p in points], "fits": fits,
+                   "loads_kg": loads, "steps": steps, "at_rest": stuck, "too_short": skipped}
         return Analysis(metrics, {"table_6_1": chapter6()["table_6_1"]}, checks, figures, ["\n".join(table)])
 
     def _plot(self, points, fits, out: Path) -> Figure:
@@ -300,6 +303,43 @@ class FrictionSteady(Scenario):
         save(fig, path)
         return Figure(path.name, "steady-state friction map: step means and the fitted eq. 6.4",
                       "Fig. 6.4: friction against velocity at 0/3/6 kg, asymmetric, and its fit")
+
+
+    @staticmethod
+    def _plot_step(log: LogData, cfg, points, spool, y, p_cycle, fp, period: float, out: Path) -> Figure:
+        """Fig. 6.3: the upward step without load nearest the thesis's (0.06 V, ~15 mm/s), its
+        valve input, position, velocity and the cylinder's friction (eq. 6.5) from its start."""
+        rising = [p for p in points if p["velocity_mm_s"] > 0.0] or points
+        light = min(p["load_kg"] or 0.0 for p in rising)
+        step = min((p for p in rising if (p["load_kg"] or 0.0) == light),
+                   key=lambda p: abs(p["velocity_mm_s"] - FIG_6_3_MM_S))
+        first, last = step["_cycles"]
+        cycles = np.arange(max(first - int(0.1 / period), 0), last + 1)
+        t = (cycles - first) * period
+        smooth = max(int(round(SMOOTH_S / period)), 1)
+        position = np.convolve(np.nan_to_num(y[cycles], nan=float(np.nanmean(y[cycles]))),
+                               np.ones(smooth) / smooth, mode="same")
+        velocity = np.gradient(position, period)
+        accel = np.gradient(velocity, period)
+        at = (p_cycle >= cycles[0] + smooth) & (p_cycle <= cycles[-1] - smooth)     # the averages' edges left out
+        k = p_cycle[at] - cycles[0]
+        friction = cylinder_friction(fp[at], accel[k], velocity[k], _moving_mass(cfg, step["load_kg"]),
+                                     cfg.testbench.guide_coulomb_n, cfg.testbench.guide_viscous_ns_m)
+        fig, axes = plt.subplots(4, 1, figsize=(7, 7), sharex=True)
+        axes[0].plot(t, spool[cycles], lw=1)
+        axes[1].plot(t, y[cycles] / MM, lw=1)
+        axes[2].plot(t[smooth:-smooth], velocity[smooth:-smooth] / MM, lw=1)
+        axes[3].plot(t[k], friction, ".", ms=3)
+        for ax, label in zip(axes, ("u [V]", "y [mm]", "y' [mm/s]", "Ff [N]")):
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+        axes[-1].set_xlabel("t [s] from the step")
+        axes[0].set_title(f"open-loop valve step of {step['valve_v']:g} V, {light:g} kg (steady window: "
+                          f"{step['velocity_mm_s']:.1f} mm/s, {step['friction_n']:.1f} N)", fontsize=9)
+        path = out / "friction_step.png"
+        save(fig, path)
+        return Figure(path.name, "one open-loop valve step: input, position, velocity and friction",
+                      "Fig. 6.3: a 0.06 V step: the piston at ~15 mm/s, the friction settling to its steady value")
 
 
 class FrictionPresliding(Scenario):
@@ -345,6 +385,7 @@ class FrictionPresliding(Scenario):
         y = log.leg_positions(1)[:, 0]
         rod_n = log.get("LEG_STATE_1").per_cycle(log.n_cycles, "FORCE")
         p_cycle, seal_n = _seal_friction(log, cfg, rod_n)
+        _, piston_n = _pressure_force(log, cfg)
         charts = []
         for test in _tests(log, TestMode.FORCE_SINE):
             k0, k1 = test["cycle"], test["cycle"] + int(test["duration_s"] / period)
@@ -353,10 +394,11 @@ class FrictionPresliding(Scenario):
             ok = np.isfinite(y[np.clip(k, 0, log.n_cycles - 1)]) & np.isfinite(seal_n[at])
             if ok.sum() < 10:
                 continue
-            k, force = k[ok], seal_n[at][ok]
+            k, force, piston = k[ok], seal_n[at][ok], piston_n[at][ok]
             d, df = y[k] - y[k[0]], force - force[0]
             chart = {"load_kg": load_at(log, k0), "amplitude_n": test["force_n"], "d": d, "df": df,
-                     "max_displacement_mm": float(np.max(np.abs(d)) / MM)}
+                     "max_displacement_mm": float(np.max(np.abs(d)) / MM), "t": (k - k0) * period,
+                     "fp": piston}
             for side, pick in (("+", np.argmax), ("-", np.argmin)):
                 i = int(pick(d))
                 chart[side] = (float(d[i]), float(df[i])) if np.sign(d[i]) == (1 if side == "+" else -1) else None
@@ -435,12 +477,33 @@ class FrictionPresliding(Scenario):
         thesis_sigma1 = {side: presliding_damping(c6["table_6_2"][f"sigma0_{key}_n_mm"] / MM, mass,
                                                   c6["table_6_1"][f"sigma2_{key}_ns_mm"] / MM) * MM
                          for side, key in (("+", "pos"), ("-", "neg"))}
-        figures = [self._plot(charts, results, out)] if out is not None and charts else []
+        figures = [self._plot(charts, results, out), self._plot_sine(charts, out)] if out is not None and charts else []
         table = ["| parameter | identified | emulator | Table 6.2 |", "|---|---|---|---|"] + rows
-        metrics = {"tests": [{k: v for k, v in c.items() if k not in ("d", "df")} for c in charts],
+        metrics = {"tests": [{k: v for k, v in c.items() if k not in ("d", "df", "t", "fp")} for c in charts],
                    "results": results, "model_fit": model, "mass_for_sigma1_kg": mass,
                    "eq_6_12_on_table_6_2_sigma0": thesis_sigma1}
         return Analysis(metrics, {"table_6_2": c6["table_6_2"]}, checks, figures, ["\n".join(table)])
+
+    @staticmethod
+    def _plot_sine(charts, out: Path) -> Figure:
+        """Fig. 6.5: the largest sine at the heaviest load: the piston's force, the position and
+        the cylinder's friction (the seal's, `_seal_friction`) over it."""
+        chart = max(charts, key=lambda c: ((c["load_kg"] or 0.0), c["amplitude_n"]))
+        fig, axes = plt.subplots(3, 1, figsize=(7, 6), sharex=True)
+        axes[0].plot(chart["t"], chart["fp"], lw=1)
+        axes[1].plot(chart["t"], chart["d"] / MM, lw=1)
+        axes[2].plot(chart["t"], chart["df"], lw=1)
+        for ax, label in zip(axes, ("Fp [N] (eq. 6.5, the piston's)", "y - y0 [mm]", "Ff - Ff0 [N]")):
+            ax.set_ylabel(label, fontsize=8)
+            ax.grid(alpha=0.3)
+        axes[-1].set_xlabel("t [s] from the sine's start")
+        axes[0].set_title(f"force-controlled sine of {chart['amplitude_n']:g} N, {chart['load_kg'] or 0.0:g} kg",
+                          fontsize=9)
+        path = out / "friction_presliding_sine.png"
+        save(fig, path)
+        return Figure(path.name, "one force-controlled sine: piston force, position and friction over time",
+                      "Fig. 6.5 (6 kg): the position's response differs up and down, friction up to ~30 N up, "
+                      "~-10 N down")
 
     @staticmethod
     def _model_fit(log: LogData, cfg, y, rod_n, p_cycle, seal_n, period: float) -> dict | None:

@@ -90,6 +90,7 @@ def test_friction_steady_recovers_the_emulators_map_through_the_bus(steady_run):
         assert fitted["sigma2_ns_mm"] == pytest.approx(true["sigma2_ns_mm"], rel=0.10)
     assert {p["load_kg"] for p in doc["metrics"]["points"]} == {0.0, 6.0}
     assert (out / "friction_steady.png").stat().st_size > 10_000
+    assert (out / "friction_step.png").stat().st_size > 10_000          # Fig. 6.3
 
 
 @pytest.mark.hil
@@ -115,6 +116,7 @@ def test_friction_presliding_recovers_the_seals_stiffness_through_the_bus(tmp_pa
     assert fit["sigma0_pos_n_m"] * MM == pytest.approx(238.9709, rel=0.25)
     assert fit["sigma0_neg_n_m"] * MM == pytest.approx(81.5808, rel=0.25)
     assert (tmp_path / "friction_presliding.png").is_file()
+    assert (tmp_path / "friction_presliding_sine.png").stat().st_size > 10_000     # Fig. 6.5
 
 
 def test_the_bristle_model_is_the_emulators_lugre_state_at_rest():
