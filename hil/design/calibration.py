@@ -14,7 +14,13 @@ Here the same three numbers come from a **linearisation** of the emulator's own 
   pre-sliding, below the encoder's 0.125 mm, and not what those transients excite);
 - b0, b1 from the dominant (complex) pole pair; k01 from a least-squares fit of the
   third-order velocity response k01 b0 / (s^2 + b1 s + b0) to the linearised one over
-  5-300 rad/s, the band of the 150 ms identification windows.
+  5-300 rad/s, the band of the 150 ms identification windows;
+- the disturbance path of eq. 4.68, an external force Fe against the piston (eq. 4.63):
+  V/Fe = -k02 b0 (s + z0) / (s^2 + b1 s + b0), k02 and z0 by the same fit;
+- chapter 4.4's sensibility constants at the operating point: Kx (eq. 4.51, the load
+  pressure's rate per volt) and Kd (eq. 4.52, per metre) from the valve's flow gains and the
+  chambers' stiffness, Kp from the reduced model's b1 (eq. 4.69); eq. 4.71-4.73 then predict
+  k01, k02 and z0 from them, which the fitted ones are held against.
 
 `fit` tunes the declared physical parameters by least squares on the log-ratios to
 Table A.3 and is how the "tuned" values of the emulator's `data/emulator.toml` were produced.
@@ -68,17 +74,34 @@ class OperatingPoint:
     pressure_b_bar: float
     spool_offset_pct: float
     converged: bool
+    k02_mm_n: float = math.nan    # the disturbance path (eq. 4.68): mm/N ...
+    z0: float = math.nan          # ... and its zero, 1/s
+    kx: float = math.nan          # eq. 4.51: Pa/s per V
+    kd: float = math.nan          # eq. 4.52: Pa/m
+    kp: float = math.nan          # eq. 4.69: 1/s (negative: the valve's pressure coefficients)
+    mass_kg: float = math.nan
+    damping_ns_m: float = math.nan
+    kd_area_m2: float = math.nan  # the piston's area the constants are per
+
+    def chapter_4_4(self) -> dict:
+        """Eq. 4.71-4.73 from Kx, Kd, Kp, m and sigma (SI) beside the fitted k01, k02, z0, and
+        eq. 4.70's b0 beside the pole pair's."""
+        area = self.kd_area_m2
+        b0 = (area * self.kd - self.damping_ns_m * self.kp) / self.mass_kg
+        return {"k01_mm_s_v": float(area * self.kx / (self.mass_kg * self.b0) / MM),
+                "k02_mm_n": float(1.0 / (self.mass_kg * self.b0) / MM), "z0": float(-self.kp), "b0": float(b0)}
 
     @property
     def dominant_pole(self) -> complex:
         return complex(-self.b1 / 2.0, math.sqrt(max(self.b0 - self.b1 ** 2 / 4.0, 0.0)))
 
 
-def _rhs(x: np.ndarray, u_v: float, y: float, mass: float, damping: float, cfg: EmulatorConfig) -> np.ndarray:
+def _rhs(x: np.ndarray, u_v: float, y: float, mass: float, damping: float, cfg: EmulatorConfig,
+         external_n: float = 0.0) -> np.ndarray:
     v, pa, pb, spool = x
     rate_a, rate_b, _, _ = hy.pressure_rates(y, v, pa, pb, spool, cfg.actuator.supply_pressure_pa, cfg.hp, 1.0,
                                          cfg.hp[hy.HP_SEAL_LEAK])
-    force = hy.piston_force(pa, pb, cfg.hp) - damping * v - mass * GRAVITY_M_S2
+    force = hy.piston_force(pa, pb, cfg.hp) - damping * v - mass * GRAVITY_M_S2 - external_n
     return np.array([force / mass, rate_a, rate_b,
                      (u_v / cfg.actuator.valve_full_scale_v - spool) / cfg.hp[hy.HP_TAU_SPOOL]])
 
@@ -112,12 +135,29 @@ def linearise(cfg: EmulatorConfig, position_mm: float, load_kg: float) -> Operat
     else:                                            # over-damped: the two slowest poles
         slow = poles[np.argsort(np.abs(poles))[:2]].real
         b0, b1 = slow[0] * slow[1], -(slow[0] + slow[1])
+    df = 1e-3
+    f_vec = (_rhs(x0, u0, y, mass, damping, cfg, df) - _rhs(x0, u0, y, mass, damping, cfg, -df)) / (2 * df)
     eye = np.eye(4)
+    s_band = 1j * BAND_RAD_S
     response = np.array([np.linalg.solve(1j * w * eye - a_mat, b_vec)[0] for w in BAND_RAD_S])  # v/u, m/s/V
-    model = b0 / ((1j * BAND_RAD_S) ** 2 + b1 * 1j * BAND_RAD_S + b0)
+    model = b0 / (s_band ** 2 + b1 * s_band + b0)
     k01 = float(np.real(np.vdot(model, response)) / np.real(np.vdot(model, model))) / MM   # (mm/s)/V
+    # V/Fe = -(c1 s + c0) / (s^2 + b1 s + b0), (c1, c0) = k02 b0 (1, z0): c0 from the exact
+    # steady response (what a P loop's steady error under a load follows, eq. 7.4), c1 by
+    # least squares over the band
+    c0 = float(np.linalg.solve(a_mat, f_vec)[0]) * b0
+    disturbance = np.array([np.linalg.solve(1j * w * eye - a_mat, f_vec)[0] for w in BAND_RAD_S])
+    shape = -s_band / (s_band ** 2 + b1 * s_band + b0)
+    rest = disturbance + c0 / (s_band ** 2 + b1 * s_band + b0)
+    c1 = float(np.real(np.vdot(shape, rest)) / np.real(np.vdot(shape, shape)))
+    hp, full_scale = cfg.hp, cfg.actuator.valve_full_scale_v
+    area = hp[hy.HP_AREA_A]
+    kd = hy.column_stiffness(y, pa, pb, hp) / area                            # eq. 4.52
+    kx = hy.force_rate_per_spool(y, pa, pb, spool, cfg.actuator.supply_pressure_pa, hp) / area / full_scale
+    kp = damping / mass - b1                                                  # eq. 4.69
     return OperatingPoint(position_mm, load_kg, float(b0), float(b1), k01, poles, pa / BAR, pb / BAR,
-                          spool * 100.0, bool(converged))
+                          spool * 100.0, bool(converged), float(c1 / b0) / MM, float(c0 / c1), float(kx),
+                          float(kd), float(kp), mass, damping, area)
 
 
 def calibration_table(cfg: EmulatorConfig, rows: np.ndarray | None = None) -> list[dict]:
@@ -133,11 +173,17 @@ def calibration_table(cfg: EmulatorConfig, rows: np.ndarray | None = None) -> li
             pole = point.dominant_pole
             within = all(abs(ratio[k] - 1.0) <= TOLERANCE[k] for k in TOLERANCE)
             pole_ok = POLE_RE[0] <= pole.real <= POLE_RE[1] and POLE_IM[0] <= pole.imag <= POLE_IM[1]
+            predicted = point.chapter_4_4()
             out.append({
                 "position_mm": float(row[0]), "load_kg": load, "emulator": emu, "thesis": thesis,
                 "ratio": ratio, "pole": [pole.real, pole.imag], "within_bounds": within, "pole_in_region": pole_ok,
                 "pressure_a_bar": point.pressure_a_bar, "pressure_b_bar": point.pressure_b_bar,
                 "spool_offset_pct": point.spool_offset_pct, "converged": point.converged,
+                "disturbance": {"k02_mm_n": point.k02_mm_n, "z0": point.z0},
+                "sensibilities": {"kx_bar_s_v": point.kx / BAR, "kd_bar_mm": point.kd / BAR * MM, "kp_1_s": point.kp},
+                "chapter_4_4": predicted,
+                "chapter_4_4_ratio": {"k01": predicted["k01_mm_s_v"] / point.k01,
+                                      "k02": predicted["k02_mm_n"] / point.k02_mm_n, "z0": predicted["z0"] / point.z0},
             })
     return out
 
@@ -153,6 +199,9 @@ def summary(table: list[dict]) -> dict:
     worst = worst_point(table)
     return {
         "points": len(table),
+        # eq. 4.71-4.73 on Kx, Kd, Kp against the fitted linearisation: the largest |ratio - 1|
+        "chapter_4_4_max_error_pct": {k: 100.0 * max(abs(e["chapter_4_4_ratio"][k] - 1.0) for e in table)
+                                      for k in ("k01", "k02", "z0")},
         "within_bounds": sum(e["within_bounds"] for e in table),
         "poles_in_region": sum(e["pole_in_region"] for e in table),
         "max_abs_error_pct": {k: 100.0 * max(abs(e["ratio"][k] - 1.0) for e in table) for k in TOLERANCE},
@@ -210,4 +259,16 @@ def format_table(table: list[dict]) -> str:
                  f"{s['max_abs_error_pct']['k01']:.1f} %")
     lines.append(f"worst point: {w['position_mm']:.0f} mm, {w['load_kg']:.0f} kg: ratios b0 {w['ratio']['b0']:.2f}, "
                  f"b1 {w['ratio']['b1']:.2f}, k01 {w['ratio']['k01']:.2f}")
+    lines += ["", "chapter 4.4 at each point: Kx (eq. 4.51) bar/s/V, Kd (4.52) bar/mm, Kp (4.69) 1/s; the disturbance",
+              "path k02 mm/N, z0 1/s (eq. 4.68, fitted); eq. 4.71-4.73 from Kx, Kd, Kp over the fitted k01, k02, z0",
+              "  Po  load |    Kx     Kd     Kp |    k02     z0 | 4.71 k01  4.73 k02  4.72 z0"]
+    for e in table:
+        k, d, r = e["sensibilities"], e["disturbance"], e["chapter_4_4_ratio"]
+        lines.append(f"{e['position_mm']:4.0f}  {e['load_kg']:3.0f}  | {k['kx_bar_s_v']:6.0f} {k['kd_bar_mm']:6.1f} "
+                     f"{k['kp_1_s']:6.1f} | {d['k02_mm_n']:6.4f} {d['z0']:6.1f} | {r['k01']:8.2f} {r['k02']:9.2f} "
+                     f"{r['z0']:8.2f}")
+    c = s["chapter_4_4_max_error_pct"]
+    lines.append(f"eq. 4.71-4.73 against the linearisation, largest |error|: k01 {c['k01']:.1f} %, "
+                 f"k02 {c['k02']:.1f} %, z0 {c['z0']:.1f} % (one load-pressure state, eq. 4.50, against two "
+                 "chambers and a spool lag)")
     return "\n".join(lines)

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from hil.design import calibration
 from physics import hydraulics as hy
+from physics.constants import GRAVITY_M_S2
 from physics.lugre import force_split as lugre_split
 from physics.lugre import steady_friction
 from physics.lugre import z_step as lugre_z_step
@@ -251,6 +252,28 @@ def test_linearisation_matches_a_simulated_step(cfg):
     assert point.b0 > 0 and point.b1 > 0
     wn = math.sqrt(point.b0)
     assert 70 < wn < 130
+
+
+@pytest.mark.parametrize("position_mm, load_kg", [(150.0, 0.0), (60.0, 6.0)])
+def test_the_disturbance_path_is_the_steady_response_and_chapter_4_4_predicts_it(cfg, position_mm, load_kg):
+    """Eq. 4.68's Fe path: its steady velocity per newton (-k02 z0) is what the nonlinear
+    chambers' steady state gives at a fixed spool (an oracle apart from the linearisation);
+    eq. 4.71 and 4.73 on Kx, Kd, Kp predict k01 and k02 (one pressure state against two
+    chambers: within 15 %); the signs of eq. 4.76-4.77."""
+    point = calibration.linearise(cfg, position_mm, load_kg)
+    y, mass = position_mm * 1e-3, calibration.moving_mass_kg(cfg, load_kg)
+    force, ps = mass * GRAVITY_M_S2, cfg.actuator.supply_pressure_pa
+
+    def spool(f, v):
+        return hy.steady_state(y, f, ps, cfg.hp, v)[2]
+    ds_df = (spool(force + 5.0, 0.0) - spool(force - 5.0, 0.0)) / 10.0
+    ds_dv = (spool(force, 1e-4) - spool(force, -1e-4)) / 2e-4
+    steady = -ds_df / (point.damping_ns_m * ds_df + ds_dv)          # m/s per N at a fixed spool
+    assert -point.k02_mm_n * 1e-3 * point.z0 == pytest.approx(steady, rel=0.03)
+    predicted = point.chapter_4_4()
+    assert predicted["k01_mm_s_v"] == pytest.approx(point.k01, rel=0.15)
+    assert predicted["k02_mm_n"] == pytest.approx(point.k02_mm_n, rel=0.15)
+    assert point.kp < 0.0 < point.kd and point.z0 > 0.0 and point.kx > 0.0
 
 
 def test_config_errors_name_the_key(tmp_path):
