@@ -36,6 +36,21 @@ def find_plant(plants: list[Plant], position_mm: float, load_kg: float) -> int |
     return None
 
 
+def disturbance_paths(plants: list[Plant]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each plant's G2 = k02 b0 (s + z0) / (s (s^2 + b1 s + b0)) [m/N] (eq. 4.68, its magnitude:
+    the position's response to an external force), from the packaged emulator's linearisation
+    at the plant's set point: the thesis identified G1 only."""
+    from hil.design.calibration import linearise
+    from plant_emulator.params import load_config as load_emulator_config
+    cfg = load_emulator_config()
+    out = []
+    for plant in plants:
+        point = linearise(cfg, plant.position_m / MM, plant.load_kg)
+        c1 = point.k02_mm_n * MM * point.b0
+        out.append((np.array([c1, c1 * point.z0]), np.array([1.0, point.b1, point.b0, 0.0])))
+    return out
+
+
 def robustness_doc(plants: list[Plant], source: str, kp_v_mm: float, ki_v_mm_s: float,
                    nominal_at: tuple[float, float] | None = None) -> tuple[dict, dict]:
     """(the JSON document, the arrays the figure needs)."""
@@ -59,7 +74,9 @@ def robustness_doc(plants: list[Plant], source: str, kp_v_mm: float, ki_v_mm_s: 
         "thesis_plant_sum_F": None if thesis_index is None else float(totals[thesis_index]),
         "plants": len(plants),
     }
-    w0 = (np.array(thesis["weights"]["w0_numerator"]) * MM, np.array(thesis["weights"]["w0_denominator"]))
+    g2 = disturbance_paths(plants)                    # the emulator's eq. 4.68 Fe path at each set point
+    w0 = g2[chosen]                                   # eq. 7.23: W0 is P0's G2, here derived, m/N
+    printed_w0 = (np.array(thesis["weights"]["w0_numerator"]) * MM, np.array(thesis["weights"]["w0_denominator"]))
     table = rb.well_posedness(p0, w0[0])
     posed = {kind: {"maps": {m.name: f"{m.num_degree}/{m.den_degree}" for m in maps},
                     "well_posed": all(m.proper for m in maps)} for kind, maps in table.items()}
@@ -102,11 +119,23 @@ def robustness_doc(plants: list[Plant], source: str, kp_v_mm: float, ki_v_mm_s: 
                        "note": "eq. 7.15 as printed peaks far above Fig. 7.4's curve (<= ~3): its "
                                "coefficients do not reproduce the figure nor eq. 7.22"},
     }
+    g2_errors = np.array([np.abs(rb.response(*g, w) / rb.response(*w0, w) - 1.0) for g in g2])
+    wdm_derived = rb.fit_weight(w, g2_errors.max(axis=0))          # eq. 7.24 by W1's procedure
     nominal_disturbance, nd_at = rb.disturbance_response(p0, kp, ki, w0)
+    printed_disturbance, _ = rb.disturbance_response(p0, kp, ki, printed_w0)
+    steady = float(w0[0][-1] / w0[1][-2]) / MM                     # |W0| s -> 0: steady mm/s per N
+    printed_steady = float(printed_w0[0][-1] / printed_w0[1][-2]) / MM
     performance = {"s_w0_hinf_mm_n": nominal_disturbance / MM, "at_rad_s": nd_at,
-                   "worst_case_bound_mm_n": rb.robust_performance_bound(p0, kp, ki, w1, w0, wdm) / MM,
+                   "worst_case_bound_mm_n": rb.robust_performance_bound(p0, kp, ki, w1, w0, wdm_derived) / MM,
                    "thesis_tyd_hinf": thesis["weights"]["tyd_hinf"],
-                   "weights": "W0 and Wdm as printed (eq. 7.23-7.24, mm/N); W1 the fitted one"}
+                   "w0_numerator_mm": [float(v) / MM for v in w0[0]], "w0_denominator": [float(v) for v in w0[1]],
+                   "w0_steady_mm_s_n": steady, "wdm_zeros": _complex(np.roots(wdm_derived[0])),
+                   "wdm_poles": _complex(np.roots(wdm_derived[1])), "max_g2_error": float(g2_errors.max()),
+                   "printed_w0": {"s_w0_hinf_mm_n": printed_disturbance / MM, "steady_mm_s_n": printed_steady,
+                                  "worst_case_bound_mm_n":
+                                      rb.robust_performance_bound(p0, kp, ki, w1, printed_w0, wdm) / MM},
+                   "weights": "W0 = P0's G2 and Wdm over the set's G2, both from the emulator's linearisation "
+                              "(eq. 4.68, `hydrapod emulator calibrate`); W1 the fitted one"}
     doc = {"plants": source, "nominal": nominal, "well_posedness": posed, "pi": pi,
            "uncertainty": uncertainty, "performance": performance}
     disks = nyquist_disks(p0, w1)
@@ -160,9 +189,19 @@ def format_robustness(doc: dict) -> str:
               f"{u['printed_w1']['w1_peak']:.1f} ({u['printed_w1']['w1_peak_at_rad_s']:.1f} rad/s): "
               + u["printed_w1"]["note"], "",
               "## Robust performance (eq. 7.23-7.27)", "",
+              f"- W0 (P0's G2, eq. 4.68 from the emulator's linearisation) = ({perf['w0_numerator_mm'][0]:.4g} s + "
+              f"{perf['w0_numerator_mm'][1]:.4g}) / (s^3 + {perf['w0_denominator'][1]:.2f} s^2 + "
+              f"{perf['w0_denominator'][2]:.0f} s) mm/N: {perf['w0_steady_mm_s_n']:.3g} mm/s per N at a fixed valve; "
+              f"Wdm over the set's G2 (largest |G2/W0 - 1| {perf['max_g2_error']:.3f}): zeros {perf['wdm_zeros']}, "
+              f"poles {perf['wdm_poles']}",
               f"- nominal ||S W0||inf = {perf['s_w0_hinf_mm_n']:.4g} mm/N at {perf['at_rad_s']:.1f} rad/s",
               f"- worst case over both uncertainty sets (pointwise bound): {perf['worst_case_bound_mm_n']:.4g} mm/N "
-              f"(thesis ||Tyd||inf = {perf['thesis_tyd_hinf']:.4g}); {perf['weights']}"]
+              f"(thesis ||Tyd||inf = {perf['thesis_tyd_hinf']:.4g}); {perf['weights']}",
+              f"- eq. 7.23 as printed, read in mm/N: {perf['printed_w0']['steady_mm_s_n']:.3g} mm/s per N at a fixed "
+              f"valve, 1/{perf['w0_steady_mm_s_n'] / perf['printed_w0']['steady_mm_s_n']:.0f} of the linearisation's "
+              f"(||S W0||inf {perf['printed_w0']['s_w0_hinf_mm_n']:.4g} mm/N, worst case "
+              f"{perf['printed_w0']['worst_case_bound_mm_n']:.4g}); read in m/N, "
+              f"{perf['printed_w0']['steady_mm_s_n'] * 1e3 / perf['w0_steady_mm_s_n']:.2f}x it"]
     return "\n".join(lines) + "\n"
 
 
