@@ -57,6 +57,16 @@ def _nominal(text: str) -> tuple[float, float]:
     return position, load
 
 
+def _ki_scales(text: str) -> tuple[float, ...]:
+    try:
+        scales = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: comma-separated numbers (e.g. 0.2,0.1)") from None
+    if not scales or not all(0.0 < v <= 1.0 for v in scales):
+        raise argparse.ArgumentTypeError(f"{text!r}: each scale in (0, 1]")
+    return scales
+
+
 def _out_dir(text: str | None, default: str) -> Path:
     out = Path(text) if text else Path(default)
     try:
@@ -86,6 +96,17 @@ def _robustness(args) -> int:
     print(json.dumps(doc, indent=1) if args.json else text + f"\n(written to {out})")
     # the verdict: the nominal loop internally stable and the small-gain test met
     return 0 if doc["pi"]["internally_stable"] and doc["uncertainty"]["robustly_stable"] else 1
+
+
+def _adaptive_steps(args) -> int:
+    from hil.design.adaptive_steps import adaptive_steps, format_steps, plot_steps
+    doc = adaptive_steps(args.ki_scales)
+    if args.plot is not None:
+        figure = _out_dir(args.plot, args.plot) / "adaptive_steps.png"
+        plot_steps(doc, figure)
+        doc["figures"] = [str(figure)]
+    print(json.dumps(doc, indent=1) if args.json else format_steps(doc))
+    return 0
 
 
 def _schedule(args) -> int:
@@ -278,6 +299,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="write ki_detuning.png here: the PI's steps per Ki scale (Fig. 7.12)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_schedule)
+
+    p = design_sub.add_parser("adaptive-steps", help="the adaptive law's 10 mm steps per Ki scale on Table A.3's "
+                                                     "plants and the emulated bench (chapter 7.6.1's < 14 %)")
+    p.add_argument("--ki-scales", type=_ki_scales, default=(0.2, 0.1), metavar="S,S",
+                   help="scales on Table 7.2's Ki (default 0.2,0.1; the controller's [adaptive] ki_scale is 0.2)")
+    p.add_argument("--plot", metavar="DIR", default=None, help="write adaptive_steps.png here")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_adaptive_steps)
 
     p = design_sub.add_parser("modes", help="the emulated hexapod's linearised modes at a pose: joint-space "
                                             "inertia, leg stiffness, flow gain, frequencies, damping, shapes")

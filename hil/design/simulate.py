@@ -123,11 +123,11 @@ def bench_sine(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig, l
 
 
 def bench_step(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig, load_kg: float, position_m: float,
-               step_m: float = 0.01, hold_s: float = 1.2, seed: int = 7) -> dict:
+               step_m: float = 0.01, hold_s: float = 1.2, seed: int = 7, controller: str = "computed-torque") -> dict:
     """sha-step's experiment at one position, in process: there, then a `step_m` square wave
     up, down, up; the last up-step's `hil.metrics.step_response` (or {"fault": ...})."""
     from hil.metrics import step_response
-    loop = InProcessLoop(controller_cfg, emulator_cfg, "computed-torque", load_kg, seed, rig="testbench")
+    loop = InProcessLoop(controller_cfg, emulator_cfg, controller, load_kg, seed, rig="testbench")
     loop.activate(100)
     flags = WaypointFlag.START | WaypointFlag.LAST
     loop.waypoint((0.0, 0.0, position_m), 2.0, 0.1, int(flags))
@@ -145,3 +145,41 @@ def bench_step(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig, l
     if loop.faulted:
         return {"fault": loop.status.fault.name}
     return step_response(np.arange(len(y)) * PERIOD_S, np.array(y), y0, step_m)
+
+
+def linear_step(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig, mode: int, position_mm: float,
+                load_kg: float, step_m: float = 0.010, seconds: float = 2.0):
+    """The joint pipeline (`mode`: PI or ADAPTIVE) driving Table A.3's identified plant at a
+    set point (`LinearRig`: no friction, no chambers) through the simulated rig's valve and
+    sensors: settled at rest, then a step of its reference. (t, y [m], y0, the pipeline)."""
+    from firmware_py.motion_control.joint_space import JointController
+    from plant_emulator.linear_rig import LinearRig
+    from plant_emulator.simulated_rig import SimulatedRig
+    from protocol.interfaces import Measurements, ValveCommands
+    rig = LinearRig.table_a3(emulator_cfg, position_mm, load_kg)
+    sim = SimulatedRig(rig, emulator_cfg)
+    meas, cmd = Measurements(1, 1), ValveCommands(1)
+    cmd.active[:] = 1.0                      # the valve follows: HOLD, then ACTIVE at the next SYNC
+    cfg = controller_cfg
+    joint = JointController(cfg, 1, PERIOD_S, moving_mass_kg=cfg.actuator.moving_mass_kg,
+                            mass_offset_kg=cfg.testbench.slide_mass_kg)
+    joint.reset(position_mm * 1e-3)
+    joint.set_mode(mode)
+    yr, ar, g_axial, tau = np.full(1, position_mm * 1e-3), np.zeros(1), np.full(1, 9.81), np.zeros(1)
+
+    def cycle():
+        sim.read(meas)
+        joint.update(meas.position_m, meas.fresh, meas.force_n, yr, ar, g_axial, tau, True)
+        cmd.spool[0] = joint.u_v[0] / cfg.actuator.valve_full_scale_v
+        sim.write(cmd)
+
+    for _ in range(1500):                    # settle the estimators at rest first
+        cycle()
+    y0 = float(rig.stroke_m[0])
+    yr[0] = y0 + step_m
+    t, ys = [], []
+    for k in range(int(seconds / PERIOD_S)):
+        cycle()
+        t.append(k * PERIOD_S)
+        ys.append(float(rig.stroke_m[0]))
+    return np.array(t), np.array(ys), y0, joint

@@ -13,16 +13,13 @@ from firmware_py.motion_control.joint_space import (
     ST_KI,
     ST_KP,
     ST_MASS,
-    JointController,
     pi_antiwindup,
     schedule_eval,
     spline_coefficients,
 )
+from hil.design.simulate import linear_step
 from hil.metrics import step_response
-from plant_emulator.linear_rig import LinearRig
 from plant_emulator.params import load_config as load_emulator_config
-from plant_emulator.simulated_rig import SimulatedRig
-from protocol.interfaces import Measurements, ValveCommands
 
 T = 0.002
 
@@ -87,36 +84,9 @@ def step_metrics(t, y, y0, step):
 
 
 def closed_loop_step(cfg, mode, position_mm, load_index, step_mm=10.0, seconds=2.0):
-    """The joint pipeline driving Table A.3's plant at a set point through the simulated
-    rig's valve and sensors: settled at rest, then a step of its reference."""
-    emulator = load_emulator_config(overrides=NOISELESS)
-    rig = LinearRig.table_a3(emulator, position_mm, LOADS[load_index])
-    sim = SimulatedRig(rig, emulator)
-    meas, cmd = Measurements(1, 1), ValveCommands(1)
-    cmd.active[:] = 1.0                      # the valve follows: HOLD, then ACTIVE at the next SYNC
-    y0 = position_mm * 1e-3
-    jc = JointController(cfg, 1, T, moving_mass_kg=cfg.actuator.moving_mass_kg,
-                         mass_offset_kg=cfg.testbench.slide_mass_kg)
-    jc.reset(y0)
-    jc.set_mode(mode)
-    yr, ar, g_axial, tau = np.full(1, y0), np.zeros(1), np.full(1, 9.81), np.zeros(1)
-
-    def cycle():
-        sim.read(meas)
-        jc.update(meas.position_m, meas.fresh, meas.force_n, yr, ar, g_axial, tau, True)
-        cmd.spool[0] = jc.u_v[0] / cfg.actuator.valve_full_scale_v
-        sim.write(cmd)
-
-    for _ in range(1500):                    # settle the estimators at rest first
-        cycle()
-    y0 = float(rig.stroke_m[0])
-    yr[0] = y0 + step_mm * 1e-3
-    t, ys = [], []
-    for k in range(int(seconds / T)):
-        cycle()
-        t.append(k * T)
-        ys.append(float(rig.stroke_m[0]))
-    return np.array(t), np.array(ys), y0, jc
+    """The joint pipeline on Table A.3's plant at a set point (`hil.design.simulate.linear_step`)."""
+    return linear_step(cfg, load_emulator_config(overrides=NOISELESS), mode, position_mm, LOADS[load_index],
+                       step_mm * 1e-3, seconds)
 
 
 @pytest.mark.parametrize("position_mm", [60, 150, 240])

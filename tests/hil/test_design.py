@@ -251,6 +251,22 @@ def test_the_generated_schedule_runs_the_controller_in_a_hil_step(tmp_path):
     assert "kp_0kg_v_mm" in written and f"{tune(table_a3_plants())[0].kp_v_m * MM:.6g}" in written
 
 
+def test_design_adaptive_steps_holds_table_7_2_against_the_thesis_s_14_percent(tmp_path):
+    """Chapter 7.6.1's < 14 %: with Table 7.2's gains and Ki x 0.2 the adaptive law overshoots
+    more even on Table A.3's own linear plants; the figure beside Fig. 7.16(b)."""
+    proc = hydrapod("design", "adaptive-steps", "--ki-scales", "0.2", "--json", "--plot", tmp_path)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    row = json.loads(proc.stdout)["scales"]["0.2"]
+    for plants in ("table_a3", "emulated"):
+        assert len(row[plants]["overshoot_pct"]) == 9
+        assert row[plants]["below_thesis_everywhere"] == (row[plants]["overshoot_max_pct"] < 14.0)
+    assert row["table_a3"]["overshoot_max_pct"] > 14.0 and row["table_a3"]["not_settled"] == 0
+    assert (tmp_path / "adaptive_steps.png").stat().st_size > 10_000
+    refused = hydrapod("design", "adaptive-steps", "--ki-scales", "0.2,x")
+    assert refused.returncode == 2 and len(refused.stderr.strip().splitlines()) == 1
+    assert "--ki-scales: '0.2,x': comma-separated numbers" in refused.stderr
+
+
 @pytest.mark.parametrize("argv, culprit", [
     (["design", "robustness", "--nominal", "125,6"], "--nominal 125,6: no such plant"),
     (["design", "schedule", "--plants", "{tmp}/metrics.json"], "not a sha-identification metrics.json"),

@@ -36,6 +36,7 @@ BAD_TEXT = {
     "log": ("/nonexistent/run.blf", "/nonexistent/run.blf"),
     "--plants": ("/nonexistent/metrics.json", "/nonexistent/metrics.json"),
     "--nominal": ("120;6", "120;6"),
+    "--ki-scales": ("0.2,x", "0.2,x"),
     "--pose": ("0,0,631", "0,0,631"),
     "--controller-config": ("/nonexistent/schedule.toml", "/nonexistent/schedule.toml"),
     "--emulator-config": ("/nonexistent/rig.toml", "/nonexistent/rig.toml"),
