@@ -24,8 +24,7 @@ from firmware_py.supervision.plausibility import AttitudeCrossCheck
 from firmware_py.supervision.waypoints import HexapodCheck, TestbenchCheck
 from physics.constants import GRAVITY_M_S2
 from protocol.enums import Fault
-
-RIGS = ("testbench", "hexapod")
+from protocol.nodes import RIGS
 
 
 class TestbenchModel:

@@ -13,8 +13,7 @@ from program.cliutil import StopFlag, number_in_range, output_file
 from program.realtime import applied, cpu_latency_measure, freeze_gc, lock_memory, set_fifo
 from program.sections import read_toml
 from protocol.enums import PACINGS
-
-RIGS = ("testbench", "hexapod")
+from protocol.nodes import RIGS
 
 
 def load_run_config(args) -> object:

@@ -30,6 +30,11 @@ HOST_SENDER = "HOST"
 EMULATOR_SENDER = "EMULATOR"
 
 
+# the rigs: the test bench's one leg node, the hexapod's six and its IMU
+LEGS_OF_RIG = {"testbench": 1, "hexapod": len(LEG_NODES)}
+RIGS = tuple(LEGS_OF_RIG)
+
+
 def leg_sender(leg: int) -> str:
     """The DBC's sender name of leg `leg` (1-based)."""
     return SENDER_OF_NODE[LEG_NODES[leg - 1]]

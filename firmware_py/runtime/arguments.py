@@ -7,8 +7,7 @@ import argparse
 from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
 from program.cliutil import number_in_range, output_file
 from protocol.enums import PACINGS
-
-RIGS = ("testbench", "hexapod")
+from protocol.nodes import RIGS
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:

@@ -13,10 +13,10 @@ from protocol import canopen_layout
 from protocol.busload import MAX_LOAD, MIN_COMPUTE_WINDOW_US, bus_budget, format_budget
 from protocol.codec import CODECS
 from protocol.dbc import dbc_path
+from protocol.nodes import LEGS_OF_RIG, RIGS
 
 CLASSIC_CAN_MAX_BITRATE = 1_000_000
 DEVICES = ("hydrapod", "canopen")
-LEGS_OF_RIG = {"hexapod": 6, "testbench": 1}
 
 
 def add_parsers(sub) -> None:
@@ -26,7 +26,7 @@ def add_parsers(sub) -> None:
                                    "each device's PDOs from its EDS). Exit 0 if it fits the limits, 1 if not.")
     p.add_argument("--devices", choices=DEVICES, default="hydrapod",
                    help="hydrapod: the DBC's nodes (default); canopen: stock CiA 408/406/404 devices")
-    p.add_argument("--rig", choices=tuple(LEGS_OF_RIG), default="hexapod",
+    p.add_argument("--rig", choices=RIGS, default="hexapod",
                    help="--devices canopen: the rig whose devices are budgeted (default hexapod)")
     p.add_argument("--buses", type=number_in_range(int, 1, 6), default=1,
                    help="--devices canopen: legs split in order across this many buses, one SYNC each (default 1)")
