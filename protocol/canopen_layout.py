@@ -13,12 +13,12 @@ import math
 import tomllib
 from dataclasses import dataclass
 
+from protocol.codec import STANDARD_ID_MASK
 from protocol.dbc import CONTROLLER_NODE, Schedule, schedules
 from protocol.devices import DEVICES_DIR, object_dictionary
 
 LAYOUT_FILE = DEVICES_DIR / "canopen-layout.toml"
 COB_ID_INVALID = 0x80000000          # bit 31 of a PDO's COB-ID: the PDO does not exist
-STANDARD_ID_MASK = 0x7FF
 EMCY_DLC = 8
 HEARTBEAT_DLC = 1
 LEG_DEVICES = ("valve", "encoder", "leg_sensors")
@@ -33,6 +33,7 @@ class Device:
     eds: str
     node: int
     sync_start: int = 0        # every-n-th-SYNC TPDOs' start value (0: the EDS's)
+    leg: int | None = None     # the leg it belongs to (None: the platform's, the IMU)
 
 
 def load_layout(n_legs: int, path=LAYOUT_FILE) -> list[Device]:
@@ -45,7 +46,7 @@ def load_layout(n_legs: int, path=LAYOUT_FILE) -> list[Device]:
             entry = layout[kind]
             starts = entry.get("sync_start", [])
             devices.append(Device(f"LEG{leg}_{kind.upper()}", entry["eds"], entry["node"] + leg - 1,
-                                  starts[leg - 1] if starts else 0))
+                                  starts[leg - 1] if starts else 0, leg))
     if n_legs == 6:
         devices.append(Device("IMU", layout["imu"]["eds"], layout["imu"]["node"]))
     return devices
@@ -97,8 +98,7 @@ def bus_schedules(n_legs: int, buses: int = 1) -> list[tuple[Schedule, ...]]:
         legs = legs_on_bus(n_legs, buses, bus)
         frames = [own["SYNC"]] + ([own[name] for name in OWN_FRAMES[1:]] if bus == 0 else [])
         for device in devices:
-            leg = int(device.name[3]) if device.name.startswith("LEG") else None
-            if (leg in legs) or (leg is None and bus == 0):
+            if device.leg in legs or (device.leg is None and bus == 0):
                 frames += device_schedules(device)
         out.append(tuple(sorted(frames, key=lambda s: s.frame_id)))
     return out

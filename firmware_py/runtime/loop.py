@@ -460,7 +460,7 @@ class ControllerLoop:
         cfg = self.cfg
         give_up = self.clock() + cfg.timing.activation_timeout_s
         self._wait(lambda state: state != -1, "heartbeat", give_up, should_stop)
-        found = identify(_CountedSend(self), self.expected_devices(), self._receive, self.dispatch, self.clock,
+        found = identify(_CountedSend(self), self.expected_devices(), self.bus.recv, self.dispatch, self.clock,
                          cfg.devices.sdo_timeout_s)
         self._booted.clear()
         revisions = sorted({f"{identity.revision:#x}" for identity in found.values()})
@@ -487,16 +487,13 @@ class ControllerLoop:
         in FAULT); False, with the refusal logged, when one is not its configured device."""
         expected = self.expected_devices()
         try:
-            identify(_CountedSend(self), {n: expected[n] for n in sorted(self._booted)}, self._receive, self.dispatch,
+            identify(_CountedSend(self), {n: expected[n] for n in sorted(self._booted)}, self.bus.recv, self.dispatch,
                      self.clock, self.cfg.devices.sdo_timeout_s)
         except IdentityError as refusal:
             self.log(f"restart refused: {refusal}")
             return False
         self._booted.clear()
         return True
-
-    def _receive(self, timeout_s: float):
-        return self.bus.recv(timeout=timeout_s)
 
     def _wait(self, ready, what: str, give_up: float, should_stop, every_200_ms=None) -> None:
         """Receive until `ready(state)` holds for every node's NMT state (heard: not -1);

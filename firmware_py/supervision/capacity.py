@@ -73,11 +73,6 @@ class SupplyBudget:
         return largest_deficit(force_n, velocity_m_s, dt_s, *self.valve_map, self.hydraulics, self.friction,
                                float(self.power[pu.PU_SET]), float(self.power[pu.PU_PUMP]), initial_m3)
 
-    def drawn_m3(self, supply_pa: float) -> float:
-        """What the line and accumulator miss at a measured supply (0 at or above the set)."""
-        set_pa = float(self.power[pu.PU_SET])
-        return pu.usable_volume(self.power, set_pa, supply_pa) if supply_pa < set_pa else 0.0
-
 
 @njit(cache=True)
 def largest_deficit(force_n, velocity_m_s, dt_s, forces, velocities, spool, pressure_a, pressure_b, hp, fp,

@@ -41,6 +41,11 @@ class Waypoint:
     drawn_after_m3: float = 0.0  # the oil its segment leaves drawn from the supply (the next one's start)
 
 
+def refused(result: Ack) -> tuple:
+    """A check's refusal: (result, no strokes, no time scale, no oil drawn)."""
+    return result, None, math.nan, math.nan
+
+
 class TestbenchCheck:
     """One leg: Z within the stroke's guard, a bounded speed, and within the leg's capacity."""
 
@@ -56,10 +61,10 @@ class TestbenchCheck:
         margin = self.margin_m
         if max(abs(pos[0]), abs(pos[1]), *(abs(r) for r in rot)) > 1e-9 or not (
                 margin <= pos[2] <= self.stroke_m - margin):
-            return Ack.OUTSIDE_WORKSPACE, None, math.nan, chain.drawn_m3
+            return refused(Ack.OUTSIDE_WORKSPACE)
         strokes = np.array([pos[2]])
         if not peak_velocity_ok(self.waypoints, chain, strokes, step):
-            return Ack.TOO_FAST, None, math.nan, chain.drawn_m3
+            return refused(Ack.TOO_FAST)
         if step:
             return Ack.ACCEPTED, strokes, math.nan, chain.drawn_m3
         trajectory, t0 = chain.trajectory(strokes)
@@ -91,12 +96,12 @@ class HexapodCheck:
         target, quat = np.array(pos, dtype=float), rpy_to_quat(*rot)
         report = self.poses.check(target, quat)
         if not report[OUT_REACHABLE]:
-            return Ack.OUTSIDE_WORKSPACE, None, math.nan, chain.drawn_m3
+            return refused(Ack.OUTSIDE_WORKSPACE)
         if report[OUT_CONDITION] < MIN_CONDITION_INDEX:
-            return Ack.SINGULAR, None, math.nan, chain.drawn_m3
+            return refused(Ack.SINGULAR)
         strokes = self.poses.lengths - g.leg_min_m
         if not peak_velocity_ok(self.waypoints, chain, strokes, step):
-            return Ack.TOO_FAST, None, math.nan, chain.drawn_m3
+            return refused(Ack.TOO_FAST)
         # the joint-space path between the waypoints, back from the target
         dk, previous = self.dk, chain.start
         dk.pose[0:3], dk.pose[3:7] = target, quat
@@ -104,33 +109,33 @@ class HexapodCheck:
         for s in self.fractions:
             dk.solve(g.leg_min_m + previous + s * (strokes - previous))
             if not dk.converged:
-                return Ack.OUTSIDE_WORKSPACE, None, math.nan, chain.drawn_m3
+                return refused(Ack.OUTSIDE_WORKSPACE)
             report = self.poses.check(dk.pose[0:3], dk.pose[3:7])
             if not report[OUT_REACHABLE]:
-                return Ack.OUTSIDE_WORKSPACE, None, math.nan, chain.drawn_m3
+                return refused(Ack.OUTSIDE_WORKSPACE)
             singular |= report[OUT_CONDITION] < MIN_CONDITION_INDEX
         if singular:
-            return Ack.SINGULAR, None, math.nan, chain.drawn_m3
+            return refused(Ack.SINGULAR)
         if step:
             return Ack.ACCEPTED, strokes, math.nan, chain.drawn_m3
         trajectory, t0 = chain.trajectory(strokes)
         try:
             loads = self.loads.loads(trajectory, t0, trajectory.duration_s, chain.sample_dt_s())
         except ValueError:                 # a pose between the checked ones: DK lost or singular
-            return Ack.SINGULAR, None, math.nan, chain.drawn_m3
+            return refused(Ack.SINGULAR)
         return capacity_verdict(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3)
 
 
 def capacity_verdict(waypoints: Waypoints, capacity: LegCapacity, loads, strokes, drawn_m3: float = 0.0):
     """(ACCEPTED, strokes, NaN, the oil drawn at the segment's end), or (BEYOND_CAPACITY, None,
-    the smallest time scale that fits (inf: none), `drawn_m3`); `drawn_m3`: the oil the supply
-    misses when the segment starts (the motions before it)."""
+    the smallest time scale that fits (inf: none), NaN); `drawn_m3`: the oil the supply misses
+    when the segment starts (the motions before it)."""
     share, lag_max = waypoints.capacity_share, waypoints.lag_max_m
     verdict = judge(capacity, loads, 1.0, share, lag_max, drawn_m3)
     if verdict.within:
         return Ack.ACCEPTED, strokes, math.nan, verdict.end_deficit_m3
     scale = needed_scale(capacity, loads, share, lag_max, beyond=1.0, initial_m3=drawn_m3)
-    return Ack.BEYOND_CAPACITY, None, math.inf if math.isnan(scale) else scale, drawn_m3
+    return Ack.BEYOND_CAPACITY, None, math.inf if math.isnan(scale) else scale, math.nan
 
 
 @dataclass

@@ -81,12 +81,12 @@ class OperatingPoint:
     kp: float = math.nan          # eq. 4.69: 1/s (negative: the valve's pressure coefficients)
     mass_kg: float = math.nan
     damping_ns_m: float = math.nan
-    kd_area_m2: float = math.nan  # the piston's area the constants are per
+    area_m2: float = math.nan     # the piston's area the constants are per
 
     def chapter_4_4(self) -> dict:
         """Eq. 4.71-4.73 from Kx, Kd, Kp, m and sigma (SI) beside the fitted k01, k02, z0, and
         eq. 4.70's b0 beside the pole pair's."""
-        area = self.kd_area_m2
+        area = self.area_m2
         b0 = (area * self.kd - self.damping_ns_m * self.kp) / self.mass_kg
         return {"k01_mm_s_v": float(area * self.kx / (self.mass_kg * self.b0) / MM),
                 "k02_mm_n": float(1.0 / (self.mass_kg * self.b0) / MM), "z0": float(-self.kp), "b0": float(b0)}
