@@ -25,6 +25,7 @@ from hil.processes import Child, ChildFailed, describe_status
 from hil.report import write_outputs
 from hil.scenario import Scenario
 from plant_emulator.params import LOCKSTEP_SYNC_TIMEOUT_PERIODS
+from program.cliutil import output_dir
 from program.errors import UserInputError
 from program.realtime import freeze_gc, thaw_gc
 from protocol.bus import BusSpec, default_bus_spec, open_bus, parse_bus_spec
@@ -315,11 +316,7 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
     if pacing not in scenario.pacings:
         raise UserInputError(f"--pacing {pacing}: {scenario.name} runs in {' or '.join(scenario.pacings)} pacing")
     spec = resolve_bus(options.bus)
-    out = Path(options.out_dir)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise UserInputError(f"--out {out}: cannot create the directory ({error.strerror})") from None
+    out = output_dir(options.out_dir)
     for stale in ("metrics.json", "report.md", LOG_NAME):
         (out / stale).unlink(missing_ok=True)
     for base in ("controller", "emulator"):       # a restarted child's files from an earlier run
@@ -399,9 +396,6 @@ def _plant_diverged(children: dict) -> str | None:
 def analyze_log(scenario: Scenario, log_path: Path, out: Path) -> dict:
     """`hydrapod hil analyze`: the same analysis on any recorded log (rig or emulator)."""
     log = read_log(log_path)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise UserInputError(f"--out {out}: cannot create the directory ({error.strerror})") from None
+    output_dir(out)
     return write_outputs(scenario, log, out, extra={"analysed_log": str(log_path)})
 

@@ -46,6 +46,16 @@ def number_in_range(kind: type, low: float | None = None, high: float | None = N
     return parse
 
 
+def output_dir(path: str | Path, option: str = "--out") -> Path:
+    """A directory a command writes into, made now; one line naming `option` when it cannot be."""
+    out = Path(path)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise UserInputError(f"{option} {out}: cannot create the directory ({error.strerror})") from None
+    return out
+
+
 def output_file(text: str) -> str:
     """argparse `type=` for a file written at the end of a run (a summary): its directory
     must exist and be writable now, not after an hour of running."""

@@ -7,7 +7,7 @@ import json
 import re
 from pathlib import Path
 
-from program.cliutil import number_in_range
+from program.cliutil import number_in_range, output_dir
 from program.errors import UserInputError
 
 SCHEDULER = re.compile(r"^(tcp|tls|inproc|ucx)://[^\s/]+(:\d+)?$")
@@ -20,11 +20,7 @@ def _run(args) -> int:
     if args.scheduler is not None and not SCHEDULER.match(args.scheduler):
         raise UserInputError(f"--scheduler {args.scheduler!r}: not a scheduler address (e.g. tcp://host:8786)")
     campaign = load_campaign(args.spec)                   # the whole spec is checked before anything runs
-    out = Path(args.out) if args.out else Path("hil-out") / "campaigns" / campaign.name
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise UserInputError(f"--out {out}: cannot create the directory ({error.strerror})") from None
+    out = output_dir(args.out or Path("hil-out") / "campaigns" / campaign.name)
     summary = run_campaign(campaign, out, scheduler=args.scheduler, workers=args.workers, resume=args.resume)
     from hil.campaign.engine import read_results
     rows = read_results(out)

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from physics.constants import BAR
-from program.cliutil import number_in_range, output_file
+from program.cliutil import number_in_range, output_dir, output_file
 from program.errors import UserInputError
 
 THESIS_KP_V_MM, THESIS_KI_V_MM_S = 0.085, 0.46      # chapter 7.4.2
@@ -67,19 +67,10 @@ def _ki_scales(text: str) -> tuple[float, ...]:
     return scales
 
 
-def _out_dir(text: str | None, default: str) -> Path:
-    out = Path(text) if text else Path(default)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise UserInputError(f"--out {out}: cannot create the directory ({error.strerror})") from None
-    return out
-
-
 def _robustness(args) -> int:
     from hil.design.plants import plant_set
     from hil.design.reports import find_plant, format_robustness, plot_nyquist, plot_uncertainty, robustness_doc
-    out = _out_dir(args.out, "hil-out/design-robustness")
+    out = output_dir(args.out or "hil-out/design-robustness")
     plants = plant_set(args.plants)
     if args.nominal is not None and find_plant(plants, *args.nominal) is None:
         raise UserInputError(f"--nominal {args.nominal[0]:g},{args.nominal[1]:g}: no such plant in {args.plants} "
@@ -102,7 +93,7 @@ def _adaptive_steps(args) -> int:
     from hil.design.adaptive_steps import adaptive_steps, format_steps, plot_steps
     doc = adaptive_steps(args.ki_scales)
     if args.plot is not None:
-        figure = _out_dir(args.plot, args.plot) / "adaptive_steps.png"
+        figure = output_dir(args.plot, "--plot") / "adaptive_steps.png"
         plot_steps(doc, figure)
         doc["figures"] = [str(figure)]
     print(json.dumps(doc, indent=1) if args.json else format_steps(doc))
@@ -119,7 +110,7 @@ def _schedule(args) -> int:
     write_schedule(out, schedule_toml(tunings, args.plants, args.ki_scale))
     doc["file"] = str(out)
     if args.plot is not None:
-        figure = _out_dir(args.plot, args.plot) / "ki_detuning.png"
+        figure = output_dir(args.plot, "--plot") / "ki_detuning.png"
         plot_ki_detuning(tunings, figure)
         doc["figures"] = [str(figure)]
     print(json.dumps(doc, indent=1) if args.json else format_schedule(doc, str(out)))
@@ -160,7 +151,7 @@ def _modes(args) -> int:
     if not report.reachable[0]:
         raise UserInputError(f"--pose {', '.join(f'{v:g}' for v in np.r_[position * 1e3, np.degrees(rpy)])}: "
                              f"outside the hexapod's workspace")
-    out = _out_dir(args.plot, args.plot) if args.plot is not None else None
+    out = output_dir(args.plot, "--plot") if args.plot is not None else None
     cfg = load_config()
     supply = None if args.supply_bar is None else args.supply_bar * 1e5
     doc = model_doc(modal_model(cfg, position, rpy, args.payload_kg, supply))

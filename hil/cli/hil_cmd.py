@@ -8,7 +8,7 @@ import math
 from pathlib import Path
 
 from physics.constants import MM
-from program.cliutil import number_in_range
+from program.cliutil import number_in_range, output_dir
 from program.errors import UserInputError
 
 
@@ -124,11 +124,7 @@ def _config_sections(path: str | None, validate) -> dict:
 
 def _faults(args) -> int:
     from hil.faults import format_terminal, run_matrix
-    out = Path(args.out) if args.out else Path("hil-out") / "faults"
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise UserInputError(f"--out {out}: cannot create the directory ({error.strerror})") from None
+    out = output_dir(args.out or Path("hil-out") / "faults")
     doc = run_matrix(out, short=args.short, bus=args.bus, start_timeout_s=args.start_timeout_s,
                      pacings=(args.pacing,) if args.pacing else ("lockstep", "realtime"))
     print(json.dumps(doc, indent=1, default=str) if args.json else format_terminal(doc))

@@ -4,12 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 from firmware_py.mechanics.geometry import default_geometry, load_geometry_file
 from firmware_py.mechanics.workspace import MIN_CONDITION_INDEX
-from program.cliutil import number_in_range
-from program.errors import UserInputError
+from program.cliutil import number_in_range, output_dir
 
 
 def _geometry(args):
@@ -28,21 +26,12 @@ def _dk_eval(args) -> int:
     return _print(args, report, format_evaluation(report))
 
 
-def _plot_dir(text: str) -> Path:
-    out = Path(text)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise UserInputError(f"--plot {text}: cannot create the directory ({error.strerror})") from None
-    return out
-
-
 def _workspace(args) -> int:
     from hil.tools.workspace_figures import workspace_extents
     geometry = _geometry(args)
     report = {"extents": workspace_extents(geometry), "min_condition_index": MIN_CONDITION_INDEX}
     if args.plot:
-        out = _plot_dir(args.plot)
+        out = output_dir(args.plot, "--plot")
         from hil.tools.workspace_plots import plot_workspace
         report["plots"] = [str(p) for p in plot_workspace(geometry, out, int(args.resolution))]
     text = "\n".join([f"{k:>26}: {v:8.1f}" for k, v in report["extents"].items()] +
@@ -58,7 +47,7 @@ def _validate_dynamics(args) -> int:
     report = {"trajectories": rows}
     text = format_validation(rows)
     if args.plot is not None:
-        out = _plot_dir(args.plot)
+        out = output_dir(args.plot, "--plot")
         report["figures"] = [str(out / name) for name in plot_validation(rows, series, out)]
         text += f"\nwrote {', '.join(report['figures'])}"
     return _print(args, report, text)
