@@ -158,9 +158,12 @@ class LoadPressure(Section):
 
 @frozen
 class Pi(Section):
-    """The robust PI (chapter 7.4), gains in V/m and V/(m s)."""
+    """The robust PI (chapter 7.4), gains in V/m and V/(m s); the D term of 7.3's classical
+    loops (0 in the PI) on the measurement, through a first-order filter."""
     kp_v_m: float = key("kp_v_mm", 0.0, 100.0, per=MM)
     ki_v_m_s: float = key("ki_v_mm_s", 0.0, 1000.0, per=MM)
+    kd_v_s_m: float = key("kd_v_s_mm", 0.0, 10.0, per=MM)
+    derivative_filter_hz: float = key("derivative_filter_hz", 1.0, 240.0)
     saturation_v: float = key("saturation_v", 0.01, 24.0)
 
 

@@ -95,16 +95,26 @@ def pi_antiwindup(error, integral, leg, kp, ki, extra, period_s, u_max):
     return min(max(u, -u_max), u_max)
 
 
+@njit(cache=True)
+def filtered_derivative(state, y, alpha, period_s):
+    """The D term's dy/dt: the backward difference through a first-order low-pass
+    (pole alpha = exp(-2 pi f T)); state = [derivative, previous y], updated in place."""
+    state[0] = alpha * state[0] + (1.0 - alpha) * (y - state[1]) / period_s
+    state[1] = y
+    return state[0]
+
+
 # -- the per-leg pipeline --------------------------------------------------------------------
 
 # parameter vector
 (JP_T, JP_R_BASE, JP_R_GAIN, JP_V_REF, JP_LAMBDA, JP_P_MAX, JP_M_MAX, JP_RLS_WN, JP_RLS_ZETA,
  JP_D_WN, JP_D_ZETA, JP_KI_SCALE, JP_MASS_OFFSET, JP_PI_KP, JP_PI_KI, JP_KPL, JP_U_MAX,
- JP_MOVING_MASS, JP_AREA, JP_FF_SCALE, JP_KP_SCALE, JP_OBSERVER_K, JP_SIZE) = range(23)
+ JP_MOVING_MASS, JP_AREA, JP_FF_SCALE, JP_KP_SCALE, JP_OBSERVER_K, JP_PI_KD, JP_DY_ALPHA, JP_SIZE) = range(25)
 # state and outputs per leg
 # (each 2nd-order filter keeps 3 columns: F u, s F u, the previous input)
+# (the D term keeps 2: its filtered dy/dt, the previous y)
 (ST_Z, ST_MASS, ST_RLS_P, ST_INTEGRAL, ST_ACCEL_D, ST_FRICTION, ST_PL, ST_PLR, ST_KP, ST_KI, ST_ERROR, ST_U,
- ST_FY, ST_FF, ST_FG, ST_D, ST_SIZE) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 15, 18, 21, 24)
+ ST_FY, ST_FF, ST_FG, ST_D, ST_DY, ST_SIZE) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 15, 18, 21, 24, 26)
 
 
 @njit(cache=True)
@@ -126,6 +136,7 @@ def legs_update(mode, jp, position, fresh_legs, force_n, yr, ar, g_axial, tau_n,
         force = force_n[leg]
         friction = lugre_observer_step(fp, jp[JP_OBSERVER_K], st[leg], ST_Z, x[1], error, period)   # eq. 7.30-7.32
         accel_d = filter_step(st[leg, ST_D:ST_D + 3], d_ad, d_bd, jp[JP_D_WN], jp[JP_D_ZETA], y)
+        dy = filtered_derivative(st[leg, ST_DY:ST_DY + 2], y, jp[JP_DY_ALPHA], period)
         # eq. 7.37 (corrected): m_L F(s)[s^2 y + g_ax] = F(s) F_s
         phi = filter_step(st[leg, ST_FY:ST_FY + 3], rls_ad, rls_bd, jp[JP_RLS_WN], jp[JP_RLS_ZETA], y)
         phi += st[leg, ST_FG]
@@ -142,7 +153,7 @@ def legs_update(mode, jp, position, fresh_legs, force_n, yr, ar, g_axial, tau_n,
         else:                                                                                   # eq. 7.40
             plr = piston_inverse_dynamics(jp[JP_MOVING_MASS] + mass, ar[leg], g_ax, friction, jp[JP_AREA])
         if mode == PI:
-            kp, ki, extra = jp[JP_PI_KP], jp[JP_PI_KI], 0.0
+            kp, ki, extra = jp[JP_PI_KP], jp[JP_PI_KI], -jp[JP_PI_KD] * dy      # D on the measurement
         else:                                                                                   # eq. 7.29
             load = mass - jp[JP_MASS_OFFSET]
             kp = jp[JP_KP_SCALE] * schedule_eval(breaks, kp_coef, loads, y, load)
@@ -192,6 +203,8 @@ class JointController:
         jp[JP_KP_SCALE] = kp_factor
         jp[JP_PI_KP] = cfg.pi.kp_v_m * kp_factor
         jp[JP_PI_KI] = cfg.pi.ki_v_m_s * ki_factor
+        jp[JP_PI_KD] = cfg.pi.kd_v_s_m * kp_factor
+        jp[JP_DY_ALPHA] = math.exp(-2.0 * math.pi * cfg.pi.derivative_filter_hz * period_s)
         jp[JP_KPL] = cfg.adaptive.kpl_v_pa
         jp[JP_U_MAX] = cfg.pi.saturation_v * cfg.limits.spool_max
         jp[JP_MOVING_MASS] = moving_mass_kg
@@ -236,6 +249,7 @@ class JointController:
                               (ST_FF, cfg.mass_estimator.initial_kg * g)):
             self.st[:, column] = value          # F u
             self.st[:, column + 2] = value      # previous input: at rest
+        self.st[:, ST_DY + 1] = self.kalman_x[:, 0]
 
     def restart_at(self, position_m, gravity_axial=None) -> None:
         """As `reset`, but the load's mass estimate (RLS) and its covariance are kept: after a

@@ -110,23 +110,54 @@ def moving_mass_kg(cfg: EmulatorConfig, load_kg: float) -> float:
     return cfg.actuator.piston_rod_mass_kg + cfg.guide.slide_mass_kg + load_kg
 
 
-def linearise(cfg: EmulatorConfig, position_mm: float, load_kg: float) -> OperatingPoint:
+@dataclass
+class StateSpace:
+    """The emulator's actuator linearised at rest at a stroke: x' = A x + b u + f Fe, state
+    x = [v, PA, PB, spool] about x0, u the valve input (V) about u0, Fe an external force (N)
+    against the piston; `damping` the viscous slopes kept in A."""
+    a: np.ndarray
+    b: np.ndarray
+    f: np.ndarray
+    x0: np.ndarray
+    u0_v: float
+    mass_kg: float
+    damping_ns_m: float
+    converged: bool
+
+
+def state_space(cfg: EmulatorConfig, position_mm: float, load_kg: float, extra_force_n: float = 0.0) -> StateSpace:
+    """Linearised where the chambers hold the moving mass's weight plus `extra_force_n` (a
+    sliding piston's steady friction, say) with the spool that holds it."""
     y = position_mm * MM
     mass = moving_mass_kg(cfg, load_kg)
     fp = cfg.friction.vector
     damping = 0.5 * (fp[lugre.S2_POS] + fp[lugre.S2_NEG]) + cfg.guide.viscous_ns_m
-    pa, pb, spool, converged = hy.steady_state(y, mass * GRAVITY_M_S2, cfg.actuator.supply_pressure_pa, cfg.hp)
+    pa, pb, spool, converged = hy.steady_state(y, mass * GRAVITY_M_S2 + extra_force_n,
+                                               cfg.actuator.supply_pressure_pa, cfg.hp)
     x0 = np.array([0.0, pa, pb, spool])
     u0 = spool * cfg.actuator.valve_full_scale_v
     steps = np.array([1e-6, 10.0, 10.0, 1e-7])
+
+    def rhs(x, u_v, external_n=0.0):
+        return _rhs(x, u_v, y, mass, damping, cfg, external_n + extra_force_n)
     a_mat = np.empty((4, 4))
     for j in range(4):
         dx = np.zeros(4)
         dx[j] = steps[j]
-        a_mat[:, j] = (_rhs(x0 + dx, u0, y, mass, damping, cfg) - _rhs(x0 - dx, u0, y, mass, damping, cfg)) \
-            / (2 * steps[j])
+        a_mat[:, j] = (rhs(x0 + dx, u0) - rhs(x0 - dx, u0)) / (2 * steps[j])
     du = 1e-6 * cfg.actuator.valve_full_scale_v
-    b_vec = (_rhs(x0, u0 + du, y, mass, damping, cfg) - _rhs(x0, u0 - du, y, mass, damping, cfg)) / (2 * du)
+    df = 1e-3
+    return StateSpace(a_mat, (rhs(x0, u0 + du) - rhs(x0, u0 - du)) / (2 * du),
+                      (rhs(x0, u0, df) - rhs(x0, u0, -df)) / (2 * df), x0, float(u0), mass, damping,
+                      bool(converged))
+
+
+def linearise(cfg: EmulatorConfig, position_mm: float, load_kg: float) -> OperatingPoint:
+    y = position_mm * MM
+    space = state_space(cfg, position_mm, load_kg)
+    a_mat, b_vec, f_vec, mass, damping = space.a, space.b, space.f, space.mass_kg, space.damping_ns_m
+    _, pa, pb, spool = space.x0
+    converged = space.converged
     poles = np.linalg.eigvals(a_mat)
     complex_poles = poles[np.abs(poles.imag) > 1e-9]
     if len(complex_poles):
@@ -135,8 +166,6 @@ def linearise(cfg: EmulatorConfig, position_mm: float, load_kg: float) -> Operat
     else:                                            # over-damped: the two slowest poles
         slow = poles[np.argsort(np.abs(poles))[:2]].real
         b0, b1 = slow[0] * slow[1], -(slow[0] + slow[1])
-    df = 1e-3
-    f_vec = (_rhs(x0, u0, y, mass, damping, cfg, df) - _rhs(x0, u0, y, mass, damping, cfg, -df)) / (2 * df)
     eye = np.eye(4)
     s_band = 1j * BAND_RAD_S
     response = np.array([np.linalg.solve(1j * w * eye - a_mat, b_vec)[0] for w in BAND_RAD_S])  # v/u, m/s/V

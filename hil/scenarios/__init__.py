@@ -7,11 +7,13 @@ from hil.scenarios.friction import FrictionPresliding, FrictionSteady
 from hil.scenarios.kick import HexapodKick
 from hil.scenarios.pm import PmCircle, PmDiagonal
 from hil.scenarios.rt_loop import RealtimeHexapod, RealtimeTestbench
+from hil.scenarios.sha_classical import ShaClassical
 from hil.scenarios.sha_identification import ShaIdentification
 from hil.scenarios.sha_step import ShaStep
 from hil.scenarios.sha_tracking import ShaPerturbation, ShaTracking
 from hil.scenarios.soak import Soak
+from hil.scenarios.stick_slip import ShaStickSlip
 
 SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
-    ShaStep(), ShaTracking(), ShaPerturbation(), ShaIdentification(), PmDiagonal(), PmCircle(),
-    RealtimeTestbench(), RealtimeHexapod(), Soak(), FrictionSteady(), FrictionPresliding(), HexapodKick())}
+    ShaStep(), ShaTracking(), ShaPerturbation(), ShaIdentification(), ShaClassical(), ShaStickSlip(), PmDiagonal(),
+    PmCircle(), RealtimeTestbench(), RealtimeHexapod(), Soak(), FrictionSteady(), FrictionPresliding(), HexapodKick())}

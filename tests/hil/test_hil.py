@@ -10,6 +10,8 @@ import pytest
 
 from firmware_py.supervision.diagnostics import PEAK_KEYS
 from hil.logdata import frames_by_sender, frames_counted_by_senders, read_log
+from hil.scenarios.sha_classical import KD_V_S_MM, LOOPS
+from physics.constants import MM
 from protocol.dbc import dbc_path
 from tests.support.cli import hydrapod, reanalysed
 
@@ -142,6 +144,8 @@ def test_an_injected_fault_lasts_the_whole_experiment(tmp_path):
     (["hil", "run", "sha-step", "--controllers", "pi,fuzzy"], "fuzzy"),
     (["hil", "run", "sha-step", "--controllers", "model-based"], "model-based"),
     (["hil", "run", "pm-circle", "--loads", "3"], "pm-circle"),
+    (["hil", "run", "sha-classical", "--controllers", "adaptive"], "adaptive"),
+    (["hil", "run", "sha-stick-slip", "--positions", "50"], "sha-stick-slip"),
     (["hil", "run", "pm-circle", "--positions", "50"], "pm-circle"),
     (["hil", "run", "sha-step", "--positions", "50,300"], "300 mm"),
     (["hil", "run", "pm-circle", "--emulator-config", "/nonexistent/plant.toml"], "plant.toml"),
@@ -187,6 +191,13 @@ SCENARIO_RUNS = {
                      and set(m["sync_interval_error_us"]) >= {"p50", "p99", "max"}),
     "rt-hexapod": (["--short"], lambda m: m["seconds"] >= 9.5
                    and set(m["ctrl_status"]["period_error_us"]) >= {"p50", "p99", "max"}),
+    # the loop of each step identified from the log: the D term the controller applied is the one configured
+    "sha-classical": (["--short"], lambda m: {(r["loop"], r["load_kg"]) for r in m["steps"]}
+                      == {(loop, 6.0) for loop in LOOPS}
+                      and all(abs(r["kd"] * MM / KD_V_S_MM - 1.0) < 0.05 for r in m["steps"] if "d" in r["loop"])),
+    # the short variant: 6 kg, a ramp inside the Stribeck region (cycles) and one above it (none)
+    "sha-stick-slip": (["--short"], lambda m: {(r["load_kg"], r["speed_mm_s"], r["cycling"]) for r in m["ramps"]}
+                       == {(6.0, 8.0, True), (6.0, 20.0, False)}),
     "sha-identification": (["--short"], lambda m: (
         {(r["set_point_mm"], r["load_kg"], tuple(r["gains_v_mm"])) for r in m["points"]}
         == {(p, load, (0.25, 0.3)) for p in (60.0, 210.0) for load in (0.0, 6.0)})),
