@@ -91,9 +91,10 @@ def _robustness(args) -> int:
 
 def _adaptive_steps(args) -> int:
     from hil.design.adaptive_steps import adaptive_steps, format_steps, plot_steps
+    out = output_dir(args.plot, "--plot") if args.plot is not None else None     # before minutes of work
     doc = adaptive_steps(args.ki_scales)
-    if args.plot is not None:
-        figure = output_dir(args.plot, "--plot") / "adaptive_steps.png"
+    if out is not None:
+        figure = out / "adaptive_steps.png"
         plot_steps(doc, figure)
         doc["figures"] = [str(figure)]
     print(json.dumps(doc, indent=1) if args.json else format_steps(doc))
@@ -105,12 +106,13 @@ def _schedule(args) -> int:
     from hil.design.reports import format_schedule, plot_ki_detuning, schedule_doc
     from hil.design.schedule import schedule_toml, write_schedule
     out = Path(args.out)
+    figures = output_dir(args.plot, "--plot") if args.plot is not None else None
     plants = plant_set(args.plants)
     doc, tunings = schedule_doc(plants, args.plants, args.kp_fraction, args.ti_fraction, args.ki_scale)
     write_schedule(out, schedule_toml(tunings, args.plants, args.ki_scale))
     doc["file"] = str(out)
-    if args.plot is not None:
-        figure = output_dir(args.plot, "--plot") / "ki_detuning.png"
+    if figures is not None:
+        figure = figures / "ki_detuning.png"
         plot_ki_detuning(tunings, figure)
         doc["figures"] = [str(figure)]
     print(json.dumps(doc, indent=1) if args.json else format_schedule(doc, str(out)))

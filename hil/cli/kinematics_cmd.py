@@ -29,9 +29,9 @@ def _dk_eval(args) -> int:
 def _workspace(args) -> int:
     from hil.tools.workspace_figures import workspace_extents
     geometry = _geometry(args)
+    out = output_dir(args.plot, "--plot") if args.plot else None
     report = {"extents": workspace_extents(geometry), "min_condition_index": MIN_CONDITION_INDEX}
-    if args.plot:
-        out = output_dir(args.plot, "--plot")
+    if out is not None:
         from hil.tools.workspace_plots import plot_workspace
         report["plots"] = [str(p) for p in plot_workspace(geometry, out, int(args.resolution))]
     text = "\n".join([f"{k:>26}: {v:8.1f}" for k, v in report["extents"].items()] +
@@ -42,12 +42,12 @@ def _workspace(args) -> int:
 def _validate_dynamics(args) -> int:
     from hil.tools.validate_dynamics import format_validation, plot_validation, validate_all
     from plant_emulator.rig_geometry import read_rig_geometry
+    out = output_dir(args.plot, "--plot") if args.plot is not None else None     # before the work
     series = []
     rows = validate_all(_geometry(args), read_rig_geometry(args.geometry), series)
     report = {"trajectories": rows}
     text = format_validation(rows)
-    if args.plot is not None:
-        out = output_dir(args.plot, "--plot")
+    if out is not None:
         report["figures"] = [str(out / name) for name in plot_validation(rows, series, out)]
         text += f"\nwrote {', '.join(report['figures'])}"
     return _print(args, report, text)

@@ -132,10 +132,18 @@ class Soak(Scenario):
         host.wait_until(lambda: host.state not in moving, run.cycles(1.0), what=None)
         if host.state is not State.READY:
             self._recover(run, "at the end")
-        # home: the last recovery's move, and a clean end
-        host.waypoint(poses[-1][0], segment_time_s=MOVE_S, accel_time_s=MOVE_ACCEL_S,
-                      flags=WaypointFlag.LAST | WaypointFlag.START)
-        run.wait_motion_done(MOVE_S + 2.0)
+        # home: the last recovery's move, and a clean end; a machine stall may fault it as it
+        # may fault any move: recovered and moved again, as RECOVERY_TRIES allows
+        for _ in range(RECOVERY_TRIES):
+            try:
+                host.waypoint(poses[-1][0], segment_time_s=MOVE_S, accel_time_s=MOVE_ACCEL_S,
+                              flags=WaypointFlag.LAST | WaypointFlag.START)
+                run.wait_motion_done(MOVE_S + 2.0)
+                return
+            except HostError as error:
+                self.notes.append(f"home move: {error}")
+            self._recover(run, "after the home move")
+        raise HostError(f"soak: the home move failed {RECOVERY_TRIES} times")
 
     def _recover(self, run, why: str) -> None:
         """RESET + ENABLE after a fault; RECOVERY_TRIES failures in a row end the soak."""
