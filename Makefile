@@ -13,6 +13,10 @@ STAMP   = $(VENV)/.installed
 WORKERS ?= 2
 PYTEST  = $(PY) -m pytest -p no:cacheprovider
 
+# every process imports the project's modules: let Python keep their bytecode (a shell or CI
+# that sets PYTHONDONTWRITEBYTECODE would have each HIL child recompile them, 20x slower in the VM)
+export PYTHONDONTWRITEBYTECODE :=
+
 PACING ?= realtime
 demo: $(STAMP)
 	$(VENV)/bin/hydrapod hil run pm-circle --pacing $(PACING) --bus default --out hil-out
