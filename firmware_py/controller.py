@@ -379,6 +379,8 @@ class Controller:
         elif self.reinitialise and all_set(meas.fresh):
             self.initialise(meas, keep_load=True)
             self.reinitialise = False
+        if meas.nodes_starting:             # silent until the NMT master starts them: not a timeout
+            self.frames.reset()
         frames = self.frames.check(meas.fresh, meas.rejected, meas.sensor_fault)
         if frames is not Fault.NONE and sup.state not in LATCHED:      # the leg: an event's work
             sup.fault(frames, self.frames.leg_of(frames, meas.sensor_fault) + 1)

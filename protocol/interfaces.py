@@ -41,6 +41,7 @@ class Measurements:
         self.heartbeat_age_s = np.zeros(n_nodes)       # since each node's last heartbeat
         self.stalled = False                           # the loop's clock ran past the stall limit
         self.overrun = False                           # the previous cycle missed its deadline
+        self.nodes_starting = False                    # rebooted nodes being identified before their start
 
     def report_legs(self, position_m, force_n, valve_state: int) -> None:
         """Every leg's LEG_STATE came with these readings, exactly (no wire, no noise: what

@@ -29,7 +29,9 @@ shutdown: valves HOLD for `shutdown_hold_cycles`, DISABLED for `shutdown_disable
 from __future__ import annotations
 
 import math
+import queue
 import sys
+import threading
 import time
 from dataclasses import dataclass
 
@@ -64,14 +66,47 @@ class ActivationError(RuntimeError):
 
 
 class _CountedSend:
-    """The loop's bus for canopen's SDO client: what it sends is counted as the loop's own."""
+    """The loop's bus for canopen's SDO client: what it sends is counted as the loop's own
+    (`sent`, added to the loop's tally by the loop's own thread)."""
 
     def __init__(self, loop):
         self.loop = loop
+        self.sent = 0
 
     def send(self, msg, timeout=None) -> None:
         self.loop.bus.send(msg)
-        self.loop.stats.frames_sent += 1
+        self.sent += 1
+
+
+class _Reidentification:
+    """Rebooted nodes identified again beside the running cycle (a thread: the SDO exchanges
+    take tens of ms, which the cycle's SYNC and the valves' watchdogs cannot wait); the loop
+    hands it the SDO answers it receives and reads the verdict when `done`."""
+
+    def __init__(self, loop, expected: dict):
+        self.answers: queue.SimpleQueue = queue.SimpleQueue()
+        self.send = _CountedSend(loop)
+        self.refusal: IdentityError | None = None
+        self._args = (expected, loop.clock, loop.cfg.devices.sdo_timeout_s)
+        self._thread = threading.Thread(target=self._run, name="reidentify", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        expected, clock, timeout_s = self._args
+        try:
+            identify(self.send, expected, self._receive, lambda msg: None, clock, timeout_s)
+        except IdentityError as refusal:
+            self.refusal = refusal
+
+    def _receive(self, timeout_s: float):
+        try:
+            return self.answers.get(timeout=timeout_s)
+        except queue.Empty:
+            return None
+
+    @property
+    def done(self) -> bool:
+        return not self._thread.is_alive()
 
 
 @dataclass
@@ -163,6 +198,7 @@ class ControllerLoop:
         self._stall_s = self.cfg.timing.stall_fault_periods * self.period_s if pacing == "realtime" else math.inf
         self._restarts_seen = 0                     # the controller's restart requests carried out
         self._booted: set[int] = set()              # nodes that booted since they were identified
+        self._reidentification: _Reidentification | None = None     # ... being identified again
         self.state_at_stop = None                   # the controller's state when the shutdown began
 
     def can_filters(self) -> list[dict]:
@@ -173,8 +209,12 @@ class ControllerLoop:
     # -- receive --------------------------------------------------------------------------
     def dispatch(self, msg) -> None:
         """One received frame: decoded, and recorded for the next read or queued for the host link."""
-        status = self.decoder.receive_message(msg)
         frame_id = msg.arbitration_id
+        job = self._reidentification
+        if job is not None and SDO_RESPONSE_BASE < frame_id < SDO_RESPONSE_BASE + 0x80:
+            job.answers.put(msg)                     # an answer for the nodes being identified
+            return
+        status = self.decoder.receive_message(msg)
         if status is RxStatus.UNKNOWN_ID:
             self.stats.unknown_frames += 1
             return
@@ -288,6 +328,7 @@ class ControllerLoop:
             if ok:
                 leg_state_into(values, meas, leg)
         np.copyto(meas.rejected, self._rejected)
+        meas.nodes_starting = self._reidentification is not None
         self._now[()] = now
         np.subtract(self._now, self.heartbeat_seen, out=meas.heartbeat_age_s)
         meas.attitude_rad[:] = self._attitude
@@ -337,10 +378,19 @@ class ControllerLoop:
                            status.payload_com_m, self._declared_payload_kg)
             self._send(self.out_payload)
         self._send_acks()
-        if status.restart_requests != self._restarts_seen:
+        if status.restart_requests != self._restarts_seen and self._reidentification is None:
             self._restarts_seen = status.restart_requests
-            if any(self.nmt_state[n] != NmtState.OPERATIONAL for n in self.nodes) and self._identify_booted():
-                self._nmt_start()                    # nodes that rebooted since activation
+            if any(self.nmt_state[n] != NmtState.OPERATIONAL for n in self.nodes):
+                self._restart_booted()               # nodes that rebooted since activation
+        job = self._reidentification
+        if job is not None and job.done:
+            self._reidentification = None
+            self.stats.frames_sent += job.send.sent
+            if job.refusal is None:
+                self._booted.clear()
+                self._nmt_start()
+            else:
+                self.log(f"restart refused: {job.refusal}")
 
     def _send_acks(self) -> None:
         acks = self.controller.host.acks
@@ -460,8 +510,12 @@ class ControllerLoop:
         cfg = self.cfg
         give_up = self.clock() + cfg.timing.activation_timeout_s
         self._wait(lambda state: state != -1, "heartbeat", give_up, should_stop)
-        found = identify(_CountedSend(self), self.expected_devices(), self.bus.recv, self.dispatch, self.clock,
-                         cfg.devices.sdo_timeout_s)
+        sdo = _CountedSend(self)
+        try:                                         # before the first SYNC: the loop may wait
+            found = identify(sdo, self.expected_devices(), self.bus.recv, self.dispatch, self.clock,
+                             cfg.devices.sdo_timeout_s)
+        finally:
+            self.stats.frames_sent += sdo.sent
         self._booted.clear()
         revisions = sorted({f"{identity.revision:#x}" for identity in found.values()})
         self.log(f"identified node(s) {sorted(found)} as configured ([devices]; revision(s) {', '.join(revisions)})")
@@ -481,19 +535,15 @@ class ControllerLoop:
         return {node: (identity_of(eds), eds) for node in self.nodes
                 for eds in [devices.imu_eds if node == IMU_NODE else devices.leg_eds]}
 
-    def _identify_booted(self) -> bool:
-        """Nodes that booted since they were identified, identified again before a restart
-        starts them (a few SDO exchanges inside this cycle, while the controller is latched
-        in FAULT); False, with the refusal logged, when one is not its configured device."""
+    def _restart_booted(self) -> None:
+        """NMT start for the nodes that stopped; those that booted since they were identified
+        are identified again first, beside the cycle (`_Reidentification`), and started when
+        they prove to be their configured device."""
+        if not self._booted:
+            self._nmt_start()
+            return
         expected = self.expected_devices()
-        try:
-            identify(_CountedSend(self), {n: expected[n] for n in sorted(self._booted)}, self.bus.recv, self.dispatch,
-                     self.clock, self.cfg.devices.sdo_timeout_s)
-        except IdentityError as refusal:
-            self.log(f"restart refused: {refusal}")
-            return False
-        self._booted.clear()
-        return True
+        self._reidentification = _Reidentification(self, {n: expected[n] for n in sorted(self._booted)})
 
     def _wait(self, ready, what: str, give_up: float, should_stop, every_200_ms=None) -> None:
         """Receive until `ready(state)` holds for every node's NMT state (heard: not -1);

@@ -23,7 +23,7 @@ from protocol.devices import SDO_REQUEST_BASE
 from protocol.enums import Ack, Command, NmtCommand, NmtState, State
 from protocol.outbox import Outbox
 from tests.support.buses import GROUP, free_port
-from tests.support.loops import bus_loop, command, cycles, frames_sent
+from tests.support.loops import bus_loop, command, cycles, cycles_while_starting, frames_sent
 
 STOCK_VALVE = str(Path(__file__).parents[1] / "data" / "stock-valve.eds")
 NMT, VALVE_CMD_1 = CODECS["NMT"].frame_id, CODECS["VALVE_CMD_1"].frame_id
@@ -146,6 +146,7 @@ def test_a_node_that_reboots_as_another_device_is_not_started_again_on_reset():
     assert ctl.status.state is State.FAULT
     starts = frames_sent(bus, "NMT")
     assert command(ctl, Command.RESET) is Ack.ACCEPTED
+    assert cycles_while_starting(loop)
     cycles(loop, 10)
     assert frames_sent(bus, "NMT") == starts and bus.emulator.nmt[1] == NmtState.PRE_OPERATIONAL
     assert [line for line in lines if line.startswith("restart refused")] == [

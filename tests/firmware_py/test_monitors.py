@@ -19,6 +19,7 @@ from tests.support.loops import (
     command,
     cycles,
     cycles_until_fault,
+    cycles_while_starting,
     frames_sent,
     inject,
     valve_states,
@@ -158,9 +159,10 @@ def test_nodes_that_reboot_are_started_again_on_reset():
     assert loop.nmt_state[1] == NmtState.PRE_OPERATIONAL
     starts = frames_sent(bus, "NMT")
     ctl.host.command(int(Command.RESET), 0, 1)
-    loop.cycle()
-    assert frames_sent(bus, "NMT") == starts + 1             # NMT start sent with the RESET's ack
-    assert bus.emulator.nmt[1] == NmtState.OPERATIONAL
+    assert cycles_while_starting(loop)                        # identified again beside the cycle ...
+    assert frames_sent(bus, "NMT") == starts + 1             # ... then started
+    # the cycles went on meanwhile, the silent node no timeout while it was being identified
+    assert ctl.status.state is State.IDLE and bus.emulator.nmt[1] == NmtState.OPERATIONAL and ctl.status.state is State.IDLE
     cycles(loop, 10)
     assert command(ctl, Command.ENABLE) is Ack.ACCEPTED
     cycles(loop, 10)

@@ -6,6 +6,8 @@ controller's HostLink only, as the loop puts them there.
 
 from __future__ import annotations
 
+import time
+
 from firmware_py.config import load_config
 from hil import in_process
 from plant_emulator.params import load_config as load_emulator_config
@@ -27,6 +29,21 @@ def bus_loop(rig: str, controller: str, overrides: dict | None = None, emulator:
 def cycles(loop, n: int) -> None:
     for _ in range(n):
         loop.cycle()
+
+
+def cycles_while_starting(loop, limit_s: float = 5.0) -> bool:
+    """Cycles until the rebooted nodes the loop identifies beside its cycle (a thread) have
+    been judged, started or refused (False: no identification began); a pause between cycles
+    gives that thread its turn."""
+    give_up = time.monotonic() + limit_s
+    began = False
+    while time.monotonic() < give_up:
+        loop.cycle()
+        began = began or loop.meas.nodes_starting
+        if began and not loop.meas.nodes_starting:
+            return True
+        time.sleep(0.002)
+    return False
 
 
 def cycles_until_fault(loop, limit: int) -> int:
