@@ -162,7 +162,7 @@ def test_nodes_that_reboot_are_started_again_on_reset():
     assert cycles_while_starting(loop)                        # identified again beside the cycle ...
     assert frames_sent(bus, "NMT") == starts + 1             # ... then started
     # the cycles went on meanwhile, the silent node no timeout while it was being identified
-    assert ctl.status.state is State.IDLE and bus.emulator.nmt[1] == NmtState.OPERATIONAL and ctl.status.state is State.IDLE
+    assert ctl.status.state is State.IDLE and bus.emulator.nmt[1] == NmtState.OPERATIONAL
     cycles(loop, 10)
     assert command(ctl, Command.ENABLE) is Ack.ACCEPTED
     cycles(loop, 10)
