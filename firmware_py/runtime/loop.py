@@ -87,12 +87,11 @@ class _Reidentification:
         self.answers: queue.SimpleQueue = queue.SimpleQueue()
         self.send = _CountedSend(loop)
         self.refusal: IdentityError | None = None
-        self._args = (expected, loop.clock, loop.cfg.devices.sdo_timeout_s)
-        self._thread = threading.Thread(target=self._run, name="reidentify", daemon=True)
+        self._thread = threading.Thread(target=self._run, args=(expected, loop.clock, loop.cfg.devices.sdo_timeout_s),
+                                        name="reidentify", daemon=True)
         self._thread.start()
 
-    def _run(self) -> None:
-        expected, clock, timeout_s = self._args
+    def _run(self, expected: dict, clock, timeout_s: float) -> None:
         try:
             identify(self.send, expected, self._receive, lambda msg: None, clock, timeout_s)
         except IdentityError as refusal:

@@ -19,6 +19,7 @@ NAME_OF_CONTROLLER = {v: k for k, v in CONTROLLER_NAMES.items()}
 THESIS_PLATFORM_LIMITS = {"limits": {"platform_error_max_mm": 150.0, "platform_angle_max_deg": 20.0}}
 
 
+VALVE_FULL_SCALE_V = 10.0          # VALVE_CMD's 100 % spool setpoint = 10 V of the thesis's u
 NEW_CONTROLLER = "computed-torque"           # beyond the thesis: held to targets of its own
 TESTBENCH_CONTROLLERS = ("pi", "adaptive", NEW_CONTROLLER)
 

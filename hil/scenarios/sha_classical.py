@@ -22,14 +22,13 @@ import numpy as np
 
 from firmware_py.config import load_config as load_controller_config
 from firmware_py.motion_control.joint_space import filtered_derivative
-from hil.design.calibration import linearise, moving_mass_kg
+from hil.design.calibration import linearise, moving_mass_kg, state_space
 from hil.logdata import LogData
 from hil.metrics import step_response
 from hil.plotting import colour_for_load, plt, save
 from hil.reference_rebuild import rebuild
 from hil.scenario import Analysis, Check, Figure, Scenario
-from hil.scenarios.common import load_at, move_stroke, run_emulator_config, step_stroke
-from physics import hydraulics as hy
+from hil.scenarios.common import VALVE_FULL_SCALE_V, load_at, move_stroke, run_emulator_config, step_stroke
 from physics import lugre
 from physics.constants import GRAVITY_M_S2, MM
 
@@ -43,7 +42,6 @@ STEP_M = 0.010
 # spool +/-59 %); half of it is stable and shows what the thesis saw
 KD_V_S_MM = 0.01
 DERIVATIVE_FILTER_HZ = 50.0
-FULL_SCALE_V = 10.0                 # 100 % spool setpoint = 10 V of the thesis's u
 FIT_S = 2.0                         # the window after the step the gains are identified on
 ROUGH_S = 1.0                       # ... and the command's roughness measured on
 STEADY_S = 1.0                      # the last second of the hold: the steady error
@@ -93,12 +91,11 @@ def p_steady_error_predictions(ecfg, position_m: float, load_kg: float, kp_v_m: 
     k02_z0 = point.k02_mm_n * point.z0                       # (mm/s)/N
     eq_7_4 = k02_z0 * weight_n / (kp_v_m * MM * point.k01) * MM
 
-    def holding_error(force_n):
-        _, _, spool, _ = hy.steady_state(position_m, force_n, ecfg.actuator.supply_pressure_pa, ecfg.hp)
-        return float(spool * FULL_SCALE_V / kp_v_m)
+    def holding_error(friction_n):            # the operating point's spool (V) beyond the weight
+        return state_space(ecfg, position_m / MM, load_kg, friction_n).u0_v / kp_v_m
     sign = 1.0 if upward else -1.0
-    band = sorted(holding_error(weight_n + sign * f) for f in friction_at_rest_n(ecfg, load_kg, upward))
-    return {"eq_7_4_m": float(eq_7_4), "frictionless_m": holding_error(weight_n), "with_friction_m": band,
+    band = sorted(holding_error(sign * f) for f in friction_at_rest_n(ecfg, load_kg, upward))
+    return {"eq_7_4_m": float(eq_7_4), "frictionless_m": holding_error(0.0), "with_friction_m": band,
             "weight_n": float(weight_n)}
 
 
@@ -134,7 +131,7 @@ class ShaClassical(Scenario):
         ref = rebuild(log, "testbench", period)
         y = log.leg_positions(1)[:, 0]
         truth = log.get("EMU_TRUTH").per_cycle(log.n_cycles, "Z")
-        u = log.get("VALVE_CMD_1").per_cycle(log.n_cycles, "SPOOL_SETPOINT") * FULL_SCALE_V
+        u = log.get("VALVE_CMD_1").per_cycle(log.n_cycles, "SPOOL_SETPOINT") * VALVE_FULL_SCALE_V
         rows = []
         for motion in ref.motions:
             if not motion.step:

@@ -27,7 +27,7 @@ from hil.logdata import LogData
 from hil.plotting import colour_for_load, plt, save
 from hil.reference_rebuild import rebuild
 from hil.scenario import Analysis, Check, Figure, Scenario
-from hil.scenarios.common import load_at, move_stroke, run_emulator_config
+from hil.scenarios.common import VALVE_FULL_SCALE_V, load_at, move_stroke, run_emulator_config
 from physics.constants import MM
 from protocol.enums import WaypointFlag
 
@@ -40,7 +40,6 @@ END_MARGIN_MM = 10.0                # levels stay this far inside the stroke: a 
                                     # ~6 mm, and the controller faults within 1 mm of an end
 FILTER_HZ = 50.0
 DELAY_PERIODS = 1                   # the command latency: VALVE_CMD k is applied at SYNC k+1 (2 tried: worse fits)
-FULL_SCALE_V = 10.0                 # 100 % spool setpoint = 10 V of the thesis's u
 SEED = 5
 # Asserted: the windows' models fit like the thesis's (eq. 5.12: 0.85-0.94), and eq. 5.7
 # finds the emulator's moving mass. That the method recovers a linear plant exactly is
@@ -113,7 +112,7 @@ class ShaIdentification(Scenario):
         guess = tuple(table_a3()[5, 1:4] * (1.0, 1.0, MM))               # 150 mm, 0 kg: the fits' start
         ref = rebuild(log, "testbench", period)
         y = log.leg_positions(1)[:, 0]
-        u = log.get("VALVE_CMD_1").per_cycle(log.n_cycles, "SPOOL_SETPOINT") * FULL_SCALE_V
+        u = log.get("VALVE_CMD_1").per_cycle(log.n_cycles, "SPOOL_SETPOINT") * VALVE_FULL_SCALE_V
         pressure = log.get("LEG_PRESSURE_1")
         pl = pressure.per_cycle(log.n_cycles, "PA") - ccfg.actuator.area_ratio * pressure.per_cycle(log.n_cycles, "PB")
         n, pre = int(round(WINDOW_S / period)), int(round(PRE_S / period))
