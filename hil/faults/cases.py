@@ -11,7 +11,7 @@ PROBE_RISE_M = 30e-3
 PROBE_SEGMENT_S, PROBE_ACCEL_S = 1.5, 0.3
 INJECT_AT_S = 0.5                 # into the probe's first segment (moving at ~20 mm/s)
 OBSERVE_S = 1.0                   # excursion window after the injection
-SETTLE_S = 2.0                    # at rest before the next case (the hexapod rings at ~1.5 Hz after a stop)
+SETTLE_S = 1.0                    # at rest before the next case (a stop is at rest within 0.5 s)
 TRANSIENT_MAX_M = 1e-3            # transient faults: within 1 mm of the no-fault probe
 # after a fault's reaction the platform is at rest: REST_AFTER_S later, over REST_SPAN_S, it
 # swings at most REST_SWING_MAX_M about where it stands (truth)
