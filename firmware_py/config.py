@@ -397,6 +397,16 @@ class Waypoints(Section):
 
 
 @frozen
+class TimeScaling(Section):
+    """The hexapod's reference clock slowed online while a valve's command is at its limit or
+    the supply has fallen below the waypoint check's share of it (motion_control/time_scaling.py)."""
+    enabled: bool = flag("enabled")
+    rate_min: float = key("rate_min_pct", 5.0, 100.0, per=PCT)
+    slow_per_s: float = key("slow_per_s", 0.01, 100.0)
+    recover_per_s: float = key("recover_per_s", 0.01, 100.0)
+
+
+@frozen
 class Plausibility(Section):
     """The legs' motion against their valve input, the encoders' attitude against the IMU's."""
     spool: float = key("spool_pct", 1.0, 100.0, per=PCT)
@@ -431,6 +441,7 @@ class ControllerConfig(ConfigFile):
     kinematics: Kinematics
     waypoints: Waypoints
     payload: Payload
+    time_scaling: TimeScaling
     plausibility: Plausibility
 
     @cached_property

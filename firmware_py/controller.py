@@ -32,6 +32,7 @@ from firmware_py.motion_control.joint_space import (
 )
 from firmware_py.motion_control.laws import ComputedTorqueLaw, JointSpaceLaw
 from firmware_py.motion_control.reference import Reference
+from firmware_py.motion_control.time_scaling import DISABLED, rule_of
 from firmware_py.motion_control.trajectory import through_points
 from firmware_py.rig_model import rig_model
 from firmware_py.status import ControllerStatus
@@ -74,7 +75,8 @@ class Controller:
             raise ValueError(f"unknown controller kind {kind!r}")
         self.sup = Supervisor(kind)
         self.joint.set_mode(kind)
-        self.reference = Reference(n, period_s, cfg.waypoints.queue + 2)
+        self.reference = Reference(n, period_s, cfg.waypoints.queue + 2,
+                                   rule_of(cfg, period_s) if rig.platform is not None else DISABLED)
         self.waypoints = WaypointQueue(cfg.waypoints, rig.check)
         self.host = HostLink()
         # supervision
@@ -181,7 +183,9 @@ class Controller:
         valve_commands(VALVES_HOLD, self.spool_cmd, False, -1, cmd.enable, cmd.hold, cmd.active, cmd.reset,
                        cmd.spool)
         ref.play(through_points(np.array([rig.home_strokes, rig.home_strokes + 1e-3]), 0.1, 0.2), [0], 0)
-        ref.advance(1)
+        ref.advance(self.spool_sent)
+        ref.clock.warm_up(self.spool_sent)
+        ref.clock.observe(meas.ps_pa, meas.pressure_fresh)
         ref.hold(np.zeros(n))
         self.waypoints.check(Chain([rig.home_strokes], [0.2], [1.0]), rig.home_pose, (0.0, 0.0, 0.0), False,
                              0.0)   # a commit's
@@ -394,6 +398,7 @@ class Controller:
         sup.fault(rig.estimate(meas))
         rig.update_payload(meas, self.reference.ar, sup.state not in (State.FAULT, State.ESTOP, State.BOOT))
         # reference
+        ref.clock.observe(meas.ps_pa, meas.pressure_fresh)
         active = sup.state in ACTIVE
         if self.stop.active and sup.state is not State.FAULT:
             self.stop.end()                          # an e-stop or a reset ends a controlled stop
@@ -412,7 +417,7 @@ class Controller:
         elif testing:                                # the test drives the valve: the loop follows the leg
             ref.follow(joint.position_estimate)
         elif active and ref.moving:
-            if ref.advance(self.cycles):
+            if ref.advance(self.spool_sent):
                 sup.motion_done()
                 self._drawn_at_end_m3, self._ended_s = self.waypoints.taken_drawn_m3, self.time_s
                 if self.waypoints.head_starts_now() and sup.state is State.READY:
@@ -563,6 +568,9 @@ class Controller:
         s, sup, reference = self.status, self.sup, self.reference
         s.state, s.fault, s.fault_leg, s.kind = sup.state, sup.fault_code, sup.fault_leg, sup.controller
         s.active_waypoint, s.moving = reference.active_waypoint, reference.trajectory is not None
+        clock, playing = reference.clock, s.moving and sup.state in ACTIVE     # a fault's trajectory is not played
+        s.time_scaled, s.time_rate = clock.scaling and playing, clock.rate_fraction if playing else 1.0
+        s.motion_time_periods = clock.cycles() if playing else 0.0
         s.queue_free = self.waypoints.free()
         s.cycles, s.faults, s.restart_requests = self.cycles, sup.faults, self.restart_requests
         test = self.rig.excitation

@@ -20,7 +20,8 @@ from protocol.enums import Ack, AckKind, Command, EmuCommand, State, time_scale_
 from protocol.nodes import CONTROLLER_NODE, NODE_IDS
 from protocol.outbox import Outbox
 
-CONTROLLER_MESSAGES = ["SYNC", "CTRL_STATUS", "CTRL_ACK", "CTRL_PAYLOAD"]   # what the host reads: the controller's
+# what the host reads: the controller's
+CONTROLLER_MESSAGES = ["SYNC", "CTRL_STATUS", "CTRL_ACK", "CTRL_PAYLOAD", "CTRL_CLOCK"]
 # ... and leg 1's encoder: the identification tests choose their next input from the last
 # one's velocity, as a lab's tool reading the sensor would (scenarios/friction.py)
 HOST_MESSAGES = CONTROLLER_MESSAGES + ["LEG_STATE_1"]
@@ -59,6 +60,7 @@ class Host:
         self.acks: dict[tuple[int, int], int] = {}
         self.time_scale = math.nan                # the last CTRL_ACK's TIME_SCALE (NaN: not applicable)
         self.payload_kg = math.nan                # the last CTRL_PAYLOAD's MASS (hexapod)
+        self.clock = (0, False, 1.0, 0.0)         # the last CTRL_CLOCK: (SYNCs then, MOVING, RATE, MOTION_TIME)
         self.frames_sent = 0
         self.frames_received = 0
         self.node_heartbeats = 0                # CANopen heartbeats of the nodes
@@ -115,6 +117,9 @@ class Host:
                 self.time_scale = time_scale_from_wire(float(v[self._ack["TIME_SCALE"]]))
             elif msg.arbitration_id == CODECS["CTRL_PAYLOAD"].frame_id:
                 self.payload_kg = float(self.decoder.values["CTRL_PAYLOAD"][CODECS["CTRL_PAYLOAD"].index["MASS"]])
+            elif msg.arbitration_id == CODECS["CTRL_CLOCK"].frame_id:
+                v, i = self.decoder.values["CTRL_CLOCK"], CODECS["CTRL_CLOCK"].index
+                self.clock = (self.syncs, bool(v[i["MOVING"]]), float(v[i["RATE"]]), float(v[i["MOTION_TIME"]]))
             elif msg.arbitration_id == self._leg1_id:
                 self.leg1_track.append((self.syncs, float(self.decoder.values["LEG_STATE_1"][self._leg1_position])))
         return msg
@@ -152,6 +157,28 @@ class Host:
                             f"(state {self.state.name if self.state is not None else 'unknown'}, "
                             f"fault code {self.fault_code})")
         return False
+
+    def clock_lag(self, since_syncs: int) -> float:
+        """Periods the running trajectory's clock has fallen behind the bus since `since_syncs`
+        (the last CTRL_CLOCK: the controller slowed it online); 0 when none is running."""
+        syncs, moving, _, motion_time = self.clock
+        return max(syncs - since_syncs - motion_time, 0.0) if moving and syncs > since_syncs else 0.0
+
+    def wait_motion_end(self, max_cycles: int) -> None:
+        """Until READY after a motion of `max_cycles` periods of its own clock: the periods the
+        controller's time scaling took (CTRL_CLOCK) are added as they come, while it runs."""
+        start, lag = self.syncs, 0.0
+        while True:
+            end = start + max_cycles + math.ceil(lag)
+            if self.wait_until(lambda: self.state is State.READY, max(end - self.syncs, 1), what=None):
+                return
+            grown = self.clock_lag(start)
+            if grown <= lag or self.state not in (State.RUNNING, State.HOMING):
+                raise HostError(f"controller state READY not reached within {self.syncs - start} cycles "
+                                f"({max_cycles} on time, {lag:.0f} the controller's time scaling added; "
+                                f"state {self.state.name if self.state is not None else 'unknown'}, "
+                                f"fault code {self.fault_code})")
+            lag = grown
 
     def wait_state(self, *states: State, max_cycles: int = 5000, wall_timeout_s: float | None = None) -> None:
         self.wait_until(lambda: self.state in states, max_cycles,

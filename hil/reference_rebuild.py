@@ -7,7 +7,10 @@ makes reproducible (firmware_py/motion_control/reference.py and waypoints.py):
 - a trajectory starts from the reference it replaces: the end point of the previous one;
 - its clock is integer cycles: evaluated in the update of cycle k at
   t = (k + 1 - start) * T, where start = the cycle of the acknowledgement that started it,
-  or the cycle after the one in which the previous trajectory reached its end.
+  or the cycle after the one in which the previous trajectory reached its end;
+- on the hexapod that clock slows online (firmware_py/motion_control/time_scaling.py): the
+  rule is replayed on the frames it reads, VALVE_CMD's setpoints of the cycle before and
+  LEG_PRESSURE's supply samples, with the run's [time_scaling] (`rule`).
 The same codec decodes the same frames into the same floats and the same trajectory code
 builds the same segments, so the rebuilt reference equals the controller's bit for bit
 (tests/hil/test_hil_reference.py checks it against the controller).
@@ -22,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from firmware_py.motion_control.time_scaling import DISABLED, RATE_ONE, ScalingRule, rate_step, supply_update
 from firmware_py.motion_control.trajectory import JointTrajectory, hold_at, through_points
 from hil.logdata import LogData
 from protocol.enums import Ack, AckKind, Command, State, WaypointFlag
@@ -36,9 +40,53 @@ class Motion:
     trajectory: JointTrajectory
     step: bool
     poses: list[tuple]         # the waypoints' poses (x, y, z, roll, pitch, yaw), SI
+    times: np.ndarray | None = None    # its clock at each cycle from `start` to `end_cycle` (scaled)
 
     def time_at(self, cycle: int, period_s: float) -> float:
-        return (cycle + 1 - self.start) * period_s
+        if self.times is None:
+            return (cycle + 1 - self.start) * period_s
+        k = cycle - self.start
+        return float(self.times[k]) if k < len(self.times) else 1e9
+
+
+class ClockReplay:
+    """The controller's time-scaling rule on a log: each cycle's inputs as the controller had
+    them in its update (its VALVE_CMD setpoints of the cycle before, the latest LEG_PRESSURE
+    supply sample of each valve up to this cycle)."""
+
+    def __init__(self, log: LogData, n: int, rule: ScalingRule):
+        self.rule, self.n_cycles = rule, log.n_cycles
+        m = log.n_cycles
+        spool = np.zeros((m, n))
+        for leg in range(n):
+            sent = np.nan_to_num(log.get(f"VALVE_CMD_{leg + 1}").per_cycle(m, "SPOOL_SETPOINT"))
+            spool[1:, leg] = sent[:-1]
+        self.spool_sent = spool
+        latest, fresh = np.full(n, np.nan), np.zeros(n, dtype=np.bool_)
+        samples = np.array([log.get(f"LEG_PRESSURE_{leg + 1}").per_cycle(m, "PS") for leg in range(n)]).T
+        self.latest_pa = np.empty((m, n))
+        for k in range(m):
+            np.isfinite(samples[k], out=fresh)
+            supply_update(samples[k], fresh, latest)
+            self.latest_pa[k] = latest
+
+    def times(self, trajectory: JointTrajectory, start: int, period_s: float) -> tuple[np.ndarray, int]:
+        """(the clock at each cycle from `start` through the one that reaches the end, that
+        cycle), as `Reference.advance` runs it."""
+        seg = trajectory.segments[-1, 0]
+        end_t = np.add(seg[4], seg[6])
+        r, rate, ticks, out = self.rule, RATE_ONE, 0, []
+        k = start
+        while True:
+            if k < self.n_cycles:
+                rate = rate_step(rate, self.latest_pa[k], self.spool_sent[k], r.supply_low_pa, r.spool_limit_counts,
+                                 r.rate_min, r.slow, r.recover)
+            ticks += rate
+            t = ticks / RATE_ONE * period_s
+            out.append(t)
+            if t >= end_t:
+                return np.array(out), k
+            k += 1
 
 
 @dataclass
@@ -78,11 +126,20 @@ def _end_cycle(trajectory: JointTrajectory, start: int, period_s: float) -> int:
     return k
 
 
-def rebuild(log: LogData, rig: str, period_s: float, initial_position=None) -> Reference:
+def rebuild(log: LogData, rig: str, period_s: float, initial_position=None,
+            rule: ScalingRule | None = None) -> Reference:
     """Rebuild the reference of every cycle; `initial_position` (n_joints) starts the first motion
-    when no earlier one is known (else the measured position at its start is used)."""
+    when no earlier one is known (else the measured position at its start is used). `rule`:
+    the run's time scaling (default: the default configuration's on the hexapod)."""
     strokes_of = StrokeMap(rig)
     n = strokes_of.n
+    if rule is None:
+        rule = DISABLED
+        if rig == "hexapod":
+            from firmware_py.config import load_config
+            from firmware_py.motion_control.time_scaling import rule_of
+            rule = rule_of(load_config(), period_s)
+    clock = ClockReplay(log, n, rule) if rule.enabled else None
     staged_pos: dict[int, tuple] = {}
     staged_rot: dict[int, tuple] = {}
     pending: dict[int, dict] = {}      # seq -> waypoint sent, waiting for its ACK
@@ -105,8 +162,13 @@ def rebuild(log: LogData, rig: str, period_s: float, initial_position=None) -> R
             points = np.array([origin] + [w["strokes"] for w in chosen])
             trajectory = through_points(points, [w["accel_time"] for w in chosen],
                                         [w["segment_time"] for w in chosen])
-        running = Motion([w["seq"] for w in chosen], cycle_start, _end_cycle(trajectory, cycle_start, period_s),
-                         trajectory, bool(chosen[0]["flags"] & WaypointFlag.STEP), [w["pose"] for w in chosen])
+        step = bool(chosen[0]["flags"] & WaypointFlag.STEP)
+        if clock is not None and not step:
+            times, end_cycle = clock.times(trajectory, cycle_start, period_s)
+        else:
+            times, end_cycle = None, _end_cycle(trajectory, cycle_start, period_s)
+        running = Motion([w["seq"] for w in chosen], cycle_start, end_cycle, trajectory, step,
+                         [w["pose"] for w in chosen], times)
         motions.append(running)
 
     def advance(to_cycle: int):
@@ -156,6 +218,32 @@ def rebuild(log: LogData, rig: str, period_s: float, initial_position=None) -> R
     advance(log.n_cycles + 10**9)
     yr = _evaluate(motions, log.n_cycles, n, period_s, unknown_from, _fault_cycles(log))
     return Reference(yr, motions)
+
+
+@dataclass
+class ClockAgreement:
+    """The replayed clocks against the controller's own (CTRL_CLOCK, every 48th SYNC)."""
+    frames: int                # CTRL_CLOCK frames of a trajectory being played, before any fault
+    mismatches: int            # ... whose MOTION_TIME the replay does not give
+    slowest_rate: float        # the lowest RATE the controller reported
+    stretched_s: float         # how much longer the played trajectories took than their own time
+
+
+def clock_agreement(log: LogData, ref: Reference, period_s: float) -> ClockAgreement:
+    clock = log.get("CTRL_CLOCK")
+    fault = _fault_cycles(log)
+    frames = mismatches = 0
+    for k, moving, motion_time in zip(clock.cycle, clock["MOVING"], clock["MOTION_TIME"]):
+        if not moving or (fault is not None and k >= fault):
+            continue
+        playing = [m for m in ref.motions if m.start <= k <= m.end_cycle]
+        frames += 1
+        # CTRL_CLOCK's 1/1024-period step holds the clock exactly: the same float both ways
+        mismatches += not playing or playing[-1].time_at(k, period_s) != motion_time * period_s
+    slowest = float(np.min(clock["RATE"])) if len(clock) else 1.0
+    stretched = sum((m.end_cycle - m.start + 1) * period_s - float(m.times[-1]) for m in ref.motions
+                    if m.times is not None and (fault is None or m.end_cycle < fault))
+    return ClockAgreement(frames, mismatches, slowest, stretched)
 
 
 def _fault_cycles(log: LogData) -> int | None:

@@ -280,10 +280,11 @@ class Run:
             self.wait_s(0.02)
 
     def wait_motion_done(self, max_s: float) -> None:
-        """Until the controller is back in READY after a motion (CTRL_STATUS every 16 SYNC)."""
+        """Until the controller is back in READY after a motion (CTRL_STATUS every 16 SYNC) that
+        takes `max_s` on time, and what its online time scaling adds (CTRL_CLOCK)."""
         self.host.wait_until(lambda: self.host.state is State.RUNNING or self.host.state is State.HOMING,
                              self.cycles(1.0), what=None)
-        self.host.wait_state(State.READY, max_cycles=self.cycles(max_s))
+        self.host.wait_motion_end(self.cycles(max_s))
 
 
 def run_scenario(scenario: Scenario, options: RunOptions) -> dict:

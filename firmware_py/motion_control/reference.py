@@ -1,20 +1,23 @@
 """The joint reference of every cycle: a trajectory being played, or a position held.
 
-A trajectory's clock is integer cycles, t = (cycle - start) * T, not an accumulated float,
-so a log's analysis can rebuild the very same reference from the waypoints and the
-acknowledgements it holds (hil/reference_rebuild.py). In place on arrays made here.
+A trajectory's clock is integer ticks (time_scaling.Clock): at full speed t = (cycle - start)
+T, not an accumulated float; slowed online, a rule a log replays. So a log's analysis can
+rebuild the very same reference from the waypoints, the acknowledgements and the frames it
+holds (hil/reference_rebuild.py). In place on arrays made here.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from firmware_py.motion_control.time_scaling import DISABLED, Clock, ScalingRule
 from firmware_py.motion_control.trajectory import T_START, TM, JointTrajectory, sls_coefficients, through_points
 
 
 class Reference:
-    def __init__(self, n_legs: int, period_s: float, max_segments: int):
+    def __init__(self, n_legs: int, period_s: float, max_segments: int, rule: ScalingRule = DISABLED):
         self.period_s = period_s
+        self.clock = Clock(rule, n_legs)
         self.yr = np.zeros(n_legs)               # position [m]
         self.vr = np.zeros(n_legs)               # velocity [m/s]
         self.ar = np.zeros(n_legs)               # acceleration [m/s^2]
@@ -37,6 +40,7 @@ class Reference:
         """Follow `trajectory` from `cycle` on; `seqs` name its segments."""
         self.trajectory = trajectory
         self.start_cycle = cycle
+        self.clock.start(not trajectory.step)
         self.seqs = seqs
         seg = trajectory.segments[:, 0]
         n = len(seg)
@@ -78,10 +82,13 @@ class Reference:
         self.ar.fill(0.0)
         self.hold_position[:] = position
 
-    def advance(self, cycle: int) -> bool:
-        """This cycle's point of the trajectory; True when it reached its end (then held)."""
-        t = (cycle - self.start_cycle) * self.period_s
+    def advance(self, spool_sent) -> bool:
+        """This cycle's point of the trajectory (`spool_sent`: the valve commands of the last
+        cycle, for the clock); True when it reached its end (then held)."""
+        self.clock.tick(spool_sent)
+        t = self.clock.cycles() * self.period_s
         self.trajectory.evaluate_into(t, self.yr, self.vr, self.ar)
+        self.clock.scale(self.vr, self.ar, self.period_s)
         while self._segment < self.segments - 1 and t >= self.ends[self._segment]:
             self._segment += 1
         if self._segment < len(self.seqs):

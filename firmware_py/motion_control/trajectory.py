@@ -96,6 +96,7 @@ def sls_evaluate_into(segments, t, pos, vel, acc):
 class JointTrajectory:
     """A chain of SLS segments in joint space; evaluate_into is allocation-free."""
     segments: np.ndarray              # (n_seg, n_joints, 8)
+    step: bool = False                # a step reference (`hold_at`): a setpoint held, no speed
 
     @property
     def duration_s(self) -> float:
@@ -144,4 +145,4 @@ def hold_at(point, duration_s: float) -> JointTrajectory:
     coeffs[0, :, TA] = duration_s / 2.0
     coeffs[0, :, TM] = duration_s
     coeffs[0, :, DECEL] = 1.0
-    return JointTrajectory(coeffs)
+    return JointTrajectory(coeffs, step=True)

@@ -47,7 +47,14 @@ from protocol.dbc import sync_counter_overflow
 from protocol.devices import SDO_RESPONSE_BASE, identity_of
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import PACINGS, Fault, NmtCommand, NmtState, Pacing
-from protocol.interfaces import attitude_into, leg_pressure_into, leg_state_into, payload_values, valve_command_values
+from protocol.interfaces import (
+    attitude_into,
+    clock_values,
+    leg_pressure_into,
+    leg_state_into,
+    payload_values,
+    valve_command_values,
+)
 from protocol.nodes import CONTROLLER_NODE, IMU_NODE, SENDER_OF_NODE, rig_nodes
 from protocol.outbox import Outbox
 
@@ -166,6 +173,9 @@ class ControllerLoop:
         self.out_payload = Outbox("CTRL_PAYLOAD") if has_imu else None
         self._declared_payload_kg = controller.cfg.hexapod.payload_kg
         self._payload_schedule = CODECS["CTRL_PAYLOAD"].schedule
+        # ... and its reference's clock (online time scaling)
+        self.out_clock = Outbox("CTRL_CLOCK") if has_imu else None
+        self._clock_schedule = CODECS["CTRL_CLOCK"].schedule
         self._overflow = sync_counter_overflow()
         self.sync_counter = 0
         self.heartbeat_seen = np.full(len(self.nodes), -np.inf)
@@ -376,6 +386,10 @@ class ControllerLoop:
             payload_values(self.out_payload.values, self.out_payload.index, status.payload_mass_kg,
                            status.payload_com_m, self._declared_payload_kg)
             self._send(self.out_payload)
+        if self.out_clock is not None and self._clock_schedule.due(self.sync_counter):
+            clock_values(self.out_clock.values, self.out_clock.index, status.moving, status.time_scaled,
+                         status.time_rate, status.motion_time_periods)
+            self._send(self.out_clock)
         self._send_acks()
         if status.restart_requests != self._restarts_seen and self._reidentification is None:
             self._restarts_seen = status.restart_requests

@@ -247,7 +247,12 @@ class MonitorApp(App[None]):
         t.append("fault       ")
         t.append(s.fault + (f" (leg {s.fault_leg})" if s.fault_leg and s.fault != "NONE" else ""),
                  "bold red" if s.fault not in ("NONE", "-") else "")
-        t.append(f"\nwaypoint    {s.active_waypoint}\n")
+        t.append(f"\nwaypoint    {s.active_waypoint}")
+        if math.isfinite(s.clock_rate):              # CTRL_CLOCK: the trajectory's clock, slowed online
+            t.append(f"   clock {s.clock_rate:.0%}", "bold yellow" if s.clock_rate < 1.0 else "")
+        t.append("\n")
+        if math.isfinite(s.payload_kg):
+            t.append(f"payload     {s.payload_kg:.2f} kg ({'estimated' if s.payload_estimated else 'declared'})\n")
         t.append(f"overruns    {s.overruns}\n")
         t.append(f"compute max {_f(s.compute_max_us, '.0f')} us   "
                  f"period err max {_f(s.period_error_max_us, '.0f')} us\n")

@@ -121,6 +121,9 @@ class Snapshot:
     rejected: int
     lost: int
     positions_m: np.ndarray = field(repr=False)   # the legs' strokes for a DK
+    payload_kg: float = float("nan")              # CTRL_PAYLOAD's MASS
+    payload_estimated: bool = False               # ... ESTIMATING (else the declared payload)
+    clock_rate: float = float("nan")              # CTRL_CLOCK's RATE while a trajectory plays (NaN: none)
 
 
 class BusView:
@@ -137,6 +140,7 @@ class BusView:
         self.n_legs = 0
         self.state, self.fault, self.fault_leg, self.controller = "-", "-", 0, "-"
         self.active_waypoint = self.overruns = 0
+        self.payload_kg, self.payload_estimated, self.clock_rate = float("nan"), False, float("nan")
         self.compute_max_us = self.period_error_max_us = float("nan")
         self.status_seen_s = float("nan")
         self.attitude_rad: tuple[float, float, float] | None = None
@@ -184,7 +188,8 @@ class BusView:
         h = {CODECS["SYNC"].frame_id: self._sync, CODECS["CTRL_STATUS"].frame_id: self._status,
              CODECS["CTRL_ACK"].frame_id: self._ack, CODECS["HOST_CMD"].frame_id: self._host_cmd,
              CODECS["HOST_WAYPOINT_TIME"].frame_id: self._waypoint, CODECS["NMT"].frame_id: self._nmt,
-             CODECS["IMU_ATTITUDE"].frame_id: self._imu, CODECS["EMU_TRUTH"].frame_id: self._truth}
+             CODECS["IMU_ATTITUDE"].frame_id: self._imu, CODECS["EMU_TRUTH"].frame_id: self._truth,
+             CODECS["CTRL_PAYLOAD"].frame_id: self._payload, CODECS["CTRL_CLOCK"].frame_id: self._clock}
         for leg in range(N_LEGS):
             n = leg + 1
             h[CODECS[f"LEG_STATE_{n}"].frame_id] = lambda t, s, leg=leg: self._leg_state(t, s, leg)
@@ -225,6 +230,16 @@ class BusView:
         self.overruns = int(v[i["OVERRUNS"]])
         self.active_waypoint = int(v[i["ACTIVE_WAYPOINT"]])
         self.status_seen_s = t
+
+    def _payload(self, t: float, status: RxStatus) -> None:
+        if status is RxStatus.OK:
+            v, i = self._values("CTRL_PAYLOAD")
+            self.payload_kg, self.payload_estimated = float(v[i["MASS"]]), bool(v[i["ESTIMATING"]])
+
+    def _clock(self, t: float, status: RxStatus) -> None:
+        if status is RxStatus.OK:
+            v, i = self._values("CTRL_CLOCK")
+            self.clock_rate = float(v[i["RATE"]]) if v[i["MOVING"]] else float("nan")
 
     def _ack(self, t: float, status: RxStatus) -> None:
         if status is RxStatus.OK:
@@ -377,7 +392,8 @@ class BusView:
                 rates=dict(self.rates), load=self.load,
                 sync_period_us=period, sync_jitter_p99_us=p99, sync_jitter_max_us=worst, frames=self.frames,
                 unknown=self.decoder.unknown_frames, rejected=rejected, lost=int(self.decoder.lost.sum()),
-                positions_m=np.array([s.position_m for s in self.legs]))
+                positions_m=np.array([s.position_m for s in self.legs]), payload_kg=self.payload_kg,
+                payload_estimated=self.payload_estimated, clock_rate=self.clock_rate)
 
     def history(self, end_s: float, window_s: float) -> np.ndarray:
         """The per-SYNC rows with end_s - window_s < time <= end_s, oldest first (a copy of

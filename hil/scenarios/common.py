@@ -37,6 +37,14 @@ def run_emulator_config(log: LogData) -> EmulatorConfig:
     return load_emulator_config(path if path.is_file() else None)
 
 
+def run_controller_config(log: LogData):
+    """The controller configuration a log's run ran (the config file the runner wrote beside
+    the log); the defaults without one."""
+    from firmware_py.config import load_config
+    path = Path(log.path).parent / "controller.toml"
+    return load_config(path if path.is_file() else None)
+
+
 def load_at(log: LogData, cycle: int) -> float | None:
     """The emulator load set last (EMU_CTRL SET_LOAD) before `cycle`; None on a log without one."""
     load = None

@@ -11,6 +11,7 @@ import numpy as np
 
 from firmware_py.mechanics.geometry import default_geometry
 from firmware_py.mechanics.kinematics import DirectKinematics
+from firmware_py.motion_control.time_scaling import rule_of
 from hil.experiments import (
     IAE_FACTOR_MAX,
     MAX_ERROR_MM,
@@ -25,10 +26,16 @@ from hil.host import HostError
 from hil.logdata import LogData
 from hil.metrics import iae, split_faults
 from hil.plotting import plt, save
-from hil.reference_rebuild import rebuild
+from hil.reference_rebuild import clock_agreement, rebuild
 from hil.runner import merge_sections
 from hil.scenario import Analysis, Check, Figure, Scenario
-from hil.scenarios.common import NAME_OF_CONTROLLER, NEW_CONTROLLER, THESIS_PLATFORM_LIMITS, controller_at
+from hil.scenarios.common import (
+    NAME_OF_CONTROLLER,
+    NEW_CONTROLLER,
+    THESIS_PLATFORM_LIMITS,
+    controller_at,
+    run_controller_config,
+)
 from program.errors import UserInputError
 from protocol.enums import Ack, Command, Fault, State, WaypointFlag
 
@@ -176,7 +183,7 @@ class PlatformMovement(Scenario):
         period = 1.0 / rate_hz
         geometry = default_geometry()
         ta = movement_waypoints(self.motion())[0].accel_time_s       # as the controller decoded it
-        ref = rebuild(log, "hexapod", period)
+        ref = rebuild(log, "hexapod", period, rule=rule_of(run_controller_config(log), period))
         strokes = log.leg_positions(6)
         truth = np.column_stack([log.get("EMU_TRUTH").per_cycle(log.n_cycles, a) for a in ("X", "Y", "Z")])
         runs = {}
@@ -216,6 +223,13 @@ class PlatformMovement(Scenario):
             }
             series[controller] = ((cycles - first) * period, x_ref, x_true, x_dk)
         checks = []
+        clock = clock_agreement(log, ref, period)
+        if clock.frames:
+            checks.append(Check("the reference's clock as the analysis replays it equals the controller's (CTRL_CLOCK)",
+                                clock.mismatches == 0, f"{clock.mismatches} of {clock.frames} frames differ", "0"))
+        checks.append(Check("online time scaling: the slowest rate of the reference's clock", True,
+                            f"{clock.slowest_rate:.3f} ({clock.stretched_s:.2f} s added)", "reported",
+                            required=False))
         stalls, others = split_faults(log, period)
         mine = [(cycle, name) for cycle, name in others if controller_at(log, cycle) not in THESIS_CONTROLLERS]
         thesis_faults = [f"{controller_at(log, cycle)} {name}" for cycle, name in others if (cycle, name) not in mine]
@@ -265,7 +279,9 @@ class PlatformMovement(Scenario):
             for a in AXES:
                 table.append(f"| {controller} | {a} | {r['iae_truth_m_s'][a]:.5f} | {r['iae_dk_m_s'][a]:.5f} | "
                              f"{thesis.get(a, float('nan')):.5f} | {r['max_error_truth_mm'][a]:.2f} |")
-        return Analysis({"movement": self.motion_name, "time_scale": self.time_scale, "controllers": results},
+        return Analysis({"movement": self.motion_name, "time_scale": self.time_scale, "controllers": results,
+                         "clock": {"slowest_rate": clock.slowest_rate, "stretched_s": round(clock.stretched_s, 3),
+                                   "frames_checked": clock.frames, "mismatches": clock.mismatches}},
                         self.thesis, checks, figures,
                         ["\n".join(table)])
 

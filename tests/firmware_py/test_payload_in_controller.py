@@ -33,18 +33,24 @@ def test_without_estimation_the_declared_payload_stands():
     assert rig.computed_torque.dynamics.masses[0] == pytest.approx(rig.geometry.platform.mass_kg)
 
 
-def test_the_payload_goes_on_the_bus_every_sixteenth_sync():
-    """CTRL_PAYLOAD, decoded by cantools from the DBC: the estimate of an undeclared 3 kg."""
+def test_the_payload_and_the_clock_go_on_the_bus_every_48th_sync():
+    """CTRL_PAYLOAD, decoded by cantools from the DBC: the estimate of an undeclared 3 kg;
+    CTRL_CLOCK beside it: holding, at full rate."""
     from hil.in_process import bus_loop
     from protocol.codec import CODECS
     from protocol.dbc import load_database
     emulator = load_emulator_config(overrides={"hexapod": {"payload_kg": 3.0}})
     loop, ctl, bus = bus_loop(load_config(), emulator, "hexapod", "computed-torque")
     frame_id = CODECS["CTRL_PAYLOAD"].frame_id
-    before = bus.sent[frame_id]
     for _ in range(800):
         loop.cycle()
-    assert bus.sent[frame_id] - before == 800 // 16
+    clock_id = CODECS["CTRL_CLOCK"].frame_id
+    before, clocks_before = bus.sent[frame_id], bus.sent[clock_id]
+    for _ in range(960):
+        loop.cycle()
+    assert bus.sent[frame_id] - before == bus.sent[clock_id] - clocks_before == 960 // 48
+    clock = load_database().decode_message(clock_id, bus.last_sent[clock_id])
+    assert clock["MOVING"] == 0 and clock["RATE"] == 1.0 and clock["MOTION_TIME"] == 0.0
     decoded = load_database().decode_message(frame_id, bus.last_sent[frame_id])
     assert decoded["ESTIMATING"] == 1 and decoded["COM_PLACED"] == 1
     assert decoded["MASS"] == pytest.approx(3.0, abs=0.15)
