@@ -201,7 +201,7 @@ def _presliding_in_process(start_cycles: int, force_filter_hz: float | None = No
         loop.waypoint((0.0, 0.0, stroke_m), 0.2, 0.1, WaypointFlag.LAST | WaypointFlag.START)
         cycles(int((0.5 if stroke_m > 0.155 else 1.2) / period))
     sines = []
-    for amplitude in np.linspace(5.0, 25.0, 5):
+    for amplitude in np.linspace(5.0, 25.0, 3):
         assert loop.test(TestMode.FORCE_SINE, 0.0, amplitude, 25.0).name == "ACCEPTED"
         sines.append(np.arange(len(y) + 1, len(y) + int(25.0 / period)))
         cycles(int(25.5 / period) + 5)
