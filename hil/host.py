@@ -64,6 +64,7 @@ class Host:
         self.frames_sent = 0
         self.frames_received = 0
         self.node_heartbeats = 0                # CANopen heartbeats of the nodes
+        self.heartbeat_at: dict[int, float] = {}  # each node's last heartbeat (host's monotonic clock)
         self._cmd = Outbox("HOST_CMD")
         self._pos = Outbox("HOST_WAYPOINT_POS")
         self._rot = Outbox("HOST_WAYPOINT_ROT")
@@ -101,6 +102,7 @@ class Host:
         self.frames_received += 1
         if msg.arbitration_id in NODE_HEARTBEAT_IDS:
             self.node_heartbeats += 1
+            self.heartbeat_at[msg.arbitration_id] = time.monotonic()
         status = self.decoder.receive_message(msg)
         if status is RxStatus.OK:
             if msg.arbitration_id == self._sync_id:
@@ -179,6 +181,12 @@ class Host:
                                 f"state {self.state.name if self.state is not None else 'unknown'}, "
                                 f"fault code {self.fault_code})")
             lag = grown
+
+    def wait_heartbeats(self, since: float, ids=NODE_HEARTBEAT_IDS, wall_timeout_s: float = 5.0) -> None:
+        """Until every node in `ids` has sent a heartbeat after `since` (time.monotonic()): a node
+        that was silent is back before a RESET judges the nodes' heartbeats."""
+        self.wait_until(lambda: all(self.heartbeat_at.get(i, -math.inf) > since for i in ids), 10**9,
+                        what="a heartbeat from every node", wall_timeout_s=wall_timeout_s)
 
     def wait_state(self, *states: State, max_cycles: int = 5000, wall_timeout_s: float | None = None) -> None:
         self.wait_until(lambda: self.state in states, max_cycles,

@@ -7,6 +7,7 @@ import json
 import math
 from pathlib import Path
 
+from physics.actuator import PAYLOAD
 from physics.constants import MM
 from program.cliutil import number_in_range, output_dir
 from program.errors import UserInputError
@@ -126,7 +127,7 @@ def _faults(args) -> int:
     from hil.faults import format_terminal, run_matrix
     out = output_dir(args.out or Path("hil-out") / "faults")
     doc = run_matrix(out, short=args.short, bus=args.bus, start_timeout_s=args.start_timeout_s,
-                     pacings=(args.pacing,) if args.pacing else ("lockstep", "realtime"))
+                     pacings=(args.pacing,) if args.pacing else ("lockstep", "realtime"), payload_kg=args.payload_kg)
     print(json.dumps(doc, indent=1, default=str) if args.json else format_terminal(doc))
     return 0 if doc["passed"] else 1
 
@@ -224,6 +225,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pacing", choices=("lockstep", "realtime"), default=None,
                    help="only the sessions of this pacing (default: both)")
     p.add_argument("--start-timeout-s", type=number_in_range(float, 1.0, 3600.0), default=90.0)
+    p.add_argument("--payload-kg", type=number_in_range(float, *PAYLOAD.range), default=0.0,
+                   help="a payload on the hexapod's platform, declared to its controller (default 0)")
     p.add_argument("--json", action="store_true", help="print faults.json instead of the table")
     p.set_defaults(handler=_faults)
     p = hil_sub.add_parser("soak", help="realtime hexapod trajectory loop with random frame faults: jitter, "

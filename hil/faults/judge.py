@@ -131,23 +131,27 @@ def judge_waypoints(view: LogView, mark: Marks, baseline: Marks | None, run_dir:
     ok = all(acks.get(k) in allowed for k, allowed in expected.items()
              if k in acks or not k.startswith("through"))          # no singularity on the bench
     ok = ok and acks.get("NaN field", "").startswith("REFUSED")
-    # zero motion: never RUNNING, and no leg's encoder moves by more than the one count its
-    # hold hunts over (a position loop cannot see less). The platform's own range (truth)
-    # is reported beside its range holding at rest in as long a window just before: both
-    # hunt (0.1-0.3 mm on the hexapod, one count of a slender leg amplified)
+    # zero motion: never RUNNING, and no leg's encoder moves by more than its hold hunts over:
+    # one count (a position loop cannot see less), or what the legs spanned holding at rest in
+    # as long a window just before (a payload's hold hunts over two). The platform's own range
+    # (truth) is reported beside its range holding at rest then: both hunt (0.1-0.3 mm on the
+    # hexapod, one count of a slender leg amplified)
     span = mark.t_end - mark.t_inject
     k0, k1 = view.cycle_at(mark.t_inject), view.cycle_at(mark.t_end)
     legs = view.leg_range(k0, k1)
+    hold = view.leg_range(view.cycle_at(mark.t_inject - span), k0)
+    bound = max(ENCODER_COUNT_M, hold or 0.0) * 1.001
     motion = view.truth_range(mark.t_inject, mark.t_end)
     floor = view.truth_range(mark.t_inject - span, mark.t_inject)
     states = view.states_between(mark.t_inject, mark.t_end)
-    still = "RUNNING" not in states and legs is not None and legs <= ENCODER_COUNT_M * 1.001
+    still = "RUNNING" not in states and legs is not None and legs <= bound
     measured = "; ".join(f"{k}: {v}" for k, v in acks.items()) + \
         (f"; states {states}; legs moved "
-         f"{'n/a' if legs is None else f'{legs / ENCODER_COUNT_M:.0f}'} encoder count(s) at most (bound 1); "
+         f"{'n/a' if legs is None else f'{legs / ENCODER_COUNT_M:.0f}'} encoder count(s) at most (bound "
+         f"{bound / ENCODER_COUNT_M:.0f}: the hold's before); "
          f"platform range {_mm(motion)} (holding at rest before: {_mm(floor)})")
-    return ok and still, measured, {"acks": acks, "leg_range_m": legs, "platform_range_m": motion,
-                                    "hold_platform_range_m": floor, "states": states}
+    return ok and still, measured, {"acks": acks, "leg_range_m": legs, "hold_leg_range_m": hold,
+                                    "platform_range_m": motion, "hold_platform_range_m": floor, "states": states}
 
 def judge_babble(view: LogView, mark: Marks, baseline: Marks | None, run_dir: Path | None):
     faults = view.faults_between(mark.t_start, mark.t_end)

@@ -22,11 +22,14 @@ def sessions(short: bool, pacings: tuple[str, ...] = PACINGS) -> list[Session]:
 
 
 def run_matrix(out: Path, short: bool, bus: str | None = None, start_timeout_s: float = 90.0,
-               pacings: tuple[str, ...] = PACINGS) -> dict:
+               pacings: tuple[str, ...] = PACINGS, payload_kg: float = 0.0) -> dict:
+    """Every session's cases; `payload_kg` on the hexapod's platform, declared to its controller."""
     results, runs = [], []
     for session in sessions(short, pacings):
+        payload = {"hexapod": {"payload_kg": payload_kg}} if payload_kg and session.rig == "hexapod" else {}
         options = RunOptions(out_dir=out / session.name, bus=bus, short=short, start_timeout_s=start_timeout_s,
-                             valve_watchdog_periods=VALVE_WATCHDOG_PERIODS if session.pacing == "realtime" else None)
+                             valve_watchdog_periods=VALVE_WATCHDOG_PERIODS if session.pacing == "realtime" else None,
+                             controller_config=payload, emulator_config=payload)
         doc = run_scenario(session, options)
         runs.append({"session": session.name, "passed": doc["passed"], "failure": doc.get("failure"),
                      "e2e_errors": doc["e2e_errors"], "wall_time_s": doc.get("wall_time_s"),

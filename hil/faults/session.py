@@ -36,7 +36,9 @@ from hil.logquery import LogView
 from hil.metrics import faults_in_windows
 from hil.processes import ChildFailed
 from hil.scenario import Analysis, Check, Scenario
+from protocol.codec import CODECS
 from protocol.enums import Command, EmuCommand, EmuFault, Fault, State, WaypointFlag
+from protocol.nodes import LEGS_OF_RIG, rig_nodes
 
 
 class Session(Scenario):
@@ -113,8 +115,15 @@ class Session(Scenario):
         before each of those faults (`metrics.faults_in_windows`).
         """
         host = run.host
+        cleared = time.monotonic()
         host.emulator(EmuCommand.CLEAR_ALL)
         run.wait_s(0.1)
+        # a node the case silenced is back (its heartbeat) before the RESET judges the nodes:
+        # lockstep runs the cycles faster than its 100 ms heartbeat
+        try:
+            host.wait_heartbeats(cleared, {CODECS[f"HEARTBEAT_{n}"].frame_id for n in rig_nodes(LEGS_OF_RIG[self.rig])})
+        except HostError as error:                 # the RESET below then says what is missing
+            mark.notes.append(f"recovery: {error}")
         for attempt in range(1, TRY_LIMIT + 1):
             started = time.time()
             ok, error = self._recover_once(run)

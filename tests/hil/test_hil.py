@@ -151,6 +151,7 @@ def test_an_injected_fault_lasts_the_whole_experiment(tmp_path):
     (["hil", "run", "pm-circle", "--emulator-config", "/nonexistent/plant.toml"], "plant.toml"),
     (["hil", "analyze", "/nonexistent/run.blf", "--scenario", "sha-step"], "run.blf"),
     (["hil", "analyze", "x.txt", "--scenario", "sha-step"], "x.txt"),
+    (["hil", "faults", "--payload-kg", "500"], "--payload-kg"),
 ])
 def test_cli_errors_are_one_line_and_exit_2(argv, culprit, tmp_path):
     proc = hydrapod(*argv, *(["--out", tmp_path] if argv[1] == "run" else []))
