@@ -67,7 +67,7 @@ class Controller:
         self._full_scale = np.array(self.full_scale_v)          # 0-d: a ufunc converts no number per cycle
         self.joint = JointController(cfg, n, period_s, moving_mass_kg=rig.moving_mass_kg,
                                      mass_offset_kg=rig.mass_offset_kg, kp_factor=rig.kp_factor,
-                                     ki_factor=rig.ki_factor)
+                                     ki_factor=rig.ki_factor, guide_friction=rig.guide_friction)
         self.laws = {k: JointSpaceLaw(k, self.joint, self.full_scale_v) for k in (PI, ADAPTIVE, MODEL_BASED)}
         self.laws[COMPUTED_TORQUE] = ComputedTorqueLaw(rig.computed_torque, self.joint, rig.platform,
                                                        rig.platform is not None)

@@ -44,6 +44,7 @@ class TestbenchModel:
         self.park_strokes = np.full(1, cfg.testbench.park_m)
         self.moving_mass_kg, self.mass_offset_kg = cfg.actuator.moving_mass_kg, cfg.testbench.slide_mass_kg
         self.rod_mass_kg = cfg.actuator.moving_mass_kg
+        self.guide_friction = (cfg.testbench.guide_coulomb_n, cfg.testbench.guide_viscous_ns_m)
         self.kp_factor = self.ki_factor = 1.0
         self.gravity_axial = np.full(1, GRAVITY_M_S2)
         self.tau_n = np.zeros(1)
@@ -113,6 +114,7 @@ class HexapodModel:
         self.park_strokes = np.full(6, cfg.hexapod.park_stroke_m)
         self.moving_mass_kg, self.mass_offset_kg = self.geometry.rod.mass_kg, 0.0
         self.rod_mass_kg = self.geometry.rod.mass_kg
+        self.guide_friction = (0.0, 0.0)                      # the load cells hold the platform's joints
         self.kp_factor, self.ki_factor = cfg.hexapod.kp_factor, cfg.hexapod.ki_factor
         self.gravity_axial = self.platform.gravity_axial
         self.tau_n = self.platform.force_n

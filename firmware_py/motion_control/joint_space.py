@@ -109,7 +109,10 @@ def filtered_derivative(state, y, alpha, period_s):
 # parameter vector
 (JP_T, JP_R_BASE, JP_R_GAIN, JP_V_REF, JP_LAMBDA, JP_P_MAX, JP_M_MAX, JP_RLS_WN, JP_RLS_ZETA,
  JP_D_WN, JP_D_ZETA, JP_KI_SCALE, JP_MASS_OFFSET, JP_PI_KP, JP_PI_KI, JP_KPL, JP_U_MAX,
- JP_MOVING_MASS, JP_AREA, JP_FF_SCALE, JP_KP_SCALE, JP_OBSERVER_K, JP_PI_KD, JP_DY_ALPHA, JP_SIZE) = range(25)
+ JP_MOVING_MASS, JP_AREA, JP_FF_SCALE, JP_KP_SCALE, JP_OBSERVER_K, JP_PI_KD, JP_DY_ALPHA, JP_GUIDE_FC, JP_GUIDE_FV,
+ JP_SIZE) = range(27)
+# below this speed the guide's Coulomb friction is taken in proportion (it sticks at rest, either way)
+GUIDE_STICK_M_S = 5e-3
 # state and outputs per leg
 # (each 2nd-order filter keeps 3 columns: F u, s F u, the previous input)
 # (the D term keeps 2: its filtered dy/dt, the previous y)
@@ -142,7 +145,12 @@ def legs_update(mode, jp, position, fresh_legs, force_n, yr, ar, g_axial, tau_n,
         phi += st[leg, ST_FG]
         filter_step(st[leg, ST_FG:ST_FG + 3], rls_ad, rls_bd, jp[JP_RLS_WN], jp[JP_RLS_ZETA], g_ax)
         psi = st[leg, ST_FF]
-        filter_step(st[leg, ST_FF:ST_FF + 3], rls_ad, rls_bd, jp[JP_RLS_WN], jp[JP_RLS_ZETA], force)
+        # the load cell carries the slide's guide friction too (test bench): taken off while it
+        # slides, its identified Fc sign(v) + sigma_v v (Table D.1), as eq. 7.36 takes off Ff
+        v = x[1]
+        guide = (jp[JP_GUIDE_FC] * (1.0 if v > 0.0 else -1.0) + jp[JP_GUIDE_FV] * v) if abs(v) > GUIDE_STICK_M_S \
+            else 0.0
+        filter_step(st[leg, ST_FF:ST_FF + 3], rls_ad, rls_bd, jp[JP_RLS_WN], jp[JP_RLS_ZETA], force - guide)
         mass = st[leg, ST_MASS]
         if fresh:
             mass = rls_step(st[:, ST_MASS], st[:, ST_RLS_P], leg, phi, psi, jp[JP_LAMBDA], jp[JP_P_MAX],
@@ -183,7 +191,7 @@ class JointController:
 
     def __init__(self, cfg: ControllerConfig, n_legs: int, period_s: float, *, moving_mass_kg: float,
                  mass_offset_kg: float, initial_position_m: float = 0.0, kp_factor: float = 1.0,
-                 ki_factor: float = 1.0):
+                 ki_factor: float = 1.0, guide_friction: tuple[float, float] = (0.0, 0.0)):
         self.cfg, self.n_legs, self.period_s = cfg, n_legs, period_s
         self.mode = PI
         jp = np.zeros(JP_SIZE)
@@ -211,6 +219,7 @@ class JointController:
         jp[JP_AREA] = cfg.actuator.piston_area_m2
         jp[JP_FF_SCALE] = cfg.model_based.feedforward_scale
         jp[JP_OBSERVER_K] = cfg.friction.observer_gain_per_s
+        jp[JP_GUIDE_FC], jp[JP_GUIDE_FV] = guide_friction       # N, N s/m: between the rod and the load
         self.jp = jp
         self.a, self.q = kalman_model(period_s, cfg.kalman.jerk_psd_m2_s5)
         rls, lp = cfg.mass_estimator, cfg.load_pressure

@@ -162,7 +162,8 @@ def linear_step(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig, 
     cmd.active[:] = 1.0                      # the valve follows: HOLD, then ACTIVE at the next SYNC
     cfg = controller_cfg
     joint = JointController(cfg, 1, PERIOD_S, moving_mass_kg=cfg.actuator.moving_mass_kg,
-                            mass_offset_kg=cfg.testbench.slide_mass_kg)
+                            mass_offset_kg=cfg.testbench.slide_mass_kg,
+                            guide_friction=(cfg.testbench.guide_coulomb_n, cfg.testbench.guide_viscous_ns_m))
     joint.reset(position_mm * 1e-3)
     joint.set_mode(mode)
     yr, ar, g_axial, tau = np.full(1, position_mm * 1e-3), np.zeros(1), np.full(1, 9.81), np.zeros(1)
