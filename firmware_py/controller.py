@@ -142,7 +142,8 @@ class Controller:
         return ControllerStatus(
             rig=rig.name, n_legs=self.n, n_nodes=rig.n_nodes, kind=self.sup.controller, reference_m=self.reference.yr,
             hold_m=self.reference.hold_position, position_m=joint.position_estimate, error_m=joint.error_m,
-            spool=self.spool_cmd, load_mass_kg=joint.mass_kg, residual_ratio=self.residuals.ratio,
+            spool=self.spool_cmd, load_mass_kg=joint.mass_kg, load_pressure_pa=joint.load_pressure_pa,
+            friction_n=joint.friction_n, residual_ratio=self.residuals.ratio,
             missing_in_row=self.frames.missing, rejected_in_row=self.frames.rejected,
             pose=platform.dk.pose if platform is not None else None,
             reference_pose=platform.ref_dk.pose if platform is not None else None, margins=self.margins,

@@ -45,6 +45,8 @@ class ControllerStatus:
     error_m: np.ndarray = None          # reference - measured position
     spool: np.ndarray = None            # the controller's valve input, fraction of full input
     load_mass_kg: np.ndarray = None     # the RLS estimate of each leg's load (eq. 7.33-7.37)
+    load_pressure_pa: np.ndarray = None # the indirect load pressure (eq. 7.38-7.39)
+    friction_n: np.ndarray = None       # the seals' friction from the LuGre observer (eq. 7.30-7.32)
     residual_ratio: np.ndarray = None   # each actuator residual's |r| / threshold
     missing_in_row: np.ndarray = None   # cycles in a row without a valid LEG_STATE
     rejected_in_row: np.ndarray = None  # ... of which a frame came and was rejected

@@ -23,8 +23,8 @@ EMCY_DLC = 8
 HEARTBEAT_DLC = 1
 LEG_DEVICES = ("valve", "encoder", "leg_sensors")
 # the controller's and host's frames that are the same on either profile
-OWN_FRAMES = ("SYNC", "CTRL_STATUS", "CTRL_PAYLOAD", "CTRL_ACK", "HOST_CMD", "HOST_TEST", "HOST_WAYPOINT_POS",
-              "HOST_WAYPOINT_ROT", "HOST_WAYPOINT_TIME", "EMCY_16", "HEARTBEAT_16")
+OWN_FRAMES = ("SYNC", "CTRL_STATUS", "CTRL_PAYLOAD", "CTRL_CLOCK", "CTRL_LOAD", "CTRL_ACK", "HOST_CMD", "HOST_TEST",
+              "HOST_WAYPOINT_POS", "HOST_WAYPOINT_ROT", "HOST_WAYPOINT_TIME", "EMCY_16", "HEARTBEAT_16")
 
 
 @dataclass(frozen=True)

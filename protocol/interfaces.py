@@ -179,3 +179,11 @@ def clock_values(values, index, moving: bool, scaled: bool, rate: float, motion_
     values[index["SCALED"]] = scaled and playing
     values[index["RATE"]] = rate if playing else 1.0
     values[index["MOTION_TIME"]] = motion_time_periods if playing else 0.0
+
+
+def load_values(values, index, leg: int, mass_kg: float, load_pressure_pa: float, friction_n: float) -> None:
+    """CTRL_LOAD: one leg's (0-based `leg`) estimates of chapter 7.5; NaN (none yet) is sent as 0."""
+    values[index["LEG"]] = leg + 1
+    values[index["MASS"]] = mass_kg if mass_kg == mass_kg else 0.0
+    values[index["LOAD_PRESSURE"]] = load_pressure_pa if load_pressure_pa == load_pressure_pa else 0.0
+    values[index["FRICTION"]] = friction_n if friction_n == friction_n else 0.0

@@ -234,6 +234,8 @@ class JointController:
         self.u_v = self.st[:, ST_U]                   # views, made once
         self.error_m = self.st[:, ST_ERROR]
         self.mass_kg = self.st[:, ST_MASS]
+        self.load_pressure_pa = self.st[:, ST_PL]
+        self.friction_n = self.st[:, ST_FRICTION]
         self.integral = self.st[:, ST_INTEGRAL]
         self.kalman_x = np.zeros((n_legs, 3))
         self.kalman_p = np.zeros((n_legs, 3, 3))

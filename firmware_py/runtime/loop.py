@@ -52,6 +52,7 @@ from protocol.interfaces import (
     clock_values,
     leg_pressure_into,
     leg_state_into,
+    load_values,
     payload_values,
     valve_command_values,
 )
@@ -176,6 +177,9 @@ class ControllerLoop:
         # ... and its reference's clock (online time scaling)
         self.out_clock = Outbox("CTRL_CLOCK") if has_imu else None
         self._clock_schedule = CODECS["CTRL_CLOCK"].schedule
+        # every rig: the legs' estimates of chapter 7.5, one leg per frame
+        self.out_load = Outbox("CTRL_LOAD")
+        self._load_schedule, self._load_leg = CODECS["CTRL_LOAD"].schedule, 0
         self._overflow = sync_counter_overflow()
         self.sync_counter = 0
         self.heartbeat_seen = np.full(len(self.nodes), -np.inf)
@@ -386,6 +390,12 @@ class ControllerLoop:
             payload_values(self.out_payload.values, self.out_payload.index, status.payload_mass_kg,
                            status.payload_com_m, self._declared_payload_kg)
             self._send(self.out_payload)
+        if self._load_schedule.due(self.sync_counter):
+            leg = self._load_leg
+            load_values(self.out_load.values, self.out_load.index, leg, status.load_mass_kg[leg],
+                        status.load_pressure_pa[leg], status.friction_n[leg])
+            self._send(self.out_load)
+            self._load_leg = (leg + 1) % status.n_legs
         if self.out_clock is not None and self._clock_schedule.due(self.sync_counter):
             clock_values(self.out_clock.values, self.out_clock.index, status.moving, status.time_scaled,
                          status.time_rate, status.motion_time_periods)

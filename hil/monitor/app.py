@@ -292,8 +292,8 @@ class MonitorApp(App[None]):
 
     def _legs_table(self, s: Snapshot) -> Table:
         table = Table(expand=True, box=None, header_style="bold")
-        for col in ("leg", "pos mm", "vel mm/s", "force N", "pA bar", "pB bar", "valve 408", "status",
-                    "DHMR", "cmd %", "spool %", "age ms", "E2E rej", "lost"):
+        for col in ("leg", "pos mm", "vel mm/s", "force N", "pA bar", "pB bar", "m_L kg", "P_L bar", "valve 408",
+                    "status", "DHMR", "cmd %", "spool %", "age ms", "E2E rej", "lost"):
             table.add_column(col, justify="right", no_wrap=True)
         for leg in range(max(s.n_legs, 1)):
             g = s.legs[leg]
@@ -301,7 +301,8 @@ class MonitorApp(App[None]):
             stale = age > STALE_S
             table.add_row(
                 str(leg + 1), _f(g.position_m, ".2f", 1e3), _f(g.velocity_m_s, ".1f", 1e3), _f(g.force_n, ".1f"),
-                _f(g.pa_pa, ".2f", 1e-5), _f(g.pb_pa, ".2f", 1e-5),
+                _f(g.pa_pa, ".2f", 1e-5), _f(g.pb_pa, ".2f", 1e-5), _f(g.load_mass_kg, ".2f"),
+                _f(g.load_pressure_pa, ".2f", 1e-5),
                 Text(g.valve_state, "bold red" if "FAULT" in g.valve_state else ""),
                 f"{g.status_state} {g.fault_reason}", g.control_bits, _f(g.spool_cmd, ".2f", 1e2),
                 _f(g.spool_actual, ".2f", 1e2), Text(_age_ms(s.now_s, g.seen_s), "bold red" if stale else ""),

@@ -83,6 +83,8 @@ class Leg:
     pa_pa: float = float("nan")
     pb_pa: float = float("nan")
     pressure_seen_s: float = float("nan")
+    load_mass_kg: float = float("nan")        # CTRL_LOAD: the RLS mass, the indirect load pressure
+    load_pressure_pa: float = float("nan")
     rejected: int = 0                         # LEG_STATE frames the E2E check rejected
     lost: int = 0                             # gaps in its counter
 
@@ -189,7 +191,8 @@ class BusView:
              CODECS["CTRL_ACK"].frame_id: self._ack, CODECS["HOST_CMD"].frame_id: self._host_cmd,
              CODECS["HOST_WAYPOINT_TIME"].frame_id: self._waypoint, CODECS["NMT"].frame_id: self._nmt,
              CODECS["IMU_ATTITUDE"].frame_id: self._imu, CODECS["EMU_TRUTH"].frame_id: self._truth,
-             CODECS["CTRL_PAYLOAD"].frame_id: self._payload, CODECS["CTRL_CLOCK"].frame_id: self._clock}
+             CODECS["CTRL_PAYLOAD"].frame_id: self._payload, CODECS["CTRL_CLOCK"].frame_id: self._clock,
+             CODECS["CTRL_LOAD"].frame_id: self._load}
         for leg in range(N_LEGS):
             n = leg + 1
             h[CODECS[f"LEG_STATE_{n}"].frame_id] = lambda t, s, leg=leg: self._leg_state(t, s, leg)
@@ -235,6 +238,14 @@ class BusView:
         if status is RxStatus.OK:
             v, i = self._values("CTRL_PAYLOAD")
             self.payload_kg, self.payload_estimated = float(v[i["MASS"]]), bool(v[i["ESTIMATING"]])
+
+    def _load(self, t: float, status: RxStatus) -> None:
+        if status is RxStatus.OK:
+            v, i = self._values("CTRL_LOAD")
+            leg = int(v[i["LEG"]]) - 1
+            if 0 <= leg < N_LEGS:
+                self.legs[leg].load_mass_kg = float(v[i["MASS"]])
+                self.legs[leg].load_pressure_pa = float(v[i["LOAD_PRESSURE"]])
 
     def _clock(self, t: float, status: RxStatus) -> None:
         if status is RxStatus.OK:

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from hil.design.calibration import table_a3
+from hil.estimates import SETTLED_FRACTION, direct_load_pressure, load_changes, load_estimates, settling
 from hil.experiments import SINE_AMPLITUDE_MM as AMPLITUDE_MM
 from hil.experiments import SINE_CENTRE_MM as CENTRE_MM
 from hil.experiments import SINE_POINTS_PER_PERIOD as POINTS_PER_PERIOD
@@ -33,8 +34,10 @@ from hil.scenarios.common import (
     each_controller_and_load,
     load_at,
     move_stroke,
+    run_controller_config,
+    run_emulator_config,
 )
-from physics.constants import MM
+from physics.constants import BAR, MM
 from protocol.enums import Ack, AckKind, Command, EmuCommand, Fault, State, WaypointFlag, time_scale_from_wire
 
 # The thesis's robust PI (eq. 7.13) on the thesis's own plant at the sine's centre (Table A.3,
@@ -300,6 +303,9 @@ class ShaTracking(Scenario):
                       "thesis Figs. 7.17 (PI) and 7.18 (adaptive): y and the error over 0-12 s for 0, 3, 6 kg")
 
 
+SETTLING_OVER_MEMORY = 1.2           # the estimate's settling against its forgetting's exponential window
+
+
 class ShaPerturbation(Scenario):
     name = "sha-perturbation"
     title = "sine tracking while masses are added and removed, PI and adaptive"
@@ -346,11 +352,93 @@ class ShaPerturbation(Scenario):
                                 required=False))
         if not runs:
             checks.append(Check("sine runs found in the log", False, "0", ">= 1"))
+        estimates = self._estimates(log, runs, period_s)
+        for controller, e in estimates.items():
+            results[controller]["estimates"] = {k: v for k, v in e.items() if not k.startswith("_")}
+            after = e["segments"][1:]                     # each load change (the first: held before)
+            late = [f"{g['true_kg']:g} kg: " + ("never" if g["settled_s"] is None else
+                                                f"{g['settled_s']:.2f} s (forgetting's {g['predicted_s']:.2f} s)")
+                    for g in after]
+            checks.append(Check(f"{controller}: the RLS mass on the bus (CTRL_LOAD) within {SETTLED_FRACTION:.0%} of "
+                                f"the slide and load after each change, as fast as its forgetting allows",
+                                bool(after) and all(g["settled_s"] is not None
+                                                    and g["settled_s"] <= SETTLING_OVER_MEMORY * g["predicted_s"]
+                                                    for g in after), "; ".join(late),
+                                f"<= {SETTLING_OVER_MEMORY:g} x T / (1 - lambda) ln(|m_0 - m| / 0.1 m), before the "
+                                f"next change {self.quarter_s(period_s):.2f} s later (thesis Fig. 7.14: settled inside "
+                                f"its 10 s, no time stated)"))
+            checks.append(Check(f"{controller}: indirect P_L (eq. 7.39) against the chambers' P_A - alpha P_B",
+                                True, f"rms {e['load_pressure_rms_bar']:.2f} bar over a "
+                                      f"{e['load_pressure_span_bar']:.1f} bar span", "reported (thesis Fig. 7.15)",
+                                required=False))
         figures = [self._plot(runs, out)] if out is not None and runs else []
+        if out is not None and estimates:
+            figures.append(self._plot_estimates(estimates, out))
         table = ["| controller | max error mm | rms error mm | load changes (t s: kg) |", "|---|---|---|---|"]
         table += [f"| {r['controller']} | {r['max_error_mm']:.2f} | {r['rms_error_mm']:.2f} | "
                   + ", ".join(f"{c['t_s']:g}: {c['load_kg']:g}" for c in r["load_changes"]) + " |" for r in runs]
         return Analysis({"runs": results}, self.thesis, checks, figures, ["\n".join(table)])
+
+    def quarter_s(self, period_s: float) -> float:
+        """The time between two load changes."""
+        return 0.25 * 2 * math.pi / self.W_RAD_S
+
+    def _estimates(self, log: LogData, runs: list[dict], period_s: float) -> dict:
+        """Per run: the RLS mass (CTRL_LOAD) against the slide and the load the emulator carried,
+        segment by segment between the load changes, and the indirect P_L against the direct."""
+        emulator = run_emulator_config(log)
+        slide, ratio = emulator.guide.slide_mass_kg, emulator.actuator.area_ratio
+        est = load_estimates(log)
+        if not len(est.cycle):
+            return {}
+        changes = load_changes(log)
+        direct_cycles, direct = direct_load_pressure(log, ratio)
+        out = {}
+        for r in runs:
+            start, end = r["start"], r["start"] + len(r["_t"])
+            inside = [(c, load) for c, load in changes if start <= c < end]
+            before = [load for c, load in changes if c < start]
+            bounds = [(start, before[-1] if before else 0.0)] + inside
+            memory = period_s / (1.0 - run_controller_config(log).mass_estimator.forgetting)
+            segments = [settling(est, c, (bounds[k + 1][0] if k + 1 < len(bounds) else end), slide + load, period_s,
+                                 memory) for k, (c, load) in enumerate(bounds)]
+            sel = (est.cycle >= start) & (est.cycle < end)
+            pl = est.load_pressure_pa[sel]
+            nearest = np.searchsorted(direct_cycles, est.cycle[sel]).clip(0, max(len(direct_cycles) - 1, 0))
+            close = np.abs(direct_cycles[nearest] - est.cycle[sel]) <= 8 if len(direct_cycles) else np.zeros(0, bool)
+            diff = (pl - direct[nearest])[close] / BAR if len(direct_cycles) else np.zeros(0)
+            out[r["controller"]] = {
+                "segments": segments, "slide_kg": slide,
+                "load_pressure_rms_bar": float(np.sqrt(np.mean(diff ** 2))) if len(diff) else float("nan"),
+                "load_pressure_span_bar": float(np.ptp(pl) / BAR) if len(pl) else float("nan"),
+                "_t": (est.cycle[sel] - start) * period_s, "_mass": est.mass_kg[sel], "_pl": pl,
+                "_friction": est.friction_n[sel],
+                "_true": np.array([slide + next(load for c, load in reversed(bounds) if c <= k)
+                                   for k in est.cycle[sel]]),
+                "_direct_t": (direct_cycles[(direct_cycles >= start) & (direct_cycles < end)] - start) * period_s,
+                "_direct": direct[(direct_cycles >= start) & (direct_cycles < end)]}
+        return out
+
+    def _plot_estimates(self, estimates: dict, out: Path) -> Figure:
+        fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
+        for controller, e in estimates.items():
+            axes[0].plot(e["_t"], e["_mass"], lw=1, label=f"{controller}: RLS m_L (CTRL_LOAD)")
+            axes[1].plot(e["_t"], e["_friction"], lw=1, label=f"{controller}: seals' F_f (observer)")
+            axes[2].plot(e["_t"], e["_pl"] / BAR, lw=1, label=f"{controller}: P_L indirect (eq. 7.39)")
+        first = next(iter(estimates.values()))
+        axes[0].step(first["_t"], first["_true"], "k--", lw=1, where="post", label="slide + load emulated")
+        axes[2].plot(first["_direct_t"], first["_direct"] / BAR, "k.", ms=2, label="P_A - alpha P_B (transducers)")
+        axes[0].set_ylabel("m_L [kg]")
+        axes[1].set_ylabel("F_f [N]")
+        axes[2].set_ylabel("P_L [bar]")
+        axes[2].set_xlabel("t [s] from the sine's start")
+        for ax in axes:
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=7)
+        path = out / "sha_perturbation_estimates.png"
+        save(fig, path)
+        return Figure(path.name, "the RLS load mass, the seals' friction and the load pressure from the log",
+                      "thesis Figs. 7.14 (m, Ff) and 7.15 (P_L indirect against the pressure sensors)")
 
     def _plot(self, runs, out: Path) -> Figure:
         fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)

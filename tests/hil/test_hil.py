@@ -172,7 +172,9 @@ SCENARIO_RUNS = {
     "sha-tracking": (["--short"], lambda m: {(r["controller"], r["load_kg"], round(r["w_rad_s"], 1))
                                             for r in m["runs"]} == {(c, load, w) for c in CONTROLLERS
                                                                     for load in (0.0,) for w in (0.5, 2.0)}),
-    "sha-perturbation": ([], lambda m: all(len(r["load_changes"]) == 3 for r in m["runs"].values())
+    # the RLS mass and the load pressure from the log alone (CTRL_LOAD): a segment per load
+    "sha-perturbation": ([], lambda m: all(len(r["load_changes"]) == 3 and len(r["estimates"]["segments"]) == 4
+                                           for r in m["runs"].values())
                          and set(m["runs"]) == {"pi", "adaptive"}),
     # the thesis's timing. The circle: all three complete, model-based < PI+P is required and
     # computed torque is held to <= 2 x the thesis's IAE and <= 10 mm (measured 4-8 mm). The

@@ -72,6 +72,8 @@ def test_the_view_shows_what_the_frames_say():
                      INFO=3))
     view.feed(t, CODECS["HEARTBEAT_2"].frame_id, frames("HEARTBEAT_2", STATE=int(NmtState.OPERATIONAL)))
     view.feed(t, CODECS["CTRL_PAYLOAD"].frame_id, frames("CTRL_PAYLOAD", ESTIMATING=1, MASS=2.5))
+    view.feed(t, CODECS["CTRL_LOAD"].frame_id,
+              frames("CTRL_LOAD", LEG=2, MASS=4.35, LOAD_PRESSURE=7.0e5, FRICTION=-12.0))
     view.feed(t, CODECS["CTRL_CLOCK"].frame_id, frames("CTRL_CLOCK", MOVING=1, SCALED=1, RATE=0.625,
                                                         MOTION_TIME=123.5))
     bad = bytearray(frames("LEG_STATE_2", POSITION=0.2, FORCE=0.0))
@@ -86,6 +88,7 @@ def test_the_view_shows_what_the_frames_say():
     assert s.legs[2].control_bits == "D-M-" and s.legs[2].spool_cmd == pytest.approx(0.03, abs=1e-4)
     assert s.heartbeats["LEG2"][0] == "OPERATIONAL"
     assert (s.payload_kg, s.payload_estimated, s.clock_rate) == (2.5, True, 0.625)
+    assert (s.legs[1].load_mass_kg, s.legs[1].load_pressure_pa) == (pytest.approx(4.35), pytest.approx(7.0e5))
     assert "CONTROL_DEVIATION ACTUATOR_RESIDUAL leg 3" in s.emcy[-1].text
     assert s.sync_period_us == pytest.approx(2000, abs=1)
     assert s.sync_jitter_max_us == pytest.approx(500, abs=1)          # the one late SYNC

@@ -36,7 +36,7 @@ FLOORS = {
     "hil": [
         {"logdata", "plotting", "injection", "identification", "experiments", "host", "processes", "in_process"},
         {"fuzz"},
-        {"logquery", "metrics", "monitor", "reference_rebuild", "scenario"},
+        {"logquery", "metrics", "monitor", "reference_rebuild", "scenario", "estimates"},
         {"design", "report"},
         {"runner", "tools"},
         {"scenarios"},

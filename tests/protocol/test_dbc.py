@@ -129,7 +129,7 @@ def test_only_sync_leg_state_and_valve_cmd_every_cycle():
     every = sorted(s.name for s in schedules() if s.sync_period == 1)
     assert every == sorted(["SYNC"] + [f"LEG_STATE_{n}" for n in LEGS] + [f"VALVE_CMD_{n}" for n in LEGS])
     slow = {s.name for s in schedules() if s.sync_period > 1}
-    assert {"CTRL_STATUS", "CTRL_PAYLOAD", "CTRL_CLOCK", "IMU_ATTITUDE", "IMU_RATE"} \
+    assert {"CTRL_STATUS", "CTRL_PAYLOAD", "CTRL_CLOCK", "CTRL_LOAD", "IMU_ATTITUDE", "IMU_RATE"} \
         | {f"VALVE_STATUS_{n}" for n in LEGS} | {f"LEG_PRESSURE_{n}" for n in LEGS} == slow
 
 
