@@ -365,7 +365,7 @@ class ShaPerturbation(Scenario):
                                                     and g["settled_s"] <= SETTLING_OVER_MEMORY * g["predicted_s"]
                                                     for g in after), "; ".join(late),
                                 f"<= {SETTLING_OVER_MEMORY:g} x T / (1 - lambda) ln(|m_0 - m| / 0.1 m), before the "
-                                f"next change {self.quarter_s(period_s):.2f} s later (thesis Fig. 7.14: settled inside "
+                                f"next change {self.quarter_s:.2f} s later (thesis Fig. 7.14: settled inside "
                                 f"its 10 s, no time stated)"))
             checks.append(Check(f"{controller}: indirect P_L (eq. 7.39) against the chambers' P_A - alpha P_B",
                                 True, f"rms {e['load_pressure_rms_bar']:.2f} bar over a "
@@ -379,7 +379,8 @@ class ShaPerturbation(Scenario):
                   + ", ".join(f"{c['t_s']:g}: {c['load_kg']:g}" for c in r["load_changes"]) + " |" for r in runs]
         return Analysis({"runs": results}, self.thesis, checks, figures, ["\n".join(table)])
 
-    def quarter_s(self, period_s: float) -> float:
+    @property
+    def quarter_s(self) -> float:
         """The time between two load changes."""
         return 0.25 * 2 * math.pi / self.W_RAD_S
 
