@@ -39,22 +39,27 @@ def load_changes(log: LogData) -> list[tuple[int, float]]:
 def settling(estimates: LoadEstimates, start: int, end: int, true_kg: float, period_s: float,
              memory_s: float) -> dict:
     """Over cycles [start, end) with `true_kg` carried: when the estimate entered, for good,
-    SETTLED_FRACTION of it (None: it never did), its error at the end, and the time an RLS
-    whose forgetting remembers `memory_s` (T / (1 - lambda)) takes from where the estimate
-    started: memory_s ln(|m_0 - m| / (SETTLED_FRACTION m)), the exponential window's."""
+    SETTLED_FRACTION of it (None: it never did), its error at the end, and what an RLS whose
+    forgetting remembers `memory_s` (T / (1 - lambda)) does from where the estimate started,
+    its error decaying as exp(-t / memory_s): the time it takes to settle,
+    memory_s ln(|m_0 - m| / (SETTLED_FRACTION m)), and its error at the last sample."""
     inside = (estimates.cycle >= start) & (estimates.cycle < end)
     cycles, mass = estimates.cycle[inside], estimates.mass_kg[inside]
     if not len(mass):
         return {"true_kg": true_kg, "settled_s": None, "final_kg": None, "final_error_pct": None,
                 "predicted_s": None}
-    gap = abs(float(mass[0]) - true_kg) / (SETTLED_FRACTION * true_kg)
+    start_error = abs(float(mass[0]) - true_kg)
+    gap = start_error / (SETTLED_FRACTION * true_kg)
     predicted = round(memory_s * float(np.log(gap)), 3) if gap > 1.0 else 0.0
+    span_s = float((cycles[-1] - start) * period_s)
     within = np.abs(mass - true_kg) <= SETTLED_FRACTION * true_kg
     outside = np.flatnonzero(~within)
     first = 0 if not len(outside) else outside[-1] + 1
     settled = None if first >= len(mass) else round(float((cycles[first] - start) * period_s), 3)
     return {"true_kg": round(true_kg, 3), "settled_s": settled, "predicted_s": predicted,
-            "final_kg": round(float(mass[-1]), 3),
+            "span_s": round(span_s, 3), "final_kg": round(float(mass[-1]), 3),
+            "final_error_kg": round(abs(float(mass[-1]) - true_kg), 3),
+            "predicted_final_error_kg": round(start_error * float(np.exp(-span_s / memory_s)), 3),
             "final_error_pct": round(float((mass[-1] - true_kg) / true_kg * 100.0), 1)}
 
 
@@ -63,3 +68,13 @@ def direct_load_pressure(log: LogData, area_ratio: float, leg: int = 1) -> tuple
     pressure the piston's force over its area gives, Fig. 7.15's direct measurement."""
     series = log.get(f"LEG_PRESSURE_{leg}")
     return series.cycle, series["PA"] - area_ratio * series["PB"]
+
+
+def follows_forgetting(segment: dict, factor: float) -> bool:
+    """The estimate settled within `factor` x the time its forgetting needs; where that time is
+    longer than the segment, its error at the end within `factor` x the forgetting's there."""
+    if segment["predicted_s"] is None:
+        return False
+    if segment["predicted_s"] <= segment["span_s"]:
+        return segment["settled_s"] is not None and segment["settled_s"] <= factor * segment["predicted_s"]
+    return segment["final_error_kg"] <= factor * segment["predicted_final_error_kg"]
