@@ -569,7 +569,9 @@ class Controller:
         s, sup, reference = self.status, self.sup, self.reference
         s.state, s.fault, s.fault_leg, s.kind = sup.state, sup.fault_code, sup.fault_leg, sup.controller
         s.active_waypoint, s.moving = reference.active_waypoint, reference.trajectory is not None
-        clock, playing = reference.clock, s.moving and sup.state in ACTIVE     # a fault's trajectory is not played
+        # played: advanced at least once, and not a fault's left-over trajectory
+        clock = reference.clock
+        playing = s.moving and sup.state in ACTIVE and clock.ticks > 0
         s.time_scaled, s.time_rate = clock.scaling and playing, clock.rate_fraction if playing else 1.0
         s.motion_time_periods = clock.cycles() if playing else 0.0
         s.queue_free = self.waypoints.free()

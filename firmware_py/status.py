@@ -30,9 +30,9 @@ class ControllerStatus:
     faults: int = 0                     # faults latched since start
     restart_requests: int = 0           # RESETs accepted: each asks the NMT master to start nodes that rebooted
     moving: bool = False                # a trajectory is being played
-    time_scaled: bool = False           # ... under the online time-scaling rule
-    time_rate: float = 1.0              # its clock's rate, fraction of full speed
-    motion_time_periods: float = 0.0    # its clock tau, in periods since its start (at full rate)
+    time_scaled: bool = False           # ... under the online time-scaling rule (while played)
+    time_rate: float = 1.0              # its clock's rate, fraction of full speed (1 while none is played)
+    motion_time_periods: float = 0.0    # its clock tau, in periods since its start (0 while none is played)
     testing: bool = False               # an identification test (HOST_TEST) drives the valve
     initialised: bool = False           # a complete set of measurements has come since start or RESET
     overruns_in_row: int = 0

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from firmware_py.motion_control.time_scaling import DISABLED, RATE_ONE, ScalingRule, rate_step, supply_update
-from firmware_py.motion_control.trajectory import JointTrajectory, hold_at, through_points
+from firmware_py.motion_control.trajectory import T_START, TM, JointTrajectory, hold_at, through_points
 from hil.logdata import LogData
 from protocol.enums import Ack, AckKind, Command, State, WaypointFlag
 
@@ -73,8 +73,7 @@ class ClockReplay:
     def times(self, trajectory: JointTrajectory, start: int, period_s: float) -> tuple[np.ndarray, int]:
         """(the clock at each cycle from `start` through the one that reaches the end, that
         cycle), as `Reference.advance` runs it."""
-        seg = trajectory.segments[-1, 0]
-        end_t = np.add(seg[4], seg[6])
+        end_t = _end_time(trajectory)
         r, rate, ticks, out = self.rule, RATE_ONE, 0, []
         k = start
         while True:
@@ -114,10 +113,15 @@ class StrokeMap:
         return lengths[0] - self.geometry.leg_min_m
 
 
+def _end_time(trajectory: JointTrajectory) -> float:
+    """The trajectory's end, T_START + TM of its last segment, as the controller computes it."""
+    seg = trajectory.segments[-1, 0]
+    return np.add(seg[T_START], seg[TM])
+
+
 def _end_cycle(trajectory: JointTrajectory, start: int, period_s: float) -> int:
     """The log cycle whose update first sees t >= the trajectory's end (same float test)."""
-    seg = trajectory.segments[-1, 0]
-    end_t = np.add(seg[4], seg[6])                  # T_START + TM, as the controller computes it
+    end_t = _end_time(trajectory)
     k = start - 1 + max(int(math.ceil(end_t / period_s)) - 1, 0)
     while (k + 1 - start) * period_s >= end_t:
         k -= 1

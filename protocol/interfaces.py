@@ -172,13 +172,13 @@ def payload_values(values, index, mass_kg: float, com_m, declared_kg: float) -> 
         values[index[name]] = com_m[k] if placed else 0.0
 
 
-def clock_values(values, index, moving: bool, scaled: bool, rate: float, motion_time_periods: float) -> None:
-    """CTRL_CLOCK: the running trajectory's clock and its rate (0 and 1 while none is played)."""
-    playing = moving and motion_time_periods > 0.0
+def clock_values(values, index, playing: bool, scaled: bool, rate: float, motion_time_periods: float) -> None:
+    """CTRL_CLOCK: the played trajectory's clock and its rate (the controller's status: 0 and 1
+    while none is played)."""
     values[index["MOVING"]] = playing
-    values[index["SCALED"]] = scaled and playing
-    values[index["RATE"]] = rate if playing else 1.0
-    values[index["MOTION_TIME"]] = motion_time_periods if playing else 0.0
+    values[index["SCALED"]] = scaled
+    values[index["RATE"]] = rate
+    values[index["MOTION_TIME"]] = motion_time_periods
 
 
 def load_values(values, index, leg: int, mass_kg: float, load_pressure_pa: float, friction_n: float) -> None:

@@ -111,7 +111,8 @@ def filtered_derivative(state, y, alpha, period_s):
  JP_D_WN, JP_D_ZETA, JP_KI_SCALE, JP_MASS_OFFSET, JP_PI_KP, JP_PI_KI, JP_KPL, JP_U_MAX,
  JP_MOVING_MASS, JP_AREA, JP_FF_SCALE, JP_KP_SCALE, JP_OBSERVER_K, JP_PI_KD, JP_DY_ALPHA, JP_GUIDE_FC, JP_GUIDE_FV,
  JP_SIZE) = range(27)
-# below this speed the guide's Coulomb friction is taken in proportion (it sticks at rest, either way)
+# below this speed the guide is taken as sticking, its force unknown and none taken off: a leg
+# settling after a step creeps below it in the Kalman estimate while the slide is stuck
 GUIDE_STICK_M_S = 5e-3
 # state and outputs per leg
 # (each 2nd-order filter keeps 3 columns: F u, s F u, the previous input)

@@ -10,7 +10,7 @@ so computed torque's feedforward stays consistent with the reference it follows.
 The rate and the clock are integers (RATE_ONE ticks per cycle at full speed) and the triggers
 are the frames on the bus (VALVE_CMD's setpoint counts, LEG_PRESSURE's PS), so a log's
 analysis replays the very same clock (hil/reference_rebuild.py); CTRL_CLOCK carries it every
-16th SYNC. At full rate tau = (cycles since the start) T, the rule the rest of the project
+48th SYNC. At full rate tau = (cycles since the start) T, the rule the rest of the project
 already follows. Steps (a held setpoint) are not scaled: they have no speed to lower.
 """
 
@@ -21,8 +21,11 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from protocol.dbc import signal_scale
+
 RATE_ONE = 1024                   # clock ticks per cycle at full speed
-SPOOL_COUNTS = 16384              # VALVE_CMD's setpoint counts at full opening (CiA 408 0x6311)
+# VALVE_CMD's setpoint counts at full opening (the DBC's % step; CiA 408 0x6311's 16384)
+SPOOL_COUNTS = round(100.0 / signal_scale("VALVE_CMD_1", "SPOOL_SETPOINT"))
 
 
 @dataclass(frozen=True)
@@ -56,16 +59,11 @@ def spool_at_limit(spool, limit_counts) -> bool:
 
 
 @njit(cache=True)
-def supply_update(ps_pa, fresh, latest) -> float:
-    """Each valve's latest P-port sample (`latest`, NaN before any) from this cycle's fresh
-    ones; returns the lowest (NaN before any)."""
-    lowest = np.nan
+def supply_update(ps_pa, fresh, latest) -> None:
+    """Each valve's latest P-port sample (`latest`, NaN before any) from this cycle's fresh ones."""
     for i in range(ps_pa.shape[0]):
         if fresh[i]:
             latest[i] = ps_pa[i]
-        if latest[i] == latest[i] and not lowest <= latest[i]:
-            lowest = latest[i]
-    return lowest
 
 
 @njit(cache=True)

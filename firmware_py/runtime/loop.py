@@ -397,8 +397,8 @@ class ControllerLoop:
             self._send(self.out_load)
             self._load_leg = (leg + 1) % status.n_legs
         if self.out_clock is not None and self._clock_schedule.due(self.sync_counter):
-            clock_values(self.out_clock.values, self.out_clock.index, status.moving, status.time_scaled,
-                         status.time_rate, status.motion_time_periods)
+            clock_values(self.out_clock.values, self.out_clock.index, status.motion_time_periods > 0.0,
+                         status.time_scaled, status.time_rate, status.motion_time_periods)
             self._send(self.out_clock)
         self._send_acks()
         if status.restart_requests != self._restarts_seen and self._reidentification is None:

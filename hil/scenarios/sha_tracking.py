@@ -310,6 +310,15 @@ class ShaTracking(Scenario):
                       "thesis Figs. 7.17 (PI) and 7.18 (adaptive): y and the error over 0-12 s for 0, 3, 6 kg")
 
 
+def _stacked_figure(fig, axes, path: Path, what: str, thesis: str) -> Figure:
+    """Panels over a shared time axis, gridded and labelled, saved as `path`."""
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    save(fig, path)
+    return Figure(path.name, what, thesis)
+
+
 SETTLING_OVER_MEMORY = 1.2           # the estimate's settling against its forgetting's exponential window
 
 
@@ -447,13 +456,9 @@ class ShaPerturbation(Scenario):
         axes[1].set_ylabel("F_f [N]")
         axes[2].set_ylabel("P_L [bar]")
         axes[2].set_xlabel("t [s] from the sine's start")
-        for ax in axes:
-            ax.grid(alpha=0.3)
-            ax.legend(fontsize=7)
-        path = out / "sha_perturbation_estimates.png"
-        save(fig, path)
-        return Figure(path.name, "the RLS load mass, the seals' friction and the load pressure from the log",
-                      "thesis Figs. 7.14 (m, Ff) and 7.15 (P_L indirect against the pressure sensors)")
+        return _stacked_figure(fig, axes, out / "sha_perturbation_estimates.png",
+                               "the RLS load mass, the seals' friction and the load pressure from the log",
+                               "thesis Figs. 7.14 (m, Ff) and 7.15 (P_L indirect against the pressure sensors)")
 
     def _plot(self, runs, out: Path) -> Figure:
         fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
@@ -466,10 +471,6 @@ class ShaPerturbation(Scenario):
         axes[0].set_ylabel("y [mm]")
         axes[1].set_ylabel("y_r - y [mm]")
         axes[1].set_xlabel("t [s] (dotted: load changes)")
-        for ax in axes:
-            ax.grid(alpha=0.3)
-            ax.legend(fontsize=7)
-        path = out / "sha_perturbation.png"
-        save(fig, path)
-        return Figure(path.name, "position and error while the load changes 0 -> 3 -> 6 -> 0 kg",
-                      "thesis Figs. 7.20-7.21: the error stays about 1 mm while masses are added/removed")
+        return _stacked_figure(fig, axes, out / "sha_perturbation.png",
+                               "position and error while the load changes 0 -> 3 -> 6 -> 0 kg",
+                               "thesis Figs. 7.20-7.21: the error stays about 1 mm while masses are added/removed")
