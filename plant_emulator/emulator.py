@@ -30,7 +30,6 @@ from dataclasses import dataclass, field
 import can
 import numpy as np
 
-from physics import hydraulics as hy
 from plant_emulator.devices import EmulatedDevices
 from plant_emulator.injected import KNOWN_FAULTS
 from plant_emulator.params import EmulatorConfig
@@ -364,6 +363,17 @@ class Emulator:
         self.rig.kick(int(axis), float(value), float(duration_s))
         self.counters.kicks += 1
 
+    def _slide(self, command) -> None:
+        """Appendix D's free falls: the test bench's slide unbolted from the rod, or bolted again
+        (only where it rests on the rod's tip)."""
+        if not hasattr(self.rig, "unbolt_slide"):
+            print(f"emulator: EMU_CTRL {command.name} ignored: the hexapod has no guide", file=sys.stderr, flush=True)
+        elif command == EmuCommand.UNBOLT_SLIDE:
+            self.rig.unbolt_slide()
+        elif not self.rig.bolt_slide():
+            print(f"emulator: EMU_CTRL BOLT_SLIDE ignored: the slide is {1e3 * self.rig.gap_m:.1f} mm above the rod",
+                  file=sys.stderr, flush=True)
+
     def _nmt(self, command: int, node: int) -> None:
         if command == NmtCommand.START:      # the NMT master (re)started: its alive counters start afresh
             self.decoder.restart_sender(CODECS["NMT"].schedule.sender)
@@ -387,6 +397,8 @@ class Emulator:
         command, target, kind, param = int(command), int(target), int(kind), int(param)
         if command == EmuCommand.SET_LOAD:
             self.rig.set_load(load_kg)
+        elif command in (EmuCommand.UNBOLT_SLIDE, EmuCommand.BOLT_SLIDE):
+            self._slide(EmuCommand(command))
         elif command == EmuCommand.INJECT_FAULT and kind in KNOWN_FAULTS:
             self.inject(target, EmuFault(kind), param)
         elif command == EmuCommand.CLEAR_FAULT:
@@ -517,7 +529,7 @@ class Emulator:
             for axis, value in zip("XYZ", position):
                 box.values[box.index[axis]] = value
         else:
-            box.values[box.index["Z"]] = self.rig.state[0, hy.S_Y]
+            box.values[box.index["Z"]] = self.rig.stroke_m[0]
         self._emit(0, "EMU_TRUTH")
 
     def summary(self) -> dict:

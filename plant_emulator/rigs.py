@@ -56,43 +56,62 @@ SEIZED_SOLIMP = (0.9999, 0.9999, 0.0001, 0.5, 2.0)
 
 
 @numba.njit(cache=True)
-def testbench_advance(st: np.ndarray, command: float, jammed: bool, seized: bool, ports: float, seal_leak: float,
-                      n: int, h: float, ps: float, hp: np.ndarray, fp: np.ndarray, gp: np.ndarray, rod_mass: float,
-                      load_mass: float, pu: np.ndarray, out: np.ndarray) -> float:
-    """n sub-steps of h of the test bench; out = [acceleration, seal friction, guide friction].
+def testbench_advance(st: np.ndarray, slide: np.ndarray, bolted: bool, command: float, jammed: bool, seized: bool,
+                      ports: float, seal_leak: float, n: int, h: float, ps: float, hp: np.ndarray, fp: np.ndarray,
+                      gp: np.ndarray, rod_mass: float, load_mass: float, pu: np.ndarray, out: np.ndarray) -> float:
+    """n sub-steps of h of the test bench; out = [acceleration, seal friction, guide friction,
+    1 where the slide rides on the rod]. `slide` = [y, v] of the guide's slide: bolted to the
+    rod, it moves with it; unbolted (Appendix D's free falls), it rests on the rod's tip while
+    the rod pushes it and falls on its own (weight, guide friction) when the rod leaves it.
     Returns the supply pressure after them (the power unit `pu`; empty: `ps` held)."""
     mass = rod_mass + load_mass
     stroke = hp[hy.HP_STROKE]
     y, v = st[hy.S_Y], st[hy.S_V]
+    ys, vs = (y, v) if bolted else (slide[0], slide[1])
     accel = 0.0
     seal = 0.0
     guide = 0.0
+    together = True
     for _ in range(n):
         if not jammed:
             st[hy.S_SPOOL] = hy.spool_step(st[hy.S_SPOOL], command, h, hp)
         drive = hy.piston_force(st[hy.S_PA], st[hy.S_PB], hp)            # eq. 4.15
         seal_z, seal_c = force_split(st[hy.S_Z], v, fp)                  # eq. 6.1-6.3
-        guide_z, guide_c = force_split(st[hy.S_ZG], v, gp)               # eq. D.3
-        # m dv/dt = drive - F_seal - F_guide - m g, the friction's v-slope implicit
-        v_new = (mass * v + h * (drive - seal_z - guide_z - mass * GRAVITY_M_S2)) / (mass + h * (seal_c + guide_c))
+        guide_z, guide_c = force_split(st[hy.S_ZG], vs, gp)              # eq. D.3
+        # each body alone: m dv/dt = F - m g, the friction's v-slope implicit
+        v_rod = (rod_mass * v + h * (drive - seal_z - rod_mass * GRAVITY_M_S2)) / (rod_mass + h * seal_c)
+        v_slide = (load_mass * vs + h * (-guide_z - load_mass * GRAVITY_M_S2)) / (load_mass + h * guide_c)
+        together = bolted or (ys <= y and v_slide <= v_rod)             # bolted, or the rod pushes the slide
+        if together:
+            v_rod = (rod_mass * v + load_mass * vs + h * (drive - seal_z - guide_z - mass * GRAVITY_M_S2)) / (
+                mass + h * (seal_c + guide_c))
         if seized:                                                       # the rod does not move
-            v_new = 0.0
-        y_new = y + h * v_new
+            v_rod = 0.0
+        y_new = y + h * v_rod
         if y_new <= 0.0:                                                 # end stops: inelastic
             y_new = 0.0
-            v_new = max(v_new, 0.0)
+            v_rod = max(v_rod, 0.0)
         elif y_new >= stroke:
             y_new = stroke
-            v_new = min(v_new, 0.0)
-        seal = seal_z + seal_c * v_new
-        guide = guide_z + guide_c * v_new
-        st[hy.S_Z] = z_step(st[hy.S_Z], v_new, h, fp)
-        st[hy.S_ZG] = z_step(st[hy.S_ZG], v_new, h, gp)
-        hy.chamber_step(st, y_new, v_new, ps, h, hp, ports, seal_leak)
-        accel = (v_new - v) / h
-        y, v = y_new, v_new
+            v_rod = min(v_rod, 0.0)
+        if together:
+            ys_new, v_slide = y_new, v_rod
+        else:
+            ys_new = ys + h * v_slide
+            if ys_new <= y_new:                                          # it lands on the rod: inelastic
+                v_rod = v_slide = (rod_mass * v_rod + load_mass * v_slide) / mass
+                ys_new = y_new
+                together = True
+        seal = seal_z + seal_c * v_rod
+        guide = guide_z + guide_c * v_slide
+        st[hy.S_Z] = z_step(st[hy.S_Z], v_rod, h, fp)
+        st[hy.S_ZG] = z_step(st[hy.S_ZG], v_slide, h, gp)
+        hy.chamber_step(st, y_new, v_rod, ps, h, hp, ports, seal_leak)
+        accel = (v_rod - v) / h
+        y, v, ys, vs = y_new, v_rod, ys_new, v_slide
     st[hy.S_Y], st[hy.S_V] = y, v
-    out[0], out[1], out[2] = accel, seal, guide
+    slide[0], slide[1] = ys, vs
+    out[0], out[1], out[2], out[3] = accel, seal, guide, 1.0 if together else 0.0
     if pu.shape[0]:                    # one leg far inside the pump's flow: the supply once a period
         drawn, slope = hy.supply_flow(st[hy.S_SPOOL], st[hy.S_PA], st[hy.S_PB], ps, hp, ports)
         ps = power_unit.supply_step(ps, drawn, slope, n * h, pu)
@@ -232,7 +251,9 @@ class TestbenchRig(_RigBase):
 
     def __init__(self, cfg: EmulatorConfig, load_kg: float | None = None, start_mm: float = 150.0):
         super().__init__(cfg)
-        self.out = np.zeros(3)
+        self.out = np.zeros(4)
+        self.slide = np.zeros(2)              # the guide's slide [y, v] while unbolted from the rod
+        self.bolted = True
         self.set_load(cfg.testbench.load_kg if load_kg is None else load_kg)
         self.state[0, hy.S_Y] = min(max(start_mm * 1e-3, 0.0), cfg.stroke_m)
         hold = (cfg.actuator.piston_rod_mass_kg + self.load_mass_kg) * GRAVITY_M_S2
@@ -245,27 +266,51 @@ class TestbenchRig(_RigBase):
         self.load_mass_kg = self.cfg.guide.slide_mass_kg + self.load_kg
         self.guide_friction = self.cfg.guide.lugre_vector(self.load_kg)
 
+    def unbolt_slide(self) -> None:
+        """Appendix D: the slide (with its mass) unbolted from the rod; it rests on the rod's
+        tip and falls on its guide when the rod drops away."""
+        if self.bolted:
+            self.slide[0], self.slide[1] = self.state[0, hy.S_Y], self.state[0, hy.S_V]
+            self.bolted = False
+
+    def bolt_slide(self) -> bool:
+        """Bolt the slide to the rod again: only where it rests on the rod's tip."""
+        if not self.bolted and self.out[3] > 0.0:
+            self.bolted = True
+        return self.bolted
+
+    @property
+    def gap_m(self) -> float:
+        """The slide's height above the rod's tip (0 while bolted or riding on it)."""
+        return 0.0 if self.bolted else float(self.slide[0] - self.state[0, hy.S_Y])
+
+    @property
+    def stroke_m(self) -> np.ndarray:
+        """What the guide's encoder reads: the slide's position (the rod's while bolted)."""
+        return self.state[:, hy.S_Y] if self.bolted else self.slide[0:1]
+
     def advance(self, period_s: float) -> None:
         n = max(1, round(period_s / self.cfg.testbench.substep_s))
         ps, unit = self._supply_for(period_s)
         self.supply_pressure_pa = testbench_advance(
-            self.state[0], float(self.command[0]), bool(self.jammed[0]), bool(self.seized[0]),
-            float(self.ports_open[0]), float(self.seal_leak[0]), n, period_s / n, ps, self.cfg.hp,
-            self.cfg.friction.vector, self.guide_friction, self.cfg.actuator.piston_rod_mass_kg, self.load_mass_kg,
-            unit, self.out)
-        # the rod carries the load's weight, inertia and guide friction
-        self.rod_force_n[0] = self.load_mass_kg * (self.out[0] + GRAVITY_M_S2) + self.out[2]
+            self.state[0], self.slide, self.bolted, float(self.command[0]), bool(self.jammed[0]),
+            bool(self.seized[0]), float(self.ports_open[0]), float(self.seal_leak[0]), n, period_s / n, ps,
+            self.cfg.hp, self.cfg.friction.vector, self.guide_friction, self.cfg.actuator.piston_rod_mass_kg,
+            self.load_mass_kg, unit, self.out)
+        # the rod carries the load's weight, inertia and guide friction (nothing once the slide left it)
+        riding = self.out[3] > 0.0
+        self.rod_force_n[0] = self.load_mass_kg * (self.out[0] + GRAVITY_M_S2) + self.out[2] if riding else 0.0
         self.time_s += period_s
         self._note_stability(False)
 
     def warm_up(self) -> None:
         """Load the compiled kernels now: their first call costs 0.2-0.25 s (numba's cache),
         which in the first SYNC made the nodes miss ~45 realtime cycles. Scratch copies only."""
-        testbench_advance(self.state[0].copy(), 0.0, False, False, 1.0, float(self.seal_leak[0]), 1,
-                          self.cfg.testbench.substep_s,
+        testbench_advance(self.state[0].copy(), self.slide.copy(), True, 0.0, False, False, 1.0,
+                          float(self.seal_leak[0]), 1, self.cfg.testbench.substep_s,
                           self.cfg.actuator.supply_pressure_pa,
                           self.cfg.hp, self.cfg.friction.vector, self.guide_friction,
-                          self.cfg.actuator.piston_rod_mass_kg, self.load_mass_kg, self.cfg.pu, np.zeros(3))
+                          self.cfg.actuator.piston_rod_mass_kg, self.load_mass_kg, self.cfg.pu, np.zeros(4))
 
     @property
     def acceleration_m_s2(self) -> float:

@@ -134,7 +134,7 @@ class SimulatedRig:
             if not operational[i]:
                 self.pressure_due[i] = self.status_due[i] = False
                 continue
-            stroke = rig.state[i, hy.S_Y] + encoder_drift_m(faults, node, rig.time_s)
+            stroke = rig.stroke_m[i] + encoder_drift_m(faults, node, rig.time_s)
             position, force = sensors.encoder(stroke), sensors.load_cell(float(rig.rod_force_n[i]))
             self.position_m[i], self.force_n[i] = substitute(faults, node, position, force)
             self.pressure_due[i] = self.has_pressure and self.due("LEG_PRESSURE", f"LEG_PRESSURE_{node}", counter)

@@ -146,6 +146,7 @@ def test_an_injected_fault_lasts_the_whole_experiment(tmp_path):
     (["hil", "run", "pm-circle", "--loads", "3"], "pm-circle"),
     (["hil", "run", "sha-classical", "--controllers", "adaptive"], "adaptive"),
     (["hil", "run", "sha-stick-slip", "--positions", "50"], "sha-stick-slip"),
+    (["hil", "run", "guide-free-fall", "--controllers", "adaptive"], "adaptive"),
     (["hil", "run", "pm-circle", "--positions", "50"], "pm-circle"),
     (["hil", "run", "sha-step", "--positions", "50,300"], "300 mm"),
     (["hil", "run", "pm-circle", "--emulator-config", "/nonexistent/plant.toml"], "plant.toml"),
@@ -201,6 +202,8 @@ SCENARIO_RUNS = {
     # the short variant: 6 kg, a ramp inside the Stribeck region (cycles) and one above it (none)
     "sha-stick-slip": (["--short"], lambda m: {(r["load_kg"], r["speed_mm_s"], r["cycling"]) for r in m["ramps"]}
                        == {(6.0, 8.0, True), (6.0, 20.0, False)}),
+    # Appendix D: a fall at 0 and at 6 kg, eq. D.4's Fc and sigma_v against the emulator's guide
+    "guide-free-fall": (["--short"], lambda m: [r["load_kg"] for r in m["loads"]] == [0.0, 6.0] and m["falls"] == 2),
     "sha-identification": (["--short"], lambda m: (
         {(r["set_point_mm"], r["load_kg"], tuple(r["gains_v_mm"])) for r in m["points"]}
         == {(p, load, (0.25, 0.3)) for p in (60.0, 210.0) for load in (0.0, 6.0)})),

@@ -165,6 +165,28 @@ def test_a_load_sinks_at_null_and_a_small_spool_offset_holds_it(cfg, load):
     assert rig.rod_force_n[0] == pytest.approx((1.35 + load) * 9.81, abs=15)
 
 
+@pytest.mark.parametrize("load", [0.0, 6.0])
+def test_an_unbolted_slide_falls_free_when_the_rod_drops_away_and_lands_on_it(cfg, load):
+    """Appendix D on the emulated bench: unbolted, the slide rides on the rod while it holds;
+    with the rod pulled down it falls as eq. D.4 (the encoder reads the slide), the load cell
+    carries nothing, and it can be bolted again only once it rests on the rod."""
+    rig = TestbenchRig(cfg, load, start_mm=270.0)
+    rig.command[0] = rig.state[0, hy.S_SPOOL]
+    rig.unbolt_slide()
+    run(rig, 0.1)                                    # holding: it rides on the rod
+    assert rig.gap_m == 0.0 and rig.rod_force_n[0] > 0.5 * (1.35 + load) * GRAVITY_M_S2
+    start, sinking = float(rig.stroke_m[0]), -float(rig.slide[1])      # the crude hold lets 6 kg sink
+    rig.command[0] = -0.6
+    run(rig, 0.1)
+    assert rig.gap_m > 0.0 and rig.rod_force_n[0] == 0.0 and not rig.bolt_slide()
+    mass = 1.35 + load
+    k, a0, t = 9.1 / mass, 9.81 - 10.9 / mass, 0.1
+    fallen = a0 / k * (t - (1.0 - math.exp(-k * t)) / k) + sinking * (1.0 - math.exp(-k * t)) / k
+    assert start - float(rig.stroke_m[0]) == pytest.approx(fallen, abs=1.5e-3)    # the release's few ms
+    run(rig, 1.5)
+    assert rig.gap_m == 0.0 and rig.stroke_m[0] == 0.0 and rig.bolt_slide() and rig.bolted
+
+
 def test_end_stop_holds_the_stroke(cfg):
     rig = TestbenchRig(cfg, 0.0, start_mm=280.0)
     rig.command[0] = 1.0
