@@ -40,6 +40,7 @@ from firmware_py.supervision.diagnostics import FalseAlarmMargins
 from firmware_py.supervision.monitors import FrameMonitor, LimitMonitor, LoopMonitor, NodeMonitor, all_set
 from firmware_py.supervision.plausibility import FrozenLoadCells, MotionPlausibility, SupplyAtRest, SupplyPressure
 from firmware_py.supervision.residuals import ActuatorResiduals, ChamberPrediction, SpoolResidual, sample_floor_pa
+from firmware_py.supervision.stages import Stages, at_once
 from firmware_py.supervision.stopping import ControlledStop
 from firmware_py.supervision.supervisor import ACTIVE, LATCHED, Action, Supervisor
 from firmware_py.supervision.waypoints import Chain, WaypointQueue
@@ -264,13 +265,23 @@ class Controller:
         self.waypoints.stage_rotation(tag, roll, pitch, yaw)
 
     def waypoint_commit(self, tag: int, seq: int, segment_time: float, accel_time: float, flags: int) -> Ack:
-        """HOST_WAYPOINT_TIME: check the staged pose and queue it (or say why not)."""
+        """HOST_WAYPOINT_TIME: check the staged pose and queue it (or say why not), at once."""
+        return at_once(self.waypoint_commit_stages(tag, seq, segment_time, accel_time, flags))
+
+    def _commit_context(self) -> tuple:
+        """What a waypoint's check starts from now: (state, the joint position its segment
+        starts from, the load, the oil the supply misses then)."""
         ref = self.reference
         previous = ref.target() if ref.moving else ref.yr.copy()
         refilled = self._pump_m3_s * (self.time_s - self._ended_s)
         drawn = self.waypoints.taken_drawn_m3 if ref.moving else max(self._drawn_at_end_m3 - refilled, 0.0)
-        result = self.waypoints.commit(tag, seq, segment_time, accel_time, flags, self.state, previous,
-                                       float(self.joint.mass_kg[0]), drawn)
+        return self.state, previous, float(self.joint.mass_kg[0]), drawn
+
+    def waypoint_commit_stages(self, tag: int, seq: int, segment_time: float, accel_time: float,
+                               flags: int) -> Stages[Ack]:
+        """`waypoint_commit` in stages (the host link spreads them over the cycles' slack)."""
+        result = yield from self.waypoints.commit_stages(tag, seq, segment_time, accel_time, flags,
+                                                         self._commit_context)
         if (result is Ack.ACCEPTED and self.waypoints.queue[-1].flags & WaypointFlag.START
                 and self.state is State.READY):
             self.host_command(Command.START, 0)
@@ -353,10 +364,11 @@ class Controller:
         self.reference.play(trajectory, seqs, self.cycles)
         self.sup.start_running()
 
-    def after_write(self, time_left_s: float = math.inf) -> None:
-        """Host work that must not delay the cycle's VALVE_CMD: one waypoint commit, when
-        `time_left_s` before the next SYNC leaves room for it."""
-        self.host.run_after_write(self, time_left_s >= self.cfg.timing.commit_room_s)
+    def after_write(self, time_left_s: float = math.inf, clock=None) -> None:
+        """Host work that must not delay the cycle's VALVE_CMD: the front waypoint commit's
+        stages while the time left before the next SYNC (`time_left_s` now, less what they
+        take by `clock`) leaves `commit_room_us` for another."""
+        self.host.run_after_write(self, time_left_s, self.cfg.timing.commit_room_s, clock)
 
     # -- the cycle ------------------------------------------------------------------------------
     def update(self, meas: Measurements, cmd: ValveCommands) -> None:

@@ -5,23 +5,25 @@ The loop only queues what it decoded. The controller carries the queue out:
 - in its update, before the reference is computed: the frames at the front up to the first
   waypoint commit (commands, waypoint halves, tests), and ESTOP and DISABLE wherever they
   stand (they never wait);
-- after the cycle's VALVE_CMD are sent: one waypoint commit (its workspace check takes a few
-  tenths of a ms on the hexapod), when the cycle has room left for it before the next SYNC;
-  else it waits for a later cycle (at most COMMIT_MAX_WAIT_CYCLES). What follows it waits
-  for the next update.
+- after the cycle's VALVE_CMD are sent: the front waypoint commit, stage by stage (its check
+  takes ~2 ms on the hexapod here, in stages of a few tenths of a ms), each stage only while
+  the cycle has `commit_room_us` left before the next SYNC; the rest in later cycles. A
+  commit that found no room for COMMIT_MAX_WAIT_CYCLES then runs a stage a cycle regardless.
+  Its CTRL_ACK goes out when its last stage is done; what follows it waits until then.
 So a command never overtakes a commit sent before it (a waypoint half reusing a TAG cannot
 reach a commit that has not been checked yet), and the cycle's timing never waits for one.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from enum import IntEnum
 
 from protocol.enums import AckKind, Command, time_scale_to_wire
 
 IMMEDIATE_COMMANDS = (int(Command.ESTOP), int(Command.DISABLE))
-COMMIT_MAX_WAIT_CYCLES = 50      # a commit waits for a cycle with room at most this long, then runs
+COMMIT_MAX_WAIT_CYCLES = 50      # a commit waits for room at most this long, then runs a stage a cycle
 
 
 class Frame(IntEnum):
@@ -38,6 +40,7 @@ class HostLink:
         # (AckKind, SEQ, result, CTRL_ACK.TIME_SCALE as sent: 0 where it does not apply)
         self.acks: deque[tuple[int, int, int, float]] = deque()
         self.commit_waited = 0                           # cycles the front commit has waited for room
+        self._commit = None                              # the front commit's stages, once begun
 
     # -- what the loop decoded ------------------------------------------------------------
     def command(self, command: int, argument: int, seq: int) -> None:
@@ -67,16 +70,34 @@ class HostLink:
                 queue.remove(item)
                 self._carry_out(controller, *item)
 
-    def run_after_write(self, controller, room: bool = True) -> None:
-        """The waypoint commit at the front, if there is one and the cycle has `room` for it
-        (or it has waited long enough)."""
+    def run_after_write(self, controller, time_left_s: float = math.inf, room_s: float = 0.0, clock=None) -> None:
+        """The front waypoint commit's stages while the cycle has `room_s` left before the next
+        SYNC (`time_left_s` at the call, less what the stages took by `clock`; without a clock,
+        all of them when there is room)."""
         if not (self.queue and self.queue[0][0] is Frame.COMMIT):
             return
-        if room or self.commit_waited >= COMMIT_MAX_WAIT_CYCLES:
-            self.commit_waited = 0
-            self._carry_out(controller, *self.queue.popleft())
-        else:
+        if time_left_s < room_s and self.commit_waited < COMMIT_MAX_WAIT_CYCLES:
             self.commit_waited += 1
+            return
+        if self._commit is None:
+            tag, seq, segment_time, accel_time, flags = self.queue[0][1]
+            self._commit = controller.waypoint_commit_stages(tag, seq, segment_time, accel_time, flags)
+        start = clock() if clock is not None else 0.0
+        while True:
+            try:
+                next(self._commit)
+            except StopIteration as done:
+                self._commit_done(controller, done.value)
+                return
+            left = time_left_s - (clock() - start) if clock is not None else time_left_s
+            if left < room_s:
+                return
+
+    def _commit_done(self, controller, result) -> None:
+        _, (_, seq, *_) = self.queue.popleft()
+        self._commit, self.commit_waited = None, 0
+        scale = time_scale_to_wire(controller.waypoints.time_scale_needed)
+        self.acks.append((AckKind.WAYPOINT, seq, int(result), scale))
 
     def _carry_out(self, controller, frame: Frame, values: tuple) -> None:
         if frame is Frame.COMMAND:
@@ -86,11 +107,6 @@ class HostLink:
             controller.stage_position(*values)
         elif frame is Frame.ROTATION:
             controller.stage_rotation(*values)
-        elif frame is Frame.COMMIT:
-            tag, seq, segment_time, accel_time, flags = values
-            result = int(controller.waypoint_commit(tag, seq, segment_time, accel_time, flags))
-            scale = time_scale_to_wire(controller.waypoints.time_scale_needed)
-            self.acks.append((AckKind.WAYPOINT, seq, result, scale))
         else:
             mode, seq, valve_v, force_n, duration_s = values
             self.acks.append((AckKind.TEST, seq, int(controller.test_command(mode, valve_v, force_n, duration_s)),

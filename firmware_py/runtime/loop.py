@@ -480,7 +480,7 @@ class ControllerLoop:
             self._log_fault(now)
         self._report_latch()
         # after the write: its cost never delays VALVE_CMD, and it waits when the SYNC is near
-        self.controller.after_write(self._next_deadline - self.clock())
+        self.controller.after_write(self._next_deadline - self.clock(), self.clock)
         self._cycle_end = self.clock()
         phase[PH_HOST_WORK] = self._cycle_end - written
 

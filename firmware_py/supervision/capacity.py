@@ -33,12 +33,14 @@ from firmware_py.mechanics.dynamics import InverseDynamics, gauss_solve_into, pl
 from firmware_py.mechanics.kinematics import DirectKinematics, dk_solve_into, ik_into, jacobian_into
 from firmware_py.motion_control.computed_torque import valve_map_eval
 from firmware_py.motion_control.trajectory import sls_evaluate_into
+from firmware_py.supervision.stages import Stages, at_once
 from physics import hydraulics as hy
 from physics import lugre
 from physics import power_unit as pu
 
 VELOCITY_GRID_M_S = np.linspace(-3.0, 3.0, 241)     # 25 mm/s apart; the valve's no-load speed is ~3.4 m/s
 SCALE_RANGE = (0.25, 16.0)                         # the time scales a search spans
+LOAD_SAMPLES_PER_STAGE = 16                        # a staged load computation: ~0.3 ms a stage here
 
 
 @functools.lru_cache(maxsize=16)
@@ -337,18 +339,30 @@ class PlatformLoads:
 
     def loads(self, trajectory, t0_s: float, t1_s: float, dt_s: float) -> Loads:
         """ValueError naming the time where the path leaves the workspace or passes a singularity."""
+        return at_once(self.loads_stages(trajectory, t0_s, t1_s, dt_s))
+
+    def loads_stages(self, trajectory, t0_s: float, t1_s: float, dt_s: float) -> Stages[Loads]:
+        """`loads` in stages of LOAD_SAMPLES_PER_STAGE samples (the DK warm-starts across them)."""
         g, dyn, dk = self.geometry, self.dynamics, self.dk
         times = np.arange(t0_s, t1_s + 0.5 * dt_s, dt_s)
         poses, jacobians = np.empty((len(times), 7)), np.empty((len(times), 6, 6))
         static, dynamic, velocity = (np.empty((len(times), 6)) for _ in range(3))
-        failed = platform_loads_into(trajectory.segments, times, self.h_s, float(g.leg_min_m), dk.base, dk.platform,
-                                     dyn.axis1, dyn.masses, dyn.coms, dyn.inertias, dyn.gravity, dk.tolerance_m,
-                                     dk.max_iterations, dk.max_step_quat, dk.home, self._q, self._dk_scratch,
-                                     self._kin_scratch, self._vectors, poses, jacobians, static, dynamic, velocity)
-        if failed >= 0:
-            raise ValueError(f"the path leaves the workspace or passes a singular pose at t = {times[failed]:.3f} s")
-        inertia = np.min([self._leg_inertia(poses[k]) for k in sorted({0, len(times) // 2, len(times) - 1})],
-                         axis=0)
+        for a in range(0, len(times), LOAD_SAMPLES_PER_STAGE):
+            part = slice(a, a + LOAD_SAMPLES_PER_STAGE)
+            failed = platform_loads_into(trajectory.segments, times[part], self.h_s, float(g.leg_min_m), dk.base,
+                                         dk.platform, dyn.axis1, dyn.masses, dyn.coms, dyn.inertias, dyn.gravity,
+                                         dk.tolerance_m, dk.max_iterations, dk.max_step_quat, dk.home, self._q,
+                                         self._dk_scratch, self._kin_scratch, self._vectors, poses[part],
+                                         jacobians[part], static[part], dynamic[part], velocity[part])
+            if failed >= 0:
+                raise ValueError(f"the path leaves the workspace or passes a singular pose at t = "
+                                 f"{times[a + failed]:.3f} s")
+            yield
+        inertias = []
+        for k in sorted({0, len(times) // 2, len(times) - 1}):
+            inertias.append(self._leg_inertia(poses[k]))
+            yield
+        inertia = np.min(inertias, axis=0)
         return Loads(dt_s, static, dynamic, velocity, np.broadcast_to(inertia, static.shape),
                      np.linalg.inv(jacobians), self.angle_weight)
 

@@ -21,12 +21,14 @@ import numpy as np
 from firmware_py.config import Waypoints
 from firmware_py.motion_control.trajectory import JointTrajectory, hold_at, through_points
 from firmware_py.supervision.capacity import LegCapacity, PlatformLoads, judge, leg_loads, needed_scale
+from firmware_py.supervision.stages import Stages, at_once
 from physics.constants import GRAVITY_M_S2
 from protocol.enums import Ack, State, WaypointFlag
 
 COMMIT_STATES = (State.IDLE, State.READY, State.RUNNING)
 KNOWN_FLAGS = int(sum(WaypointFlag))         # other FLAGS bits are reserved and ignored
 SAMPLES_PER_ACCEL = 8                        # the capacity check's samples per SLS acceleration time
+PATH_POSES_PER_STAGE = 6                     # a staged commit checks this many poses of the path a stage
 
 
 @dataclass
@@ -58,6 +60,11 @@ class TestbenchCheck:
         self.capacity = capacity
 
     def __call__(self, chain: Chain, pos, rot, step: bool, load_kg: float):
+        return at_once(self.stages(chain, pos, rot, step, load_kg))
+
+    def stages(self, chain: Chain, pos, rot, step: bool, load_kg: float) -> Stages[tuple]:
+        """One stage: the bench's check is cheap."""
+        yield from ()
         margin = self.margin_m
         if max(abs(pos[0]), abs(pos[1]), *(abs(r) for r in rot)) > 1e-9 or not (
                 margin <= pos[2] <= self.stroke_m - margin):
@@ -76,8 +83,8 @@ class TestbenchCheck:
 class HexapodCheck:
     """The target and the joint-space path to it, pose by pose: reachable, away from
     singularities, a bounded joint speed, and the legs' forces along the segment's reference
-    within their capacity. Compiled per pose (about 10 us each): a commit runs after a cycle's
-    write, within its slack."""
+    within their capacity. Compiled per pose (about 10 us each), in stages of a few tenths of
+    a ms: a commit runs after the cycles' writes, stage by stage within their slack."""
 
     def __init__(self, waypoints: Waypoints, dk_tolerance_m: float, geometry, capacity: LegCapacity):
         from firmware_py.mechanics.kinematics import DirectKinematics
@@ -89,6 +96,9 @@ class HexapodCheck:
         self.fractions = np.linspace(1.0, 0.0, waypoints.path_samples)
 
     def __call__(self, chain: Chain, pos, rot, step: bool, load_kg: float):
+        return at_once(self.stages(chain, pos, rot, step, load_kg))
+
+    def stages(self, chain: Chain, pos, rot, step: bool, load_kg: float) -> Stages[tuple]:
         from firmware_py.mechanics.rotation import rpy_to_quat
         from firmware_py.mechanics.workspace import MIN_CONDITION_INDEX, OUT_CONDITION, OUT_REACHABLE
 
@@ -106,7 +116,9 @@ class HexapodCheck:
         dk, previous = self.dk, chain.start
         dk.pose[0:3], dk.pose[3:7] = target, quat
         singular = False
-        for s in self.fractions:
+        for k, s in enumerate(self.fractions):
+            if k % PATH_POSES_PER_STAGE == 0:
+                yield
             dk.solve(g.leg_min_m + previous + s * (strokes - previous))
             if not dk.converged:
                 return refused(Ack.OUTSIDE_WORKSPACE)
@@ -118,11 +130,14 @@ class HexapodCheck:
             return refused(Ack.SINGULAR)
         if step:
             return Ack.ACCEPTED, strokes, math.nan, chain.drawn_m3
+        yield
         trajectory, t0 = chain.trajectory(strokes)
+        yield
         try:
-            loads = self.loads.loads(trajectory, t0, trajectory.duration_s, chain.sample_dt_s())
+            loads = yield from self.loads.loads_stages(trajectory, t0, trajectory.duration_s, chain.sample_dt_s())
         except ValueError:                 # a pose between the checked ones: DK lost or singular
             return refused(Ack.SINGULAR)
+        yield
         return capacity_verdict(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3)
 
 
@@ -178,6 +193,7 @@ class WaypointQueue:
         self._staged_rot: dict[int, tuple] = {}
         self.time_scale_needed = math.nan          # the last refusal's, for CTRL_ACK (NaN: none)
         self.taken_drawn_m3 = 0.0                  # the oil the last trajectory taken leaves drawn at its end
+        self.generation = 0                        # +1 whenever waypoints leave the queue (taken, cleared)
 
     def stage_position(self, tag: int, x: float, y: float, z: float) -> None:
         self._staged_pos[tag & 0x0F] = (x, y, z)
@@ -191,38 +207,57 @@ class WaypointQueue:
     def clear(self) -> None:
         self.queue.clear()
         self.expected_seq = None
+        self.generation += 1
 
     def commit(self, tag: int, seq: int, segment_time: float, accel_time: float, flags: int, state: State,
                previous, load_kg: float, drawn_m3: float = 0.0) -> Ack:
         """Check the staged pose with this TAG and queue it, or say why not; `previous` is the
         joint position the segment starts from, `drawn_m3` the oil the supply misses then when
-        nothing is queued before it (queued, the one before it leaves its own)."""
+        nothing is queued before it (queued, the one before it leaves its own). At once."""
+        return at_once(self.commit_stages(tag, seq, segment_time, accel_time, flags,
+                                          lambda: (state, previous, load_kg, drawn_m3)))
+
+    def commit_stages(self, tag: int, seq: int, segment_time: float, accel_time: float, flags: int,
+                      context) -> Stages[Ack]:
+        """`commit` in stages; `context()` gives (state, previous, load_kg, drawn_m3) as the
+        controller sees them at that moment. Where waypoints leave the queue during the check
+        (the running motion takes them, or a clear), the check starts again from what is then
+        queued; a state that no longer admits commits at its end refuses it."""
         tag &= 0x0F
         self.time_scale_needed = math.nan
         pos = self._staged_pos.pop(tag, None)
         rot = self._staged_rot.pop(tag, None)
         if pos is None or rot is None or (seq & 0x0F) != tag:
             return Ack.INCOMPLETE
-        if self.expected_seq is not None and seq != self.expected_seq:
-            return Ack.SEQUENCE_GAP
-        if state not in COMMIT_STATES:
+        while True:
+            state, previous, load_kg, drawn_m3 = context()
+            if self.expected_seq is not None and seq != self.expected_seq:
+                return Ack.SEQUENCE_GAP
+            if state not in COMMIT_STATES:
+                return Ack.BAD_STATE
+            if len(self.queue) >= self.capacity:
+                return Ack.QUEUE_FULL
+            if not all(math.isfinite(v) for v in pos + rot + (segment_time, accel_time)):
+                return Ack.NOT_FINITE
+            if not (accel_time > 0.0 and segment_time >= 2.0 * accel_time):
+                return Ack.BAD_ARGUMENT
+            known = WaypointFlag(flags & KNOWN_FLAGS)
+            step = bool(known & WaypointFlag.STEP)
+            after_last = not self.queue or bool(self.queue[-1].flags & WaypointFlag.LAST)
+            if step and not (known & WaypointFlag.LAST and after_last):
+                return Ack.BAD_ARGUMENT                         # a step is a trajectory of its own
+            generation = self.generation
+            chain = self.chain(previous, segment_time, accel_time)
+            chain.drawn_m3 = self.queue[-1].drawn_after_m3 if self.queue else drawn_m3
+            verdict = yield from self.check.stages(chain, pos, rot, step, load_kg)
+            if self.generation == generation:
+                break
+        if context()[0] not in COMMIT_STATES:
             return Ack.BAD_STATE
-        if len(self.queue) >= self.capacity:
-            return Ack.QUEUE_FULL
-        if not all(math.isfinite(v) for v in pos + rot + (segment_time, accel_time)):
-            return Ack.NOT_FINITE
-        if not (accel_time > 0.0 and segment_time >= 2.0 * accel_time):
-            return Ack.BAD_ARGUMENT
-        flags = WaypointFlag(flags & KNOWN_FLAGS)
-        step = bool(flags & WaypointFlag.STEP)
-        if step and (not flags & WaypointFlag.LAST or (self.queue and not self.queue[-1].flags & WaypointFlag.LAST)):
-            return Ack.BAD_ARGUMENT                         # a step is a trajectory of its own
-        chain = self.chain(previous, segment_time, accel_time)
-        chain.drawn_m3 = self.queue[-1].drawn_after_m3 if self.queue else drawn_m3
-        result, strokes, self.time_scale_needed, drawn_after = self.check(chain, pos, rot, step, load_kg)
+        result, strokes, self.time_scale_needed, drawn_after = verdict
         if result is not Ack.ACCEPTED:
             return result
-        self.queue.append(Waypoint(seq, strokes, segment_time, accel_time, flags, pos + rot, chain.start,
+        self.queue.append(Waypoint(seq, strokes, segment_time, accel_time, known, pos + rot, chain.start,
                                    drawn_after))
         self.expected_seq = (seq + 1) % 256
         return Ack.ACCEPTED
@@ -252,6 +287,7 @@ class WaypointQueue:
             return None
         take = next((k + 1 for k, w in enumerate(self.queue) if w.flags & WaypointFlag.LAST), len(self.queue))
         chosen, self.queue = self.queue[:take], self.queue[take:]
+        self.generation += 1
         self.taken_drawn_m3 = chosen[-1].drawn_after_m3
         if chosen[0].flags & WaypointFlag.STEP:           # a step reference (chapters 5.4, 7.6.1)
             return hold_at(chosen[0].strokes, chosen[0].segment_time_s), [chosen[0].seq]

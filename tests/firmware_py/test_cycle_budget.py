@@ -46,9 +46,9 @@ def test_the_controller_loop_times_each_phase_where_it_happens():
         clock.spend(200e-6)
         update(meas, cmd)
 
-    def slow_host_work(time_left_s):
+    def slow_host_work(time_left_s, clock_=None):
         clock.spend(50e-6)
-        after_write(time_left_s)
+        after_write(time_left_s, clock_)
 
     ctl.update, ctl.after_write = slow_update, slow_host_work
     for _ in range(200):

@@ -78,3 +78,63 @@ def test_waypoint_commits_wait_for_the_host_work_slot_and_estop_does_not():
     assert [a[:2] for a in acks] == [(AckKind.WAYPOINT, 0), (AckKind.HOST_CMD, 2), (AckKind.WAYPOINT, 1),
                                      (AckKind.HOST_CMD, 1)]
     assert acks[2][2] == int(Ack.BAD_STATE) and not ctl.host.queue    # after the E-stop
+
+
+class SpendingClock:
+    """Each reading is `step_s` later: a stage of the check costs one reading."""
+
+    def __init__(self, step_s):
+        self.now, self.step_s = 0.0, step_s
+
+    def __call__(self):
+        self.now += self.step_s
+        return self.now
+
+
+def _hexapod_commit(ctl, seq, position, segment=1.0, accel=0.2, flags=3):
+    ctl.host.waypoint_position(seq & 0x0F, *position)
+    ctl.host.waypoint_rotation(seq & 0x0F, 0.0, 0.0, 0.0)
+    ctl.host.waypoint_commit(seq & 0x0F, seq, segment, accel, flags)
+    ctl.host.run_before_update(ctl)
+
+
+def test_a_hexapod_commit_is_checked_in_stages_over_the_cycles_slack_with_the_same_verdict():
+    """~2 ms of checks run a stage at a time while the cycle has commit_room left: the ack
+    comes cycles later, and the waypoint queued is the one a commit at once queues."""
+    at_once_loop, at_once, _ = bus_loop("hexapod", "computed-torque")
+    staged_loop, staged, _ = bus_loop("hexapod", "computed-torque")
+    target = (0.02, -0.01, 0.60)
+    for ctl in (at_once, staged):
+        _hexapod_commit(ctl, 1, target, flags=0)
+    at_once.after_write()
+    room = staged.cfg.timing.commit_room_s
+    clock, calls = SpendingClock(0.5 * room), 0
+    while not staged.host.acks:
+        staged.after_write(1.6 * room, clock)       # room for two stages a cycle
+        calls += 1
+    assert calls >= 4 and staged.host.acks[-1] == at_once.host.acks[-1] == (AckKind.WAYPOINT, 1, int(Ack.ACCEPTED),
+                                                                            0.0)
+    assert (staged.waypoints.queue[-1].strokes == at_once.waypoints.queue[-1].strokes).all()
+
+
+def test_a_staged_commit_starts_again_when_the_queue_changes_under_it_and_yields_to_an_estop():
+    loop, ctl, _ = bus_loop("hexapod", "computed-torque")
+    _hexapod_commit(ctl, 1, (0.02, -0.01, 0.60), flags=0)
+    _hexapod_commit(ctl, 2, (0.0, 0.02, 0.62), flags=0)
+    ctl.after_write()                                # the first: queued
+    ctl.host.run_before_update(ctl)                  # the next update: the second's halves
+    room = ctl.cfg.timing.commit_room_s
+    ctl.after_write(1.6 * room, SpendingClock(0.5 * room))    # the second: two stages of it
+    assert len(ctl.host.acks) == 1 and len(ctl.waypoints.queue) == 1
+    ctl.waypoints.clear()                            # (as CLEAR_WAYPOINTS would, were it not behind it)
+    ctl.after_write()
+    # checked again from the empty queue, where SEQ 2 is the first after the clear: accepted alone
+    assert ctl.host.acks[-1][:3] == (AckKind.WAYPOINT, 2, int(Ack.ACCEPTED))
+    assert [w.seq for w in ctl.waypoints.queue] == [2] and (ctl.waypoints.queue[0].start == ctl.reference.yr).all()
+    _hexapod_commit(ctl, 3, (0.02, -0.01, 0.60), flags=0)
+    ctl.after_write(1.6 * room, SpendingClock(0.5 * room))
+    loop.dispatch(host_command_frame(Command.ESTOP, 5))
+    ctl.host.run_before_update(ctl)                  # ESTOP never waits behind it ...
+    assert ctl.status.state is State.ESTOP
+    ctl.after_write()                                # ... and the commit it interrupted is refused
+    assert ctl.host.acks[-1][:3] == (AckKind.WAYPOINT, 3, int(Ack.BAD_STATE))
