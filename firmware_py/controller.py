@@ -367,8 +367,9 @@ class Controller:
     def after_write(self, time_left_s: float = math.inf, clock=None) -> None:
         """Host work that must not delay the cycle's VALVE_CMD: the front waypoint commit's
         stages while the time left before the next SYNC (`time_left_s` now, less what they
-        take by `clock`) leaves `commit_room_us` for another."""
-        self.host.run_after_write(self, time_left_s, self.cfg.timing.commit_room_s, clock)
+        take by `clock`) leaves `commit_room_us` for another. A stage forced by a long wait
+        skips a cycle that follows an overrun: a commit never makes overruns in a row."""
+        self.host.run_after_write(self, time_left_s, self.cfg.timing.commit_room_s, clock, not self.meas.overrun)
 
     # -- the cycle ------------------------------------------------------------------------------
     def update(self, meas: Measurements, cmd: ValveCommands) -> None:

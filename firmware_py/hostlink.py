@@ -8,7 +8,8 @@ The loop only queues what it decoded. The controller carries the queue out:
 - after the cycle's VALVE_CMD are sent: the front waypoint commit, stage by stage (its check
   takes ~2 ms on the hexapod here, in stages of a few tenths of a ms), each stage only while
   the cycle has `commit_room_us` left before the next SYNC; the rest in later cycles. A
-  commit that found no room for COMMIT_MAX_WAIT_CYCLES then runs a stage a cycle regardless.
+  commit that found no room for COMMIT_MAX_WAIT_CYCLES then runs a stage a cycle regardless,
+  but not right after an overrun (so a commit never makes overruns in a row).
   Its CTRL_ACK goes out when its last stage is done; what follows it waits until then.
 So a command never overtakes a commit sent before it (a waypoint half reusing a TAG cannot
 reach a commit that has not been checked yet), and the cycle's timing never waits for one.
@@ -70,13 +71,15 @@ class HostLink:
                 queue.remove(item)
                 self._carry_out(controller, *item)
 
-    def run_after_write(self, controller, time_left_s: float = math.inf, room_s: float = 0.0, clock=None) -> None:
+    def run_after_write(self, controller, time_left_s: float = math.inf, room_s: float = 0.0, clock=None,
+                        may_force: bool = True) -> None:
         """The front waypoint commit's stages while the cycle has `room_s` left before the next
         SYNC (`time_left_s` at the call, less what the stages took by `clock`; without a clock,
-        all of them when there is room)."""
+        all of them when there is room). Without room, after COMMIT_MAX_WAIT_CYCLES, one stage
+        where `may_force` (the loop's previous cycle kept its deadline)."""
         if not (self.queue and self.queue[0][0] is Frame.COMMIT):
             return
-        if time_left_s < room_s and self.commit_waited < COMMIT_MAX_WAIT_CYCLES:
+        if time_left_s < room_s and (self.commit_waited < COMMIT_MAX_WAIT_CYCLES or not may_force):
             self.commit_waited += 1
             return
         if self._commit is None:

@@ -44,6 +44,10 @@ def test_a_commit_waits_for_a_cycle_with_room_before_the_next_sync_but_not_forev
     for _ in range(COMMIT_MAX_WAIT_CYCLES):
         ctl.after_write(tight)                       # the SYNC is near: the commit waits
     assert not ctl.host.acks and len(ctl.host.queue) == 1
+    ctl.meas.overrun = True
+    ctl.after_write(tight)                           # waited its longest, but the last cycle overran
+    assert not ctl.host.acks
+    ctl.meas.overrun = False
     ctl.after_write(tight)                           # waited its longest: it runs anyway
     assert list(ctl.host.acks) == [(AckKind.WAYPOINT, 0, int(Ack.ACCEPTED), 0.0)] and ctl.host.commit_waited == 0
     for frame in host_frames(1, z + 0.02, flags=1):
