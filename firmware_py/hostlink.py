@@ -6,7 +6,7 @@ The loop only queues what it decoded. The controller carries the queue out:
   waypoint commit (commands, waypoint halves, tests), and ESTOP and DISABLE wherever they
   stand (they never wait);
 - after the cycle's VALVE_CMD are sent: the front waypoint commit, stage by stage (its check
-  takes ~2 ms on the hexapod here, in stages of a few tenths of a ms), each stage only while
+  takes ~2.5 ms on the hexapod here, in stages of at most ~0.35 ms), each stage only while
   the cycle has `commit_room_us` left before the next SYNC; the rest in later cycles. A
   commit that found no room for COMMIT_MAX_WAIT_CYCLES then runs a stage a cycle regardless,
   but not right after an overrun (so a commit never makes overruns in a row).

@@ -40,7 +40,7 @@ from physics import power_unit as pu
 
 VELOCITY_GRID_M_S = np.linspace(-3.0, 3.0, 241)     # 25 mm/s apart; the valve's no-load speed is ~3.4 m/s
 SCALE_RANGE = (0.25, 16.0)                         # the time scales a search spans
-LOAD_SAMPLES_PER_STAGE = 16                        # a staged load computation: ~0.3 ms a stage here
+LOAD_SAMPLES_PER_STAGE = 8                         # a staged load computation: ~0.1 ms a stage here
 
 
 @functools.lru_cache(maxsize=16)
@@ -236,8 +236,16 @@ def fits(capacity: LegCapacity, loads: Loads, scale: float, share: float, lag_ma
 
 def judge(capacity: LegCapacity, loads: Loads, scale: float, share: float, lag_max_m: float,
           initial_m3: float = 0.0) -> Judgement:
+    return at_once(judge_stages(capacity, loads, scale, share, lag_max_m, initial_m3))
+
+
+def judge_stages(capacity: LegCapacity, loads: Loads, scale: float, share: float, lag_max_m: float,
+                 initial_m3: float = 0.0) -> Stages[Judgement]:
+    """`judge` in three stages: the lag, the supply, the utilisation."""
     lag, k, leg = shortfall_lag(capacity, loads, scale, share)
+    yield
     deficit, reserve, end = supply_deficit(capacity, loads, scale, share, initial_m3)
+    yield
     force, velocity = loads.at_scale(scale)
     ratio = capacity.utilisation(force, velocity)
     return Judgement(lag <= lag_max_m and deficit <= reserve, lag, float(np.max(ratio)), k, leg, deficit, reserve,
@@ -250,14 +258,23 @@ def needed_scale(capacity: LegCapacity, loads: Loads, share: float, lag_max_m: f
     does not (a static load the legs cannot hold, or a supply already drawn below its share).
     `beyond`: a scale known not to fit, the search's floor (near the bound `fits` is not
     monotonic: a refusal at 1 must not name 0.99)."""
+    return at_once(needed_scale_stages(capacity, loads, share, lag_max_m, tolerance, beyond, initial_m3))
+
+
+def needed_scale_stages(capacity: LegCapacity, loads: Loads, share: float, lag_max_m: float,
+                        tolerance: float = 0.005, beyond: float | None = None,
+                        initial_m3: float = 0.0) -> Stages[float]:
+    """`needed_scale`, a stage per time scale tried."""
     low, high = SCALE_RANGE
     if not fits(capacity, loads, high, share, lag_max_m, initial_m3):
         return math.nan
+    yield
     if beyond is not None:
         low = beyond
     elif fits(capacity, loads, low, share, lag_max_m, initial_m3):
         return low
     while high - low > tolerance * low:
+        yield
         middle = math.sqrt(low * high)
         if fits(capacity, loads, middle, share, lag_max_m, initial_m3):
             high = middle

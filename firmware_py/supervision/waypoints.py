@@ -20,7 +20,7 @@ import numpy as np
 
 from firmware_py.config import Waypoints
 from firmware_py.motion_control.trajectory import JointTrajectory, hold_at, through_points
-from firmware_py.supervision.capacity import LegCapacity, PlatformLoads, judge, leg_loads, needed_scale
+from firmware_py.supervision.capacity import LegCapacity, PlatformLoads, judge_stages, leg_loads, needed_scale_stages
 from firmware_py.supervision.stages import Stages, at_once
 from physics.constants import GRAVITY_M_S2
 from protocol.enums import Ack, State, WaypointFlag
@@ -28,7 +28,7 @@ from protocol.enums import Ack, State, WaypointFlag
 COMMIT_STATES = (State.IDLE, State.READY, State.RUNNING)
 KNOWN_FLAGS = int(sum(WaypointFlag))         # other FLAGS bits are reserved and ignored
 SAMPLES_PER_ACCEL = 8                        # the capacity check's samples per SLS acceleration time
-PATH_POSES_PER_STAGE = 6                     # a staged commit checks this many poses of the path a stage
+PATH_POSES_PER_STAGE = 3                     # a staged commit checks this many poses of the path a stage
 
 
 @dataclass
@@ -77,7 +77,7 @@ class TestbenchCheck:
         trajectory, t0 = chain.trajectory(strokes)
         loads = leg_loads(trajectory, t0, trajectory.duration_s, chain.sample_dt_s(),
                           self.moving_mass_kg + load_kg, GRAVITY_M_S2)
-        return capacity_verdict(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3)
+        return at_once(capacity_verdict_stages(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3))
 
 
 class HexapodCheck:
@@ -138,18 +138,20 @@ class HexapodCheck:
         except ValueError:                 # a pose between the checked ones: DK lost or singular
             return refused(Ack.SINGULAR)
         yield
-        return capacity_verdict(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3)
+        return (yield from capacity_verdict_stages(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3))
 
 
-def capacity_verdict(waypoints: Waypoints, capacity: LegCapacity, loads, strokes, drawn_m3: float = 0.0):
+def capacity_verdict_stages(waypoints: Waypoints, capacity: LegCapacity, loads, strokes,
+                            drawn_m3: float = 0.0) -> Stages[tuple]:
     """(ACCEPTED, strokes, NaN, the oil drawn at the segment's end), or (BEYOND_CAPACITY, None,
     the smallest time scale that fits (inf: none), NaN); `drawn_m3`: the oil the supply misses
     when the segment starts (the motions before it)."""
     share, lag_max = waypoints.capacity_share, waypoints.lag_max_m
-    verdict = judge(capacity, loads, 1.0, share, lag_max, drawn_m3)
+    verdict = yield from judge_stages(capacity, loads, 1.0, share, lag_max, drawn_m3)
     if verdict.within:
         return Ack.ACCEPTED, strokes, math.nan, verdict.end_deficit_m3
-    scale = needed_scale(capacity, loads, share, lag_max, beyond=1.0, initial_m3=drawn_m3)
+    yield
+    scale = yield from needed_scale_stages(capacity, loads, share, lag_max, beyond=1.0, initial_m3=drawn_m3)
     return Ack.BEYOND_CAPACITY, None, math.inf if math.isnan(scale) else scale, math.nan
 
 
