@@ -59,12 +59,12 @@ class TestbenchCheck:
                                                                              moving_mass_kg, stroke_m)
         self.capacity = capacity
 
-    def __call__(self, chain: Chain, pos, rot, step: bool, load_kg: float):
-        return at_once(self.stages(chain, pos, rot, step, load_kg))
-
     def stages(self, chain: Chain, pos, rot, step: bool, load_kg: float) -> Stages[tuple]:
         """One stage: the bench's check is cheap."""
         yield from ()
+        return self(chain, pos, rot, step, load_kg)
+
+    def __call__(self, chain: Chain, pos, rot, step: bool, load_kg: float):
         margin = self.margin_m
         if max(abs(pos[0]), abs(pos[1]), *(abs(r) for r in rot)) > 1e-9 or not (
                 margin <= pos[2] <= self.stroke_m - margin):

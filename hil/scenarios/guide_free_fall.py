@@ -31,19 +31,23 @@ from hil.scenarios.common import each_controller_and_load, load_at, move_stroke,
 from physics.constants import GRAVITY_M_S2, MM
 from protocol.enums import AckKind, EmuCommand, TestMode
 
+
+def appendix_d() -> dict:
+    return thesis_data("appendix_d")
+
+
 TOP_M = 0.270                       # where each fall starts
 DROP_VALVE_V = -6.0                 # the rod retracts faster than a 6 kg slide falls (2.2 m/s at the bottom)
 TEST_S = 3.0                        # the valve step's longest: a 0 kg slide falls 250 mm in ~1.2 s
 PRE_S = 0.02                        # at rest before the step: the slide's start
 END_ABOVE_M = 0.030                 # a fall's record ends here, before the stroke guard's hold meets it
-FILTER_HZ = float(thesis_data("appendix_d")["experiment"]["filter_hz"])   # eq. D.2's Butterworth
+FILTER_HZ = float(appendix_d()["experiment"]["filter_hz"])   # eq. D.2's Butterworth
 # Tolerances on the emulator's guide: the pooled fit of 2-16 falls of 0.125 mm counts
 COULOMB_TOLERANCE = 0.10
 VISCOUS_TOLERANCE = 0.20
 STATIC_TOLERANCE_N = 1.0            # where the guide has no Stribeck hump (Fs = Fc): Fs - Fc found below this
 FIT_MIN = 0.995                     # eq. 5.12 on the distance fallen
 # a 6 kg slide reaches 2.2 m/s; the rod carries nothing while the slide falls, which the
-# actuator residuals (chamber model against the load cell) rightly call a fault
 # actuator residuals (chamber model against the load cell) rightly call a fault; the slide
 # lands on the guide's end (the thesis's falls did), inside the limits' end-stop margin
 OVERRIDES = {"limits": {"velocity_max_mm_s": 3000.0, "stroke_margin_mm": 0.0}, "residuals": {"enabled": False}}
@@ -57,10 +61,6 @@ def peak_velocity(s_m: np.ndarray, period: float) -> float:
     """A fall's fastest, over 20 ms (one encoder count in 2 ms is up to 62 mm/s)."""
     n = max(int(round(0.02 / period)), 1)
     return float(np.max(s_m[n:] - s_m[:-n])) / (n * period) if len(s_m) > n else 0.0
-
-
-def appendix_d() -> dict:
-    return thesis_data("appendix_d")
 
 
 class GuideFreeFall(Scenario):
