@@ -39,7 +39,8 @@ from protocol.nodes import HEARTBEAT
 
 US, MS = 1e-6, 1e-3
 # lockstep pacing: the valves' SYNC watchdog, in periods of the clock: longer than the
-# controller's lockstep wait for a cycle's frames (50 ms), which a missing frame makes it sit out
+# controller's lockstep wait for a cycle's frames (`lockstep_timeout_ms`), which a silent
+# emulator makes it sit out
 LOCKSTEP_SYNC_TIMEOUT_PERIODS = 5000.0
 
 

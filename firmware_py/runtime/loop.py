@@ -8,7 +8,8 @@ every node's heartbeat says OPERATIONAL), then
 `hold_cycles` cycles with the valves in HOLD (the first with a Reset pulse, clearing faults
 left by an earlier session), then IDLE or READY (auto_enable).
 cycle k: send SYNC k; collect cycle k's LEG_STATE frames until all are in or the window
-closes (realtime: a fraction of the period; lockstep: a timeout); `read` fills the
+closes (realtime: a fraction of the period; lockstep: the emulator's EMU_TRUTH of that SYNC,
+its last frame, or a timeout for a dead emulator); `read` fills the
 Measurements; `Controller.update(meas, cmd)`; `write` encodes the ValveCommands as
 VALVE_CMD_* (applied by the valves at SYNC k+1), CTRL_STATUS when due, CTRL_ACK for host
 frames and the heartbeat when due; then the controller's host work that must not delay
@@ -149,6 +150,8 @@ class ControllerLoop:
         has_imu = controller.status.n_nodes > n
         if has_imu:
             rx += ["IMU_ATTITUDE", "IMU_RATE"]
+        if pacing == "lockstep":            # the emulator's last frame of each SYNC closes the window
+            rx.append("EMU_TRUTH")
         self.decoder = FrameDecoder(rx)
         self.expected = self.decoder.expected_mask([f"LEG_STATE_{i}" for i in self.legs])
         self._leg_slots = [self.decoder.slot[f"LEG_STATE_{i}"] for i in self.legs]
@@ -162,6 +165,10 @@ class ControllerLoop:
         self._pressure_values = [self.decoder.values[f"LEG_PRESSURE_{i}"] for i in self.legs]
         self._imu_attitude_id = CODECS["IMU_ATTITUDE"].frame_id if has_imu else -1
         self._imu_values = self.decoder.values["IMU_ATTITUDE"] if has_imu else None
+        self._truth_id = CODECS["EMU_TRUTH"].frame_id if pacing == "lockstep" else -1
+        self._truth_values = self.decoder.values["EMU_TRUTH"] if pacing == "lockstep" else None
+        self._truth_phase = CODECS["EMU_TRUTH"].index["SYNC_PHASE"]
+        self._closed = False                        # lockstep: this SYNC's EMU_TRUTH came
         self.out_sync = Outbox("SYNC")
         self.out_nmt = Outbox("NMT")
         self.out_cmd = [Outbox(f"VALVE_CMD_{i}") for i in self.legs]
@@ -251,6 +258,9 @@ class ControllerLoop:
             if attitude_into(self._imu_values, self._attitude):
                 self._attitude_new = True
             return
+        if frame_id == self._truth_id:               # the emulator has sent all it had for this SYNC
+            self._closed = int(self._truth_values[self._truth_phase]) == self.sync_counter % 16
+            return
         k = self._heartbeat_of_id.get(frame_id)
         if k is not None:
             self.heartbeat_seen[k] = self.clock()
@@ -290,8 +300,11 @@ class ControllerLoop:
 
     def _collect(self, deadline: float) -> None:
         """Receive until every LEG_STATE of the cycle is in or the window closes; frames
-        already waiting in the receive queue when it closes arrived in time and are taken."""
-        while not self._all_fresh():
+        already waiting in the receive queue when it closes arrived in time and are taken.
+        Lockstep: the emulator's EMU_TRUTH for this SYNC closes it too (a lost frame costs no
+        wait, and a machine stall shorter than the timeout loses nothing)."""
+        self._closed = False
+        while not self._all_fresh() and not self._closed:
             remaining = deadline - self.clock()
             msg = self.bus.recv(timeout=max(remaining, 0.0))
             self._note_stall()

@@ -150,12 +150,33 @@ def nmt(bus, node_command: NmtCommand, node: int) -> None:
     bus.emulator.handle(box.message)
 
 
+def test_lockstep_cycles_close_at_the_emulators_last_frame_not_at_the_timeout():
+    """Lockstep: a lost LEG_STATE costs no wait (EMU_TRUTH of the same SYNC closes the window)
+    and is still counted missing; an EMU_TRUTH of an earlier SYNC closes nothing."""
+    loop, ctl, bus = bus_loop("testbench", "pi")
+    cycles(loop, 5)
+    inject(bus, 1, EmuFault.DROP)
+    t0, missing = bus.clock(), loop.stats.missing_frames
+    cycles(loop, 3)
+    assert bus.clock() - t0 == pytest.approx(3 * bus.period_s)          # no timeout waited out
+    assert loop.stats.missing_frames - missing == 3
+    clear(bus, 1, EmuFault.DROP)
+    cycles(loop, 2)                                           # its first frame back fails E2E (counter jump)
+    # each cycle's window closes at its LEG_STATE, leaving that SYNC's EMU_TRUTH queued ahead
+    # of the next cycle's frames: heard then, it must not close the next window
+    missing = loop.stats.missing_frames
+    cycles(loop, 50)
+    assert loop.stats.missing_frames == missing
+
+
 def test_nodes_that_reboot_are_started_again_on_reset():
     loop, ctl, bus = bus_loop("testbench", "pi")
     cycles(loop, 20)
     nmt(bus, NmtCommand.RESET_NODE, 1)                        # the node reboots: PRE-OPERATIONAL, silent
     cycles(loop, ctl.cfg.supervisor.missing_frames_fault + 2)
     assert ctl.status.fault in (Fault.SENSOR_TIMEOUT, Fault.VALVE_FAULT)
+    heartbeat_s, period_s = bus.emulator.cfg.nodes.heartbeat_s, bus.period_s
+    cycles(loop, math.ceil(heartbeat_s / period_s) + 1)            # its first heartbeat after the boot-up
     assert loop.nmt_state[1] == NmtState.PRE_OPERATIONAL
     starts = frames_sent(bus, "NMT")
     ctl.host.command(int(Command.RESET), 0, 1)

@@ -63,7 +63,9 @@ def test_sha_step_over_socketcan_vcan0_inside_a_vm(tmp_path):
                          "--exec", script], capture_output=True, text=True, timeout=VM_TIMEOUT_S,
                         env={**os.environ, "PATH": f"{BIN}:{os.environ.get('PATH', '')}"})
     stderr_tail = (work / "vm.stderr").read_text()[-2000:] if (work / "vm.stderr").exists() else ""
-    assert "VM_EXIT=0" in vm.stdout, vm.stdout[-2000:] + vm.stderr[-2000:] + stderr_tail
+    # exit 1 is a failed check: the run's own report says which
+    report = (work / "vm.json").read_text()[-3000:] if (work / "vm.json").exists() else ""
+    assert "VM_EXIT=0" in vm.stdout, vm.stdout[-2000:] + vm.stderr[-2000:] + stderr_tail + report
     doc = json.loads((work / "vm" / "metrics.json").read_text())
     assert doc["bus"] == "socketcan:vcan0"
     assert doc["passed"] and doc["failure"] is None, doc.get("failure")
