@@ -2,7 +2,7 @@
 controller as processes on the bus) passes: each fault detected within its bound, held,
 and after RESET + ENABLE a trajectory runs. The lockstep session (frame and plant faults)
 and the realtime one (process faults: SIGKILL, SIGSTOP, a dead emulator) are separate tests:
-the realtime one runs in make test's last tier, alone on the machine."""
+the realtime one in `make realtime`, alone on the machine (a benchmark)."""
 
 import json
 
