@@ -1,7 +1,7 @@
 # hydrapod
 #   make demo    creates .venv if needed; the main job: emulator + controller on the default bus,
 #                pm-circle at the thesis's timing, the thesis's two controllers and computed torque,
-#                in realtime; metrics and plots in hil-out/
+#                in lockstep (PACING=realtime: at 500 Hz on the wall clock); metrics and plots in hil-out/
 #   make test    creates .venv if needed; the suite but the realtime tier (what .ci/run runs)
 #   make check   the suite without the HIL runs and the VM (a few minutes)
 #   make realtime  the realtime HIL tier alone (a benchmark: an idle machine that keeps 500 Hz)
@@ -18,7 +18,8 @@ PYTEST  = $(PY) -m pytest -p no:cacheprovider
 # that sets PYTHONDONTWRITEBYTECODE would have each HIL child recompile them, 20x slower in the VM)
 export PYTHONDONTWRITEBYTECODE :=
 
-PACING ?= realtime
+# lockstep: the same on any machine; realtime passes only where the machine keeps 500 Hz
+PACING ?= lockstep
 demo: $(STAMP)
 	$(VENV)/bin/hydrapod hil run pm-circle --pacing $(PACING) --bus default --out hil-out
 

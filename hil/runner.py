@@ -44,6 +44,7 @@ LOCKSTEP_HEARTBEAT_TIMEOUT_MS = 10000.0
 REALTIME_EMULATOR_SYNC_TIMEOUT_PERIODS = 25.0
 START_TIMEOUT_S = 90.0                             # imports, kernels, MuJoCo, activation
 START_TRIES = 3                                    # realtime: a start a machine stall faulted is recovered
+RECOVERY_TRIES = 4                                 # realtime: a recovery a machine stall faulted is repeated
 
 
 def merge_sections(base: dict, *overlays: dict) -> dict:
@@ -246,7 +247,19 @@ class Run:
         self.host.wait_cycles(self.cycles(seconds))
 
     def select(self, controller: str) -> None:
-        self.host.command(Command.SELECT_CONTROLLER, CONTROLLER_NAMES[controller])
+        """SELECT_CONTROLLER. Realtime: refused BAD_STATE because a machine stall has just
+        faulted the controller, it is recovered first (whether a stall caused the fault is
+        judged from the log) and selected again."""
+        realtime = self.pacing == "realtime"
+        result = self.host.command(Command.SELECT_CONTROLLER, CONTROLLER_NAMES[controller], expect_ok=not realtime)
+        if result is not Ack.ACCEPTED:
+            self.await_fault_shown(f"refused: {result.name}")
+            if result is not Ack.BAD_STATE or self.host.state is not State.FAULT:
+                raise HostError(f"HOST_CMD SELECT_CONTROLLER {CONTROLLER_NAMES[controller]} refused: {result.name}")
+            self.notes.append(f"{controller}: fault {Fault(self.host.fault_code).name} before its selection (realtime; "
+                              "whether a machine stall caused it is judged from the log): recovered")
+            self.recover_from_fault()
+            self.host.command(Command.SELECT_CONTROLLER, CONTROLLER_NAMES[controller])
         self.host.wait_until(lambda: self.host.controller == CONTROLLER_NAMES[controller], 200,
                              what=f"controller {controller} in CTRL_STATUS")
 
@@ -258,7 +271,20 @@ class Run:
 
     def recover_from_fault(self) -> None:
         """After a FAULT: RESET (valves hold), drop what was queued, ENABLE (a leg left on an
-        end stop is brought back inside the guard); READY again."""
+        end stop is brought back inside the guard); READY again. Realtime: a recovery that a
+        machine stall faulted again is repeated (noted), at most RECOVERY_TRIES times."""
+        for attempt in range(1, RECOVERY_TRIES + 1):
+            try:
+                self._recover_once()
+                return
+            except HostError as error:
+                self.await_fault_shown(str(error))
+                if self.pacing != "realtime" or self.host.state is not State.FAULT or attempt == RECOVERY_TRIES:
+                    raise
+                self.notes.append(f"recovery attempt {attempt} faulted {Fault(self.host.fault_code).name} ({error}); "
+                                  "repeated")
+
+    def _recover_once(self) -> None:
         self.host.command(Command.RESET)
         self.host.wait_state(State.IDLE, max_cycles=self.cycles(2.0))
         self.host.command(Command.CLEAR_WAYPOINTS)

@@ -1,7 +1,8 @@
 """The runner's judgements: a run whose emulated plant diverged fails; the controller's
 start: in realtime a start that a fault ends (a machine stall
 while the loop starts) is recovered with RESET + ENABLE and noted, its window kept for the
-log's judgement; in lockstep, or after the last try, it is the run's failure."""
+log's judgement; in lockstep, or after the last try, it is the run's failure. The same for a
+fault that refuses a controller's selection and for a recovery a stall faults again."""
 
 from pathlib import Path
 
@@ -124,3 +125,62 @@ def test_a_run_whose_plant_diverged_fails():
     assert runner._plant_diverged(ok) is None
     broken = {"emulator": {"summary": {"plant_unstable": 3, "plant_unstable_first_s": 3.25}}}
     assert "diverged at t = 3.250 s" in runner._plant_diverged(broken)
+
+
+class FaultedHost(FakeHost):
+    """A machine stall has just faulted the controller (OVERRUN): SELECT_CONTROLLER is refused
+    BAD_STATE while it is latched; the READY wait of each of the first `recovery_faults`
+    recoveries sees FAULT again."""
+
+    def __init__(self, recovery_faults: int):
+        super().__init__(0)
+        self.state, self.fault_code = State.FAULT, int(Fault.OVERRUN)
+        self.recovery_faults = recovery_faults
+        self.controller = None
+
+    def command(self, command, argument=0, expect_ok=True):
+        self.commands.append(command)
+        if command is Command.SELECT_CONTROLLER and self.state is State.FAULT:
+            if expect_ok:
+                raise HostError(f"HOST_CMD {command.name} {argument} refused: BAD_STATE")
+            return Ack.BAD_STATE
+        if command is Command.SELECT_CONTROLLER:
+            self.controller = argument
+        return Ack.ACCEPTED
+
+    def wait_state(self, *states, max_cycles=0, wall_timeout_s=None):
+        if State.IDLE in states:
+            self.state = State.IDLE
+        elif self.recovery_faults:
+            self.recovery_faults -= 1
+            self.state = State.FAULT
+            raise HostError("controller state READY not reached within 1000 cycles (state FAULT, fault code 9)")
+        else:
+            self.state = State.READY
+
+    def wait_until(self, condition, max_cycles, what=None, wall_timeout_s=None):
+        assert condition() or what is None, what
+
+
+@pytest.mark.parametrize("recovery_faults", [0, runner.RECOVERY_TRIES - 1])
+def test_realtime_a_fault_before_the_selection_is_recovered_then_selected(tmp_path, monkeypatch, recovery_faults):
+    run = make_run(tmp_path, "realtime", 0, monkeypatch)
+    run.host = FaultedHost(recovery_faults)
+    run.select("adaptive")
+    assert run.host.state is State.READY and run.host.controller == runner.CONTROLLER_NAMES["adaptive"]
+    assert run.host.commands.count(Command.RESET) == recovery_faults + 1
+    assert sum("before its selection" in n for n in run.notes) == 1
+    assert sum("recovery attempt" in n and "faulted OVERRUN" in n for n in run.notes) == recovery_faults
+
+
+def test_a_recovery_that_faults_every_time_or_in_lockstep_fails(tmp_path, monkeypatch):
+    run = make_run(tmp_path, "realtime", 0, monkeypatch)
+    run.host = FaultedHost(runner.RECOVERY_TRIES)
+    with pytest.raises(HostError, match="READY not reached"):
+        run.recover_from_fault()
+    assert run.host.commands.count(Command.RESET) == runner.RECOVERY_TRIES
+    run = make_run(tmp_path, "lockstep", 0, monkeypatch)
+    run.host = FaultedHost(0)
+    with pytest.raises(HostError, match="SELECT_CONTROLLER .* refused: BAD_STATE"):
+        run.select("adaptive")
+    assert Command.RESET not in run.host.commands
