@@ -19,7 +19,7 @@ import numpy as np
 
 from program.errors import UserInputError
 from protocol.codec import CODECS, FrameDecoder
-from protocol.dbc import sync_counter_overflow
+from protocol.dbc import sync_counter_overflow, truth_phase
 from protocol.devices import SDO_REQUEST_BASE, SDO_RESPONSE_BASE
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import NmtCommand
@@ -189,12 +189,12 @@ def _assign_cycles(frames: list[tuple]) -> np.ndarray:
         guess, phase, t = by_order[i], frames[i][1][1] >> 4, frames[i][2]
         # only cycles that had a SYNC (a default of -1 would match phase 15: -1 % 16 == 15)
         matches = [k for k in range(guess - 8, guess + 8) if k in counter_of_cycle
-                   and counter_of_cycle[k] % 16 == phase]
+                   and truth_phase(counter_of_cycle[k]) == phase]
         if previous is not None and t - previous_t <= TRUTH_AFTER_FRAMES_MAX_S:
             # the same process, answering its SYNCs in order: after a stall its backlog
             # comes in a burst, each answer to the first SYNC of its phase after the last
             behind = [k for k in range(previous + 1, guess + 8) if k in counter_of_cycle
-                      and counter_of_cycle[k] % 16 == phase]
+                      and truth_phase(counter_of_cycle[k]) == phase]
             matches = behind[:1] or matches
         truth_cycle[i] = min(matches, key=lambda k: abs(k - guess)) if matches else guess
         previous, previous_t = truth_cycle[i], t

@@ -250,12 +250,12 @@ class Run:
         """SELECT_CONTROLLER. Realtime: refused BAD_STATE because a machine stall has just
         faulted the controller, it is recovered first (whether a stall caused the fault is
         judged from the log) and selected again."""
-        realtime = self.pacing == "realtime"
-        result = self.host.command(Command.SELECT_CONTROLLER, CONTROLLER_NAMES[controller], expect_ok=not realtime)
-        if result is not Ack.ACCEPTED:
-            self.await_fault_shown(f"refused: {result.name}")
-            if result is not Ack.BAD_STATE or self.host.state is not State.FAULT:
-                raise HostError(f"HOST_CMD SELECT_CONTROLLER {CONTROLLER_NAMES[controller]} refused: {result.name}")
+        try:
+            self.host.command(Command.SELECT_CONTROLLER, CONTROLLER_NAMES[controller])
+        except HostError as error:
+            self.await_fault_shown(str(error))
+            if self.pacing != "realtime" or self.host.state is not State.FAULT:
+                raise
             self.notes.append(f"{controller}: fault {Fault(self.host.fault_code).name} before its selection (realtime; "
                               "whether a machine stall caused it is judged from the log): recovered")
             self.recover_from_fault()

@@ -37,7 +37,7 @@ from plant_emulator.simulated_rig import SimulatedRig
 from plant_emulator.valve_node import Emergency, ValveState
 from program.realtime import percentiles_us
 from protocol.codec import CODECS, FrameDecoder
-from protocol.dbc import sync_counter_overflow
+from protocol.dbc import sync_counter_overflow, truth_phase
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import EmuCommand, EmuFault, NmtCommand, NmtState, Pacing
 from protocol.interfaces import attitude_values, leg_pressure_values, leg_state_values, valve_command_of
@@ -523,7 +523,7 @@ class Emulator:
         """EMU_TRUTH: the simulated pose for HIL metrics (after the leg frames: the
         controller's collection never waits for it)."""
         box = self.out["EMU_TRUTH"]
-        box.values[box.index["SYNC_PHASE"]] = counter % 16
+        box.values[box.index["SYNC_PHASE"]] = truth_phase(counter)
         if self.has_imu:
             position, _ = self.rig.platform_pose()
             for axis, value in zip("XYZ", position):

@@ -67,6 +67,14 @@ class Schedule:
         return self.sync_period > 0 and (sync_counter - 1) % self.sync_period == self.sync_phase
 
 
+TRUTH_PHASES = 16          # EMU_TRUTH's SYNC_PHASE: 4 bits
+
+
+def truth_phase(sync_counter: int) -> int:
+    """EMU_TRUTH's SYNC_PHASE for the SYNC with this counter: what ties a truth to its SYNC."""
+    return sync_counter % TRUTH_PHASES
+
+
 def sync_counter_overflow(db=None) -> int:
     db = db or load_database()
     return int(_attr(db, "SyncCounterOverflow", 240))

@@ -44,7 +44,7 @@ from firmware_py.supervision.supervisor import LATCHED, emergency_code
 from physics.constants import BAR
 from program.realtime import percentiles_us
 from protocol.codec import CODECS, STANDARD_ID_MASK, FrameDecoder
-from protocol.dbc import sync_counter_overflow
+from protocol.dbc import sync_counter_overflow, truth_phase
 from protocol.devices import SDO_RESPONSE_BASE, identity_of
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import PACINGS, Fault, NmtCommand, NmtState, Pacing
@@ -259,7 +259,7 @@ class ControllerLoop:
                 self._attitude_new = True
             return
         if frame_id == self._truth_id:               # the emulator has sent all it had for this SYNC
-            self._closed = int(self._truth_values[self._truth_phase]) == self.sync_counter % 16
+            self._closed = int(self._truth_values[self._truth_phase]) == truth_phase(self.sync_counter)
             return
         k = self._heartbeat_of_id.get(frame_id)
         if k is not None:

@@ -141,9 +141,7 @@ class FaultedHost(FakeHost):
     def command(self, command, argument=0, expect_ok=True):
         self.commands.append(command)
         if command is Command.SELECT_CONTROLLER and self.state is State.FAULT:
-            if expect_ok:
-                raise HostError(f"HOST_CMD {command.name} {argument} refused: BAD_STATE")
-            return Ack.BAD_STATE
+            raise HostError(f"HOST_CMD {command.name} {argument} refused: BAD_STATE")
         if command is Command.SELECT_CONTROLLER:
             self.controller = argument
         return Ack.ACCEPTED
