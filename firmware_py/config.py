@@ -236,6 +236,10 @@ class ComputedTorque(Section):
     force_bandwidth_rest_hz: float = key("force_bandwidth_rest_hz", 0.0, 100.0)
     force_rate_floor: float = key("force_rate_floor_n_s_pct", 1.0, 1e6, si=100.0)   # N/s per unit spool
     velocity_filter_hz: float = key("velocity_filter_hz", 0.5, 200.0)
+    yaw_bandwidth_hz: float = key("yaw_bandwidth_hz", 0.1, 50.0)
+    yaw_damping: float = key("yaw_damping", 0.1, 5.0)
+    yaw_blend_s: float = key("yaw_blend_s", 0.01, 100.0)
+    imu_max_age_s: float = key("imu_max_age_ms", 0.0, 10000.0, si=1e-3)
     testbench_bandwidth_hz: float = key("testbench_bandwidth_hz", 0.1, 50.0)
     testbench_damping: float = key("testbench_damping", 0.1, 5.0)
     testbench_integral_fraction: float = key("testbench_integral_fraction", 0.0, 5.0)
@@ -248,6 +252,11 @@ class ComputedTorque(Section):
         return ComputedTorqueGains(2 * math.pi * self.bandwidth_hz, self.damping, self.integral_fraction,
                                    self.velocity_gain_per_s, 2 * math.pi * self.force_bandwidth_hz,
                                    self.velocity_filter_hz, 2 * math.pi * self.force_bandwidth_rest_hz)
+
+    @property
+    def yaw_gains(self) -> tuple[float, float]:
+        """The hexapod's yaw loop with the IMU: (bandwidth rad/s, damping)."""
+        return 2 * math.pi * self.yaw_bandwidth_hz, self.yaw_damping
 
     @cached_property
     def testbench(self) -> ComputedTorqueGains:

@@ -18,6 +18,7 @@ from firmware_py.mechanics.geometry import Geometry, default_geometry
 from firmware_py.motion_control.computed_torque import ComputedTorque, LegComputedTorque
 from firmware_py.motion_control.excitation import IdentificationSignal
 from firmware_py.motion_control.payload import PayloadEstimator
+from firmware_py.motion_control.yaw_fusion import YawFusion, quat_yaw
 from firmware_py.supervision.capacity import leg_capacity
 from firmware_py.supervision.monitors import all_set, any_beyond, pose_beyond
 from firmware_py.supervision.plausibility import AttitudeCrossCheck
@@ -120,7 +121,9 @@ class HexapodModel:
         self.tau_n = self.platform.force_n
         self.home_pose = tuple(self.geometry.home_position_m)
         self.check = HexapodCheck(cfg.waypoints, kinematics.dk_tolerance_m, self.geometry, leg_capacity(cfg))
-        self.computed_torque = ComputedTorque(cfg, self.geometry, period_s)
+        ct = cfg.computed_torque
+        self.yaw = YawFusion(period_s, ct.yaw_blend_s, ct.imu_max_age_s)
+        self.computed_torque = ComputedTorque(cfg, self.geometry, period_s, self.yaw)
         self.plausibility_window = (cfg.plausibility.spool, cfg.plausibility.cycles)
         self.stop_cycles = round(cfg.supervisor.controlled_stop_s / period_s)
         self.attitude_check = AttitudeCrossCheck(cfg.plausibility.attitude_mismatch_rad,
@@ -146,14 +149,16 @@ class HexapodModel:
         return self.platform.jacobian_scaled
 
     def estimate(self, meas) -> Fault:
-        """Pose by direct kinematics, gravity along the legs; the singularity and the IMU
-        against the encoders (its sample against the DK of the same SYNC: every leg's frame
+        """Pose by direct kinematics, gravity along the legs, the yaw with the IMU's; the
+        singularity and the IMU against the encoders (its sample against the DK of the same SYNC: every leg's frame
         of this cycle). The first fault found, or NONE."""
         platform = self.platform
         if not platform.estimate(meas.position_m):
             self.dk_failures += 1
             return Fault.DK_FAILURE if self.dk_failures >= self.dk_failures_fault else Fault.NONE
         self.dk_failures = 0
+        self.yaw.update(quat_yaw(platform.dk.pose[3:7]), meas.attitude_rad, meas.attitude_fresh, meas.rate_rad_s,
+                        meas.rate_fresh)
         if platform.det_ratio < self.singularity_ratio_min:
             return Fault.SINGULARITY
         if meas.attitude_fresh and all_set(meas.fresh) and self.attitude_check.update(platform.rot,
@@ -197,6 +202,7 @@ class HexapodModel:
         """After a RESET: the direct kinematics' failures are forgotten, and the payload starts
         again from the declared one (the fault's onset may have fed it a sensor's error)."""
         self.dk_failures = 0
+        self.yaw.reset()
         if self.payload is not None:
             self.payload.reset()
             for dynamics in self._payload_dynamics:
@@ -213,6 +219,7 @@ class HexapodModel:
         self.platform.reset_reference(self.home_strokes)
         self.platform.reference_forces(self.home_strokes, reference.vr)
         any_beyond(reference.ar, self.payload_gate)
+        self.yaw.warm_up()
         if self.payload is not None:                 # a sample of the bare platform at home
             platform, estimator = self.platform, self.payload
             estimator.bare.forces(self._pose_position, self._pose_quat, self._still6, self._still6)

@@ -40,7 +40,7 @@ from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow, truth_phase
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import EmuCommand, EmuFault, NmtCommand, NmtState, Pacing
-from protocol.interfaces import attitude_values, leg_pressure_values, leg_state_values, valve_command_of
+from protocol.interfaces import attitude_values, leg_pressure_values, leg_state_values, rate_values, valve_command_of
 from protocol.nodes import CONTROLLER_NODE, IMU_NODE, rig_nodes
 from protocol.outbox import Outbox
 
@@ -473,8 +473,7 @@ class Emulator:
             attitude_values(self.out["IMU_ATTITUDE"].values, sim.attitude_rad)
             self._emit(IMU_NODE, "IMU_ATTITUDE")
         if sim.rate_due:
-            box = self.out["IMU_RATE"]
-            box.values[box.index["RATE_X"]:box.index["RATE_Z"] + 1] = sim.rate_rad_s
+            rate_values(self.out["IMU_RATE"].values, sim.rate_rad_s)
             self._emit(IMU_NODE, "IMU_RATE")
         for i, n in enumerate(self.legs):
             if not sim.sampled[i]:

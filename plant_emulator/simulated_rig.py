@@ -39,6 +39,8 @@ from protocol.interfaces import (
     leg_pressure_values,
     leg_state_into,
     leg_state_values,
+    rate_into,
+    rate_values,
     valve_command_of,
     valve_command_values,
 )
@@ -88,7 +90,7 @@ class SimulatedRig:
         self._wire = {name: (CODECS[name], CODECS[name].new_values(), CODECS[name].new_values())
                       for name in [f"LEG_STATE_{i}" for i in range(1, n + 1)] +
                       [f"LEG_PRESSURE_{i}" for i in range(1, n + 1)] + [f"VALVE_CMD_{i}" for i in range(1, n + 1)] +
-                      ["IMU_ATTITUDE"]}
+                      ["IMU_ATTITUDE", "IMU_RATE"]}
         self._pressures = np.zeros((n, 3))
         self.boot()
 
@@ -222,7 +224,7 @@ class SimulatedRig:
         self.sample(self.counter, every, True)
         faults = self.faults
         meas.pressure_fresh[:] = False
-        meas.attitude_fresh = False
+        meas.attitude_fresh = meas.rate_fresh = False
         for i, node in enumerate(self.nodes):
             silent = self.silent(node)
             corrupt = bool(faults.get(node, EmuFault.CORRUPT))
@@ -243,6 +245,9 @@ class SimulatedRig:
         if self.attitude_due and not self.silent(IMU_NODE):
             decoded = self._through_wire("IMU_ATTITUDE", attitude_values, self.attitude_rad)
             meas.attitude_fresh = attitude_into(decoded, meas.attitude_rad)
+        if self.rate_due and not self.silent(IMU_NODE):
+            decoded = self._through_wire("IMU_RATE", rate_values, self.rate_rad_s)
+            meas.rate_fresh = rate_into(decoded, meas.rate_rad_s)
         self.apply_valves()
         self.advance()
         self.end_sync()

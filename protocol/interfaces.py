@@ -35,6 +35,9 @@ class Measurements:
         # IMU_ATTITUDE (hexapod): roll, pitch, yaw of R = Rz Ry Rx
         self.attitude_rad = np.zeros(3)
         self.attitude_fresh = False                    # a valid sample arrived since the last cycle
+        # IMU_RATE (hexapod): the platform's angular rate in its own (body) frame
+        self.rate_rad_s = np.zeros(3)
+        self.rate_fresh = False                        # a valid sample arrived since the last cycle
         # node events
         self.emergency = False                         # an EMCY with an error code from a valve node
         self.imu_emergency = False                     # ... from the IMU
@@ -96,6 +99,7 @@ LP_PA, LP_PB, LP_PS, LP_FAULT_A, LP_FAULT_B = _indexes(
     "LEG_PRESSURE_1", "PA", "PB", "PS", "SENSOR_FAULT_A", "SENSOR_FAULT_B")
 IMU_VALID = int(ImuStatus.VALID)
 IMU_STATUS, IMU_ROLL, IMU_PITCH, IMU_YAW = _indexes("IMU_ATTITUDE", "STATUS", "ROLL", "PITCH", "YAW")
+RATE_STATUS, RATE_X, RATE_Y, RATE_Z = _indexes("IMU_RATE", "STATUS", "RATE_X", "RATE_Y", "RATE_Z")
 VC_D, VC_H, VC_M, VC_R, VC_SPOOL = _indexes("VALVE_CMD_1", "CW_D", "CW_H", "CW_M", "CW_R", "SPOOL_SETPOINT")
 
 
@@ -143,6 +147,18 @@ def attitude_into(values, out) -> bool:
 
 def attitude_values(values, rpy) -> None:
     values[IMU_ROLL], values[IMU_PITCH], values[IMU_YAW] = rpy[0], rpy[1], rpy[2]
+
+
+def rate_into(values, out) -> bool:
+    """A decoded IMU_RATE: the body rates into `out` when the IMU says it is valid."""
+    if int(values[RATE_STATUS]) != IMU_VALID:
+        return False
+    out[0], out[1], out[2] = values[RATE_X], values[RATE_Y], values[RATE_Z]
+    return True
+
+
+def rate_values(values, rate_rad_s) -> None:
+    values[RATE_X], values[RATE_Y], values[RATE_Z] = rate_rad_s[0], rate_rad_s[1], rate_rad_s[2]
 
 
 def valve_command_values(values, cmd: ValveCommands, leg: int) -> None:

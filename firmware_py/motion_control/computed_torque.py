@@ -9,7 +9,9 @@ pose, and the legs are driven through the inverse of their dynamics, in three st
    dynamics at the measured pose and twist):
        a_cmd = a_r + Kd (xd_r - xd) + Kp e + Ki int(e),   Kp = w^2, Kd = 2 zeta w, Ki = f w^3
        F_cmd = tau(pose, xd, a_cmd)                       (the legs' forces for a_cmd)
-   the same closed-loop poles in every direction, whatever its inertia;
+   the same closed-loop poles in every direction, whatever its inertia, but the yaw: the
+   legs barely see it (`yaw_fusion.py`), so with the IMU's yaw and rate it has poles of its
+   own, as fast as its light inertia allows (without a valid IMU, the legs' and the rest's);
 2. each valve through its steady-state map (the spool that holds a leg at force F and
    piston velocity v), with the commanded velocity v_r + lambda e_leg and the compliance flow
    F_r' / K of the oil column (F_r the forces along the reference, differenced):
@@ -32,6 +34,7 @@ from firmware_py.mechanics.dynamics import InverseDynamics, gauss_solve_into
 from firmware_py.mechanics.geometry import N_LEGS, Geometry
 from firmware_py.mechanics.rotation import rotation_vector_between_into
 from firmware_py.motion_control.estimation import filter_step, first_order_gain, second_order_filter
+from firmware_py.motion_control.yaw_fusion import YawFusion, with_yaw_into
 from physics import hydraulics as hy
 from physics import lugre
 from physics.constants import GRAVITY_M_S2
@@ -66,9 +69,9 @@ def valve_map_eval(forces, velocities, spool, force, velocity) -> float:
 
 @njit(cache=True)
 def task_acceleration_into(accel_ref, twist_ref, twist, error, integral, kp, kd, ki, out) -> None:
-    """a_cmd = a_r + Kd (xd_r - xd) + Kp e + Ki int(e)."""
+    """a_cmd = a_r + Kd (xd_r - xd) + Kp e + Ki int(e), each gain per direction."""
     for k in range(out.shape[0]):
-        out[k] = accel_ref[k] + kd * (twist_ref[k] - twist[k]) + kp * error[k] + ki * integral[k]
+        out[k] = accel_ref[k] + kd[k] * (twist_ref[k] - twist[k]) + kp[k] * error[k] + ki[k] * integral[k]
 
 
 @njit(cache=True)
@@ -183,7 +186,9 @@ class _Gains:
 
     def __init__(self, cfg: ControllerConfig, gains: ComputedTorqueGains, n_legs: int, period_s: float):
         w = gains.bandwidth_rad_s
-        self.kp, self.kd, self.ki = w * w, 2.0 * gains.damping * w, gains.integral_fraction * w ** 3
+        # per direction (the hexapod's yaw gets its own with the IMU: ComputedTorque)
+        self.kp, self.kd = np.full(n_legs, w * w), np.full(n_legs, 2.0 * gains.damping * w)
+        self.ki = np.full(n_legs, gains.integral_fraction * w ** 3)
         self.period_s = period_s
         self.velocity_gain = gains.velocity_gain_per_s
         self.hp, self.supply_pa = cfg.hydraulics, cfg.hydraulic_model.supply_pressure_pa
@@ -227,11 +232,22 @@ class _Gains:
                                    self.force_gain, self.spool_cmd)
 
 
-class ComputedTorque(_Gains):
-    """The controller's state and scratch arrays; `update(...)` writes the valve inputs."""
+YAW = 5                               # the twist's and pose error's rotation about the base's vertical
 
-    def __init__(self, cfg: ControllerConfig, geometry: Geometry, period_s: float):
+
+class ComputedTorque(_Gains):
+    """The controller's state and scratch arrays; `update(...)` writes the valve inputs.
+    `yaw`: the platform's yaw from the IMU beside the legs (None: the legs alone), updated by
+    the rig's estimate before each update."""
+
+    def __init__(self, cfg: ControllerConfig, geometry: Geometry, period_s: float, yaw: YawFusion | None = None):
         super().__init__(cfg, cfg.computed_torque.hexapod, N_LEGS, period_s)
+        self.yaw = yaw
+        w, zeta = cfg.computed_torque.yaw_gains
+        # with a valid IMU yaw: the yaw's own proportional and derivative gains
+        self.kp_imu, self.kd_imu = self.kp.copy(), self.kd.copy()
+        self.kp_imu[YAW], self.kd_imu[YAW] = w * w, 2.0 * zeta * w
+        self.fused_pose = np.zeros(7)         # the measured pose with the fused yaw
         self.dynamics = InverseDynamics(geometry)
         self.error = np.zeros(6)              # pose error: m, rad
         self.integral = np.zeros(6)
@@ -260,13 +276,21 @@ class ComputedTorque(_Gains):
             self.force_ref_prev[:] = platform.force_n
             self._fresh = False
         pose, ref_pose = platform.dk.pose, platform.ref_dk.pose
-        pose_error_into(ref_pose, pose, self.error)
         if gauss_solve_into(platform.jacobian, velocity_estimate, self._lu, self.twist_raw, False) == 0.0:
             return False
         low_pass_into(self.twist_raw, self.twist_filter_state, self.filter_ad, self.filter_bd, self.filter_wn,
                       self.filter_zeta, self.twist)
-        task_acceleration_into(platform.accel, platform.twist, self.twist, self.error, self.integral, self.kp,
-                               self.kd, self.ki, self.accel_cmd)
+        kp, kd = self.kp, self.kd
+        yaw = self.yaw
+        if yaw is not None and yaw.valid:     # the yaw and its rate the IMU's, its own gains
+            with_yaw_into(pose, yaw.yaw_rad, self.fused_pose)
+            pose_error_into(ref_pose, self.fused_pose, self.error)
+            self.twist[YAW] = yaw.rate_rad_s
+            kp, kd = self.kp_imu, self.kd_imu
+        else:
+            pose_error_into(ref_pose, pose, self.error)
+        task_acceleration_into(platform.accel, platform.twist, self.twist, self.error, self.integral, kp, kd,
+                               self.ki, self.accel_cmd)
         if not self.dynamics.forces(pose[0:3], pose[3:7], self.twist, self.accel_cmd):
             return False
         saturated = self.spool_commands(self.force_cmd, self.force_cmd, platform.force_n, self.force_ref_prev,

@@ -55,6 +55,7 @@ from protocol.interfaces import (
     leg_state_into,
     load_values,
     payload_values,
+    rate_into,
     valve_command_values,
 )
 from protocol.nodes import CONTROLLER_NODE, IMU_NODE, SENDER_OF_NODE, rig_nodes
@@ -165,6 +166,8 @@ class ControllerLoop:
         self._pressure_values = [self.decoder.values[f"LEG_PRESSURE_{i}"] for i in self.legs]
         self._imu_attitude_id = CODECS["IMU_ATTITUDE"].frame_id if has_imu else -1
         self._imu_values = self.decoder.values["IMU_ATTITUDE"] if has_imu else None
+        self._imu_rate_id = CODECS["IMU_RATE"].frame_id if has_imu else -1
+        self._imu_rate_values = self.decoder.values["IMU_RATE"] if has_imu else None
         self._truth_id = CODECS["EMU_TRUTH"].frame_id if pacing == "lockstep" else -1
         self._truth_values = self.decoder.values["EMU_TRUTH"] if pacing == "lockstep" else None
         self._truth_phase = CODECS["EMU_TRUTH"].index["SYNC_PHASE"]
@@ -215,6 +218,8 @@ class ControllerLoop:
         self._pressure_valid = np.zeros(len(self.legs), dtype=bool)
         self._pressure_new = np.zeros(len(self.legs), dtype=bool)
         self._attitude = np.zeros(3)
+        self._rate = np.zeros(3)                    # the latest valid IMU_RATE, body frame
+        self._rate_new = False
         self._stall_s = self.cfg.timing.stall_fault_periods * self.period_s if pacing == "realtime" else math.inf
         self._restarts_seen = 0                     # the controller's restart requests carried out
         self._booted: set[int] = set()              # nodes that booted since they were identified
@@ -257,6 +262,10 @@ class ControllerLoop:
         if frame_id == self._imu_attitude_id:
             if attitude_into(self._imu_values, self._attitude):
                 self._attitude_new = True
+            return
+        if frame_id == self._imu_rate_id:
+            if rate_into(self._imu_rate_values, self._rate):
+                self._rate_new = True
             return
         if frame_id == self._truth_id:               # the emulator has sent all it had for this SYNC
             self._closed = int(self._truth_values[self._truth_phase]) == truth_phase(self.sync_counter)
@@ -359,6 +368,8 @@ class ControllerLoop:
         np.subtract(self._now, self.heartbeat_seen, out=meas.heartbeat_age_s)
         meas.attitude_rad[:] = self._attitude
         meas.attitude_fresh, self._attitude_new = self._attitude_new, False
+        meas.rate_rad_s[:] = self._rate
+        meas.rate_fresh, self._rate_new = self._rate_new, False
         np.copyto(meas.pressure_valid, self._pressure_valid)
         meas.pa_pa[:] = self._pressure[:, 0]
         meas.pb_pa[:] = self._pressure[:, 1]

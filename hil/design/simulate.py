@@ -13,6 +13,7 @@ import numpy as np
 
 from firmware_py.config import ControllerConfig
 from firmware_py.mechanics.geometry import default_geometry
+from firmware_py.motion_control.yaw_fusion import quat_yaw
 from hil.experiments import Motion, segment_time
 from hil.in_process import PERIOD_S, HostRefused, InProcessLoop
 from plant_emulator.params import EmulatorConfig
@@ -23,12 +24,13 @@ SETTLE_S = 0.5                       # after the movement's last point, inside t
 
 @dataclass
 class Movement:
-    """One movement's record, per cycle from its first waypoint: platform position (emulator
-    truth) and the reference's, every leg's valve command and load cell."""
+    """One movement's record, per cycle from its first waypoint: platform position and yaw
+    (emulator truth) and the reference's position, every leg's valve command and load cell."""
     truth_m: np.ndarray
     reference_m: np.ndarray
     spool: np.ndarray
     force_n: np.ndarray
+    yaw_rad: np.ndarray
     fault: str                                  # the fault that ended it, or "NONE"
 
     @property
@@ -56,12 +58,14 @@ def movement(loop: InProcessLoop, motion: Motion) -> Movement:
         for k, point in enumerate(part[1:]):
             flags = (WaypointFlag.START if k == 0 else 0) | (WaypointFlag.LAST if k == len(part) - 2 else 0)
             points.append((point, segment_time(motion, p, part[k], point), flags))
-    record = {name: [] for name in ("truth", "reference", "spool", "force")}
+    record = {name: [] for name in ("truth", "reference", "spool", "force", "yaw")}
     status = loop.status
 
     def step() -> bool:
         loop.cycle()
-        record["truth"].append(loop.rig.platform_pose()[0].copy())
+        position, quat = loop.rig.platform_pose()
+        record["truth"].append(position.copy())
+        record["yaw"].append(quat_yaw(quat))
         record["reference"].append(status.reference_pose[:3].copy())
         record["spool"].append(loop.cmd.spool.copy())
         record["force"].append(loop.meas.force_n.copy())
@@ -73,7 +77,7 @@ def movement(loop: InProcessLoop, motion: Motion) -> Movement:
     for _ in range(int(round((sum(s for _, s, _ in points) + SETTLE_S) / PERIOD_S))):
         if not step():
             break
-    return Movement(*(np.array(record[k]) for k in ("truth", "reference", "spool", "force")),
+    return Movement(*(np.array(record[k]) for k in ("truth", "reference", "spool", "force", "yaw")),
                     status.fault.name if status.state is State.FAULT else "NONE")
 
 
