@@ -104,6 +104,9 @@ MOTIONS = {"diagonal": diagonal_motion, "circle": circle_motion}
 MOVEMENT_OVERRIDES = {"waypoints": {"velocity_max_mm_s": 1200.0},
                       "limits": {"velocity_max_mm_s": 1500.0}}
 APPROACH_SPEED_M_S = 0.2
+# `--time-scale` by the planner: "auto" the fastest timing the controller's capacity check
+# accepts (faster than the thesis's where it can), "fit" the thesis's where it fits, else that
+PLANNED_TIME_SCALES = ("auto", "fit")
 IAE_FACTOR_MAX = 2.0                   # computed torque: IAE <= this x the thesis's model-based, every axis
 MAX_ERROR_MM = 10.0                    # ... and its largest position error, every axis
 # the thesis's IAE per axis (m s, Figs. 11.9-11.16) and timing of each movement

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
+from hil.experiments import PLANNED_TIME_SCALES
 from hil.host import Host, HostError
 from hil.logdata import read_log
 from hil.metrics import faults_in_windows
@@ -71,7 +72,7 @@ class RunOptions:
     valve_watchdog_periods: float | None = None   # realtime: the emulated valves' SYNC watchdog
     start_timeout_s: float = START_TIMEOUT_S       # a slow machine (a VM in software emulation) needs more
     plots: bool = True                             # False: metrics and report only (batch runs, slow machines)
-    # the movements (pm-*): this many times the thesis's ta, tm; "auto": the planner's
+    # the movements (pm-*): this many times the thesis's ta, tm; or the planner's (PLANNED_TIME_SCALES)
     time_scale: float | str | None = None
     # a controller config file's sections (e.g. `hydrapod design schedule`), over the
     # scenario's own overrides: validated by the caller before the run
@@ -332,10 +333,11 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
         if not scenario.time_scalable:
             raise UserInputError(f"--time-scale: {scenario.name} has no movement timing to scale "
                                  f"(the pm-* scenarios have)")
-        if options.time_scale == "auto":
+        if options.time_scale in PLANNED_TIME_SCALES:
             scale, how = scenario.planned_time_scale(merge_sections(scenario.controller_overrides,
-                                                                    options.controller_config))
-            options.notes.append(f"--time-scale auto: {scale:g} x the thesis's timing ({how})")
+                                                                    options.controller_config),
+                                                     thesis_where_it_fits=options.time_scale == "fit")
+            options.notes.append(f"--time-scale {options.time_scale}: {scale:g} x the thesis's timing ({how})")
             scenario.time_scale, scenario.retime_on_refusal = scale, True
         else:
             scenario.time_scale = options.time_scale

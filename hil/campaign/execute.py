@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 from firmware_py.supervision.diagnostics import PEAK_KEYS
+from hil.experiments import PLANNED_TIME_SCALES
 from hil.runner import toml_sections
 
 METRICS_PREFIX = "metric."
@@ -38,7 +39,7 @@ def command(task: dict, out: Path) -> list[str]:
         argv += ["--positions", repr(float(params["position_mm"]))]
     if "time_scale" in params:
         scale = params["time_scale"]
-        argv += ["--time-scale", scale if scale == "auto" else repr(float(scale))]
+        argv += ["--time-scale", scale if scale in PLANNED_TIME_SCALES else repr(float(scale))]
     if task["controller_config"]:
         argv += ["--controller-config", str(out / "controller-overrides.toml")]
     if task["emulator_config"]:

@@ -15,7 +15,7 @@ unknown scenario is one line naming the file and the key (exit 2).
     load_kg = [0.0, 6.0]         # scenarios that run at several loads
     position_mm = [50.0]         # sha-step's working positions
     payload_kg = [0.0]           # the hexapod's payload, declared to the controller too
-    time_scale = [1.0, "auto"]    # pm-*: the thesis's timing, this many times slower; "auto": planned
+    time_scale = [1.0, "auto"]    # pm-*: the thesis's timing, this many times slower; "auto", "fit": planned
     supply_bar = [25.0]          # the power unit's, and the controller's model's unless set
     noise = [1.0]                # the sensors' noise, x the emulator's
     seed = [1]                   # the emulator's noise seed
@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from firmware_py.config import load_config as controller_config_load
+from hil.experiments import PLANNED_TIME_SCALES
 from hil.injection import parse_faults
 from physics.actuator import PAYLOAD
 from physics.constants import BAR
@@ -313,7 +314,7 @@ def load_campaign(path: str | Path) -> Campaign:
                                                    f"(it runs: {', '.join(scenario.controllers)})")
         else:
             integer = isinstance(kind[0], int) and isinstance(kind[1], int)
-            values = [v if key == "time_scale" and v == "auto" else       # `hil run --time-scale auto`
+            values = [v if key == "time_scale" and v in PLANNED_TIME_SCALES else    # `hil run --time-scale auto`
                       _number(source, f"grid.{key}", v, *kind, integer=integer) for v in values]
         grid[key] = list(values)
     if "load_kg" in grid and not scenario.sweeps_loads:

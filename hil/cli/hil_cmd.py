@@ -24,8 +24,9 @@ TIME_SCALES = number_in_range(float, 0.5, 10.0)
 
 
 def _time_scale(text: str) -> float | str:
-    """--time-scale: a number within TIME_SCALES' range, or auto."""
-    return "auto" if text == "auto" else TIME_SCALES(text)
+    """--time-scale: a number within TIME_SCALES' range, or one of PLANNED_TIME_SCALES."""
+    from hil.experiments import PLANNED_TIME_SCALES
+    return text if text in PLANNED_TIME_SCALES else TIME_SCALES(text)
 
 
 def _controllers(text: str | None) -> tuple[str, ...] | None:
@@ -200,7 +201,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--time-scale", type=_time_scale, default=None,
                    help="pm-circle, pm-diagonal: the movement at this many times the thesis's ta and tm "
                         "(default 1: the thesis's timing), or auto: the fastest the controller accepts "
-                        "with the declared payload and supply")
+                        "with the declared payload and supply, or fit: the thesis's timing where the "
+                        "controller accepts it, else auto's")
     p.add_argument("--valve-watchdog-periods", type=number_in_range(float, 1.0, 10000.0), default=None,
                    help="realtime: the emulated valves' SYNC watchdog in periods (default 25 on a shared host; "
                         "3 is the valves' own, for an RT kernel)")

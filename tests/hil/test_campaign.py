@@ -138,6 +138,9 @@ def test_a_time_scale_reaches_the_pm_runs_only(tmp_path):
     task = tasks(campaign, tmp_path / "out")[0]
     argv = command(task, tmp_path)
     assert argv[argv.index("--time-scale") + 1] == "2.0"
+    planned = load_campaign(_spec(tmp_path, '[campaign]\nscenario = "pm-circle"\n[grid]\ntime_scale = ["fit"]\n'))
+    argv = command(tasks(planned, tmp_path / "out")[0], tmp_path)
+    assert argv[argv.index("--time-scale") + 1] == "fit"
     assert task["controller_config"]["hexapod"]["payload_kg"] == 3.0 == task["emulator_config"]["hexapod"]["payload_kg"]
     with pytest.raises(SpecError, match="grid.time_scale"):
         load_campaign(_spec(tmp_path, GOOD + "time_scale = [2.0]\n"))

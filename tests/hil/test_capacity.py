@@ -67,6 +67,16 @@ def test_a_static_load_beyond_the_legs_fits_no_time_scale_and_auto_says_why():
                                                    "hydraulic_model": {"supply_pressure_bar": 20.0}})
 
 
+def test_fit_runs_at_the_thesiss_timing_where_it_fits_else_at_the_plan():
+    sections = {**MOVEMENT_OVERRIDES, "hydraulic_model": {"supply_pressure_bar": 40.0}}
+    faster, _ = SCENARIOS["pm-circle"].planned_time_scale(sections)
+    thesis, how = SCENARIOS["pm-circle"].planned_time_scale(sections, thesis_where_it_fits=True)
+    assert faster < 1.0 == thesis and "the thesis's timing" in how
+    heavier = {**MOVEMENT_OVERRIDES, "hexapod": {"payload_kg": 3.0}}
+    assert (SCENARIOS["pm-circle"].planned_time_scale(heavier, thesis_where_it_fits=True)[0]
+            == SCENARIOS["pm-circle"].planned_time_scale(heavier)[0] > 1.0)
+
+
 def test_the_scenario_plans_with_the_sections_it_runs_the_controller_with():
     scale, how = SCENARIOS["pm-diagonal"].planned_time_scale({**MOVEMENT_OVERRIDES, "hexapod": {"payload_kg": 3.0}})
     assert 1.0 < scale < 3.0 and "payload 3 kg" in how
