@@ -137,28 +137,41 @@ def leg_pressure_values(values, pa_pa: float, pb_pa: float, ps_pa: float) -> Non
     values[LP_PA], values[LP_PB], values[LP_PS] = pa_pa, pb_pa, ps_pa
 
 
-def attitude_into(values, out) -> bool:
-    """A decoded IMU_ATTITUDE: roll, pitch, yaw into `out` when the IMU says it is valid."""
-    if int(values[IMU_STATUS]) != IMU_VALID:
+def _imu_into(values, fields, out) -> bool:
+    """A decoded IMU frame's three values into `out` when its STATUS says valid (`fields`:
+    the STATUS index, then the three values')."""
+    status, a, b, c = fields
+    if int(values[status]) != IMU_VALID:
         return False
-    out[0], out[1], out[2] = values[IMU_ROLL], values[IMU_PITCH], values[IMU_YAW]
+    out[0], out[1], out[2] = values[a], values[b], values[c]
     return True
 
 
+def _imu_values(values, fields, vector) -> None:
+    _, a, b, c = fields
+    values[a], values[b], values[c] = vector[0], vector[1], vector[2]
+
+
+ATTITUDE_FIELDS = (IMU_STATUS, IMU_ROLL, IMU_PITCH, IMU_YAW)
+RATE_FIELDS = (RATE_STATUS, RATE_X, RATE_Y, RATE_Z)
+
+
+def attitude_into(values, out) -> bool:
+    """A decoded IMU_ATTITUDE: roll, pitch, yaw into `out` when the IMU says it is valid."""
+    return _imu_into(values, ATTITUDE_FIELDS, out)
+
+
 def attitude_values(values, rpy) -> None:
-    values[IMU_ROLL], values[IMU_PITCH], values[IMU_YAW] = rpy[0], rpy[1], rpy[2]
+    _imu_values(values, ATTITUDE_FIELDS, rpy)
 
 
 def rate_into(values, out) -> bool:
     """A decoded IMU_RATE: the body rates into `out` when the IMU says it is valid."""
-    if int(values[RATE_STATUS]) != IMU_VALID:
-        return False
-    out[0], out[1], out[2] = values[RATE_X], values[RATE_Y], values[RATE_Z]
-    return True
+    return _imu_into(values, RATE_FIELDS, out)
 
 
 def rate_values(values, rate_rad_s) -> None:
-    values[RATE_X], values[RATE_Y], values[RATE_Z] = rate_rad_s[0], rate_rad_s[1], rate_rad_s[2]
+    _imu_values(values, RATE_FIELDS, rate_rad_s)
 
 
 def valve_command_values(values, cmd: ValveCommands, leg: int) -> None:
