@@ -91,12 +91,15 @@ def judge_fault(view: LogView, mark: Marks, baseline: Marks | None, run_dir: Pat
         judged = reaction - last if last is not None and last >= (k0 or 0) else cycles
         measured += f" ({judged} since its last valid frame)"
     passed = (code in c.expect and judged is not None and judged <= c.max_cycles and held)
-    path = None
+    path = into_probe_s = None
     if c.kind is CaseKind.PLANT:
         path = path_excursion(view, mark, baseline)
         passed = passed and (c.path_max_m == math.inf or (path is not None and path <= c.path_max_m))
         leg = view.controller_fault_leg(mark.t_inject, mark.t_inject + OBSERVE_S)
         measured += f" (leg {leg})" if leg else ""
+        start = waypoint_ack_cycle(view, mark)
+        into_probe_s = None if start is None or k0 is None else round((k0 - start) * view.period_s, 3)
+        measured += f"; onset {into_probe_s} s into the probe" if into_probe_s is not None else ""
         measured += f"; off the no-fault path {_mm(path)}"
     swing = view.swing_after(reaction, REST_AFTER_S, REST_SPAN_S)
     at_rest = swing is not None and swing <= REST_SWING_MAX_M
@@ -109,6 +112,7 @@ def judge_fault(view: LogView, mark: Marks, baseline: Marks | None, run_dir: Pat
     return passed, measured, {"code": code, "cycles": cycles, "detection_ms": None if cycles is None else
                               round(cycles * view.period_s * 1e3, 1), "excursion_m": excursion,
                               "path_excursion_m": path, "held": held, "swing_after_m": swing,
+                              "onset_into_probe_s": into_probe_s,
                               "at_rest": at_rest}
 
 
