@@ -15,10 +15,10 @@ import numpy as np
 from firmware_py.config import ControllerConfig
 from firmware_py.mechanics.dynamics import gauss_solve_into
 from firmware_py.mechanics.geometry import Geometry, default_geometry
-from firmware_py.motion_control.computed_torque import ComputedTorque, LegComputedTorque
+from firmware_py.motion_control.computed_torque import YAW, ComputedTorque, LegComputedTorque
 from firmware_py.motion_control.excitation import IdentificationSignal
 from firmware_py.motion_control.payload import PayloadEstimator
-from firmware_py.motion_control.yaw_fusion import YawFusion, quat_yaw
+from firmware_py.motion_control.yaw_fusion import YawFusion, quat_yaw, wrapped
 from firmware_py.supervision.capacity import leg_capacity
 from firmware_py.supervision.monitors import all_set, any_beyond, pose_beyond
 from firmware_py.supervision.plausibility import AttitudeCrossCheck
@@ -131,6 +131,7 @@ class HexapodModel:
         self.platform_error_max_m = cfg.limits.platform_error_max_m
         self.platform_angle_max_rad = cfg.limits.platform_angle_max_rad
         self.pose_error = np.zeros(6)              # Jx^-1 of the legs' errors: the platform's, first order
+        self._ref_quat = self.platform.ref_dk.pose[3:7]
         self._lu = np.empty((6, 6))
         # the payload from the load cells, into every inverse dynamics the controller runs
         self.payload = (PayloadEstimator(bare, cfg.payload, cfg.hexapod.payload_kg, bare.platform.com_m)
@@ -187,10 +188,13 @@ class HexapodModel:
         return self.payload.mass_kg if self.payload is not None else float("nan")
 
     def pose_error_exceeds(self, joint_error_m) -> bool:
-        """The platform's pose error, from the legs' by the Jacobian at the measured pose,
-        beyond [limits] platform_error_max_mm or platform_angle_max_deg."""
+        """The platform's pose error, from the legs' by the Jacobian at the measured pose (its
+        yaw the fused one's while the IMU's is valid: the legs see 1 deg as about one encoder
+        count), beyond [limits] platform_error_max_mm or platform_angle_max_deg."""
         if gauss_solve_into(self.platform.jacobian, joint_error_m, self._lu, self.pose_error, False) == 0.0:
             return False                     # singular: the singularity check's
+        if self.yaw.valid:
+            self.pose_error[YAW] = wrapped(quat_yaw(self._ref_quat) - self.yaw.yaw_rad)
         return pose_beyond(self.pose_error, self.platform_error_max_m, self.platform_angle_max_rad)
 
     def initialise(self, position_m) -> None:

@@ -6,6 +6,7 @@ the per-leg limit alone lets the platform stray."""
 import math
 
 import numpy as np
+import pytest
 
 from firmware_py.config import load_config
 from firmware_py.rig_model import HexapodModel
@@ -29,6 +30,28 @@ def test_a_sideways_error_the_legs_barely_see_is_judged_on_the_platform():
     assert not model.pose_error_exceeds(_legs_for(model, [0.02, 0.0, 0.0, 0.0, 0.0, 0.0]))
     assert model.pose_error_exceeds(_legs_for(model, [0.0, 0.0, 0.0, 0.0, 0.0, math.radians(6.0)]))
     assert not model.pose_error_exceeds(_legs_for(model, [0.0, 0.0, 0.0, math.radians(4.0), 0.0, 0.0]))
+
+
+def test_the_yaw_is_judged_by_the_imus_while_it_is_valid():
+    """1 deg of yaw is about one encoder count of the legs': with a valid IMU the yaw's error
+    is the fused yaw's (the legs' offset taken out at its first sample), else the legs'."""
+    cfg = load_config()
+    model = HexapodModel(cfg, 0.002)
+    rate, still = np.zeros(3), np.zeros(6)
+    model.yaw.update(0.0, np.zeros(3), True, rate, True)          # the first sample: on the legs
+    turned = np.array([0.0, 0.0, math.radians(6.0)])
+    assert model.yaw.update(0.0, turned, True, rate, True)        # the IMU sees 6 deg the legs do not
+    assert model.pose_error_exceeds(still)
+    assert model.pose_error[5] == pytest.approx(-math.radians(6.0), abs=math.radians(0.05))
+    legs_turned = _legs_for(model, [0.0, 0.0, 0.0, 0.0, 0.0, math.radians(6.0)])
+    level = HexapodModel(cfg, 0.002)                              # the IMU at the reference's yaw
+    for _ in range(2):
+        level.yaw.update(0.0, np.zeros(3), True, rate, True)
+    assert not level.pose_error_exceeds(legs_turned)
+    for _ in range(round(cfg.computed_torque.imu_max_age_s / 0.002) + 1):     # the IMU silent: the legs'
+        model.yaw.update(0.0, turned, False, rate, False)
+    assert not model.yaw.valid and not model.pose_error_exceeds(still)
+    assert model.pose_error_exceeds(legs_turned)
 
 
 def test_the_controller_faults_when_the_platform_strays_sideways():
