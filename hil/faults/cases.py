@@ -7,7 +7,7 @@ import math
 from dataclasses import dataclass, field
 from enum import StrEnum
 
-from protocol.dbc import schedules
+from protocol.codec import CODECS
 
 PROBE_RISE_M = 30e-3
 PROBE_SEGMENT_S, PROBE_ACCEL_S = 1.5, 0.3
@@ -37,8 +37,7 @@ RESIDUAL_PATH_MAX_M = 5e-3        # ... and the platform within 5 mm of the no-f
 # (10x and 20x alike, in process: the bound's flow spread grows with the flow the valve passes).
 # Its onset's jump names it: at the leg's first sample whose window holds the jump, or the two
 # that split it; the third's lasting miss with the second's carried excess at the latest
-# (35 cycles measured where the aim's 25 held in 1 run of 2)
-PRESSURE_SAMPLE_CYCLES = next(s.sync_period for s in schedules() if s.name == "LEG_PRESSURE_1")
+PRESSURE_SAMPLE_CYCLES = CODECS["LEG_PRESSURE_1"].schedule.sync_period
 SEAL_LEAK_MAX_CYCLES = 3 * PRESSURE_SAMPLE_CYCLES + 1
 # a supply drop to 60 % leaves the model's band only after 25 cycles (the power unit's 50 ms
 # decay); the samples' phases and the frame add up to 14
@@ -159,7 +158,7 @@ LOCKSTEP_CASES = [
          f"SPOOL_MISMATCH within {RESIDUAL_MAX_CYCLES} cycles, <= 5 mm off the path", CaseKind.PLANT, "SPOOL_STUCK",
          1, 20, ("SPOOL_MISMATCH",), RESIDUAL_MAX_CYCLES, RESIDUAL_PATH_MAX_M),
     # the chambers predicted from one LEG_PRESSURE sample to the next: a leak pulls p_A and p_B
-    # together, seen at the leg's first sample after the onset (every 16th cycle)
+    # together, named by its onset's jump (SEAL_LEAK_MAX_CYCLES)
     Case("5f", "piston seal leaking 10x the calibrated leakage, leg 1",
          f"CHAMBER_PRESSURE within {SEAL_LEAK_MAX_CYCLES} cycles, <= 5 mm off the path", CaseKind.PLANT, "SEAL_LEAK",
          1, 10, ("CHAMBER_PRESSURE",), SEAL_LEAK_MAX_CYCLES, RESIDUAL_PATH_MAX_M),
