@@ -1,6 +1,6 @@
 """The CANopen device profile's bus (`protocol/devices/canopen-layout.toml`): which stock
 devices sit at which node ids, and what their PDOs put on the bus, read from each device's
-EDS with the `canopen` library: the COB-ID, the mapped objects' bits (the DLC) and the
+EDS with the `canopen` library (`protocol.pdo`): the COB-ID, the mapped objects' bits (the DLC) and the
 transmission type (1..240: every n-th SYNC; its SYNC start value, sub-index 6, the phase).
 RPDOs are the controller's: it sends each one every cycle. The host protocol and the
 controller's own frames (SYNC, CTRL_*, HOST_*, its heartbeat and EMCY) stay the DBC's.
@@ -13,12 +13,11 @@ import math
 import tomllib
 from dataclasses import dataclass
 
-from protocol.codec import STANDARD_ID_MASK
 from protocol.dbc import CONTROLLER_NODE, Schedule, schedules
 from protocol.devices import DEVICES_DIR, object_dictionary
+from protocol.pdo import RPDO, TPDO, pdo_maps
 
 LAYOUT_FILE = DEVICES_DIR / "canopen-layout.toml"
-COB_ID_INVALID = 0x80000000          # bit 31 of a PDO's COB-ID: the PDO does not exist
 EMCY_DLC = 8
 HEARTBEAT_DLC = 1
 LEG_DEVICES = ("valve", "encoder", "leg_sensors")
@@ -52,32 +51,21 @@ def load_layout(n_legs: int, path=LAYOUT_FILE) -> list[Device]:
     return devices
 
 
-def _pdos(device: Device, od, comm_base: int, map_base: int, sender: str, kind: str) -> list[Schedule]:
+def _pdos(device: Device, od, sender: str, kind: str) -> list[Schedule]:
     out = []
-    for k in range(512):
-        comm, mapping = comm_base + k, map_base + k
-        if comm not in od or mapping not in od:
-            continue
-        cob_id = int(od[comm][1].default)
-        if cob_id & COB_ID_INVALID:
-            continue
-        bits = sum(int(od[mapping][i].default) & 0xFF for i in range(1, int(od[mapping][0].default) + 1))
-        transmission = int(od[comm][2].default)
-        period = 1 if kind == "RPDO" else (transmission if 1 <= transmission <= 240 else 0)
-        start = int(od[comm][6].default) if 6 in od[comm] else 0
-        if device.sync_start and period > 1:
-            start = device.sync_start
+    for pdo in pdo_maps(od, kind, device.name):
+        period = 1 if kind == RPDO else pdo.sync_period
+        start = device.sync_start if device.sync_start and period > 1 else pdo.sync_start
         phase = (start - 1) % period if period > 1 and start else 0
-        out.append(Schedule(f"{device.name}_{kind}{k + 1}", cob_id & STANDARD_ID_MASK, math.ceil(bits / 8), sender,
-                            period, phase, 0, None))
+        out.append(Schedule(pdo.name, pdo.cob_id, pdo.dlc, sender, period, phase, 0, None))
     return out
 
 
 def device_schedules(device: Device) -> list[Schedule]:
     """A device's frames: its RPDOs (the controller's), TPDOs, heartbeat and EMCY."""
     od = object_dictionary(device.eds, device.node)
-    frames = _pdos(device, od, 0x1400, 0x1600, CONTROLLER_NODE, "RPDO")
-    frames += _pdos(device, od, 0x1800, 0x1A00, device.name, "TPDO")
+    frames = _pdos(device, od, CONTROLLER_NODE, RPDO)
+    frames += _pdos(device, od, device.name, TPDO)
     heartbeat_ms = int(od[0x1017].default) if 0x1017 in od else 0
     if heartbeat_ms:
         frames.append(Schedule(f"{device.name}_HEARTBEAT", 0x700 + device.node, HEARTBEAT_DLC, device.name, 0, 0,

@@ -16,9 +16,11 @@ from functools import cache
 from pathlib import Path
 
 import canopen
+from canopen.objectdictionary.datatypes import INTEGER_TYPES
 
 from program.errors import UserInputError
 from program.sections import STR, Key
+from protocol.pdo import mapping_write_abort
 
 DEVICES_DIR = Path(__file__).parent
 SDO_REQUEST_BASE = 0x600                 # client -> server (the node's SDO server receives)
@@ -82,14 +84,36 @@ def identity_of(name: str) -> Identity:
 
 def local_node(node_id: int, name: str, identity: Identity | None = None) -> canopen.LocalNode:
     """A device of this EDS as a node that answers SDO (canopen's LocalNode: the emulator's
-    devices); 0x1000 and 0x1018 from `identity` (default: the EDS's own)."""
+    devices); 0x1000 and 0x1018 from `identity` (default: the EDS's own). Like a stock device
+    it refuses, with CiA 301's abort code, a PDO mapping it cannot carry."""
     identity = identity or identity_of(name)
-    node = canopen.LocalNode(node_id, object_dictionary(name))
+    od = object_dictionary(name, node_id)
+    node = canopen.LocalNode(node_id, od)
     node.set_data(*DEVICE_TYPE, identity.device_type.to_bytes(4, "little"))
     for (index, sub), value in ((VENDOR_ID, identity.vendor_id), (PRODUCT_CODE, identity.product_code),
                                 (REVISION, identity.revision)):
         node.set_data(index, sub, value.to_bytes(4, "little"))
+
+    def refuse_a_bad_mapping(index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes):
+        code = mapping_write_abort(node.object_dictionary, written_values(node), index, subindex,
+                                   int(od.decode_raw(data)) if od.data_type in INTEGER_TYPES else 0, name)
+        if code:
+            raise canopen.SdoAbortedError(code)
+
+    node.add_write_callback(refuse_a_bad_mapping)
     return node
+
+
+def written_values(node: canopen.LocalNode) -> dict[tuple[int, int], int]:
+    """The integer objects written to a local node (by SDO or `set_data`), (index, sub) -> value:
+    with its EDS, the node's configuration (`protocol.pdo.pdo_maps`' `written`)."""
+    out = {}
+    for index, subs in node.data_store.items():
+        for sub, data in subs.items():
+            variable = node.object_dictionary.get_variable(index, sub)
+            if variable is not None and variable.data_type in INTEGER_TYPES:
+                out[(index, sub)] = int(variable.decode_raw(data))
+    return out
 
 
 def check_files(names, where: str, error: type[UserInputError]) -> None:
