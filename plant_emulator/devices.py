@@ -9,7 +9,6 @@ import canopen
 
 from protocol.codec import STANDARD_ID_MASK
 from protocol.devices import SDO_REQUEST_BASE, local_node
-from protocol.nodes import IMU_NODE
 
 
 class _Sender:
@@ -20,13 +19,21 @@ class _Sender:
 
 
 class EmulatedDevices:
-    def __init__(self, nodes: list[int], leg_eds: str, imu_eds: str, send):
+    """`eds_of` node id -> its EDS: each node's SDO server."""
+
+    def __init__(self, eds_of: dict[int, str], send):
         self.network = canopen.Network(_Sender(lambda msg, timeout=None: send(msg)))
+        self.eds_of = dict(eds_of)
         self.nodes = {}
-        for node in nodes:
-            self.nodes[node] = local_node(node, imu_eds if node == IMU_NODE else leg_eds)
-            self.network.add_node(self.nodes[node])
-        self._request = {SDO_REQUEST_BASE + node: node for node in nodes}
+        for node in self.eds_of:
+            self.reset(node)
+        self._request = {SDO_REQUEST_BASE + node: node for node in self.eds_of}
+
+    def reset(self, node: int) -> canopen.LocalNode:
+        """The node as it powers up: its EDS's defaults, nothing a master wrote."""
+        self.nodes[node] = local_node(node, self.eds_of[node])
+        self.network.add_node(self.nodes[node])          # replaces the node before, unsubscribed
+        return self.nodes[node]
 
     def node_of(self, frame_id: int) -> int | None:
         """The node an SDO request is for (None: not an SDO request to these nodes)."""

@@ -30,14 +30,16 @@ from dataclasses import dataclass, field
 import can
 import numpy as np
 
+from plant_emulator.canopen_nodes import CanopenNodes
 from plant_emulator.devices import EmulatedDevices
 from plant_emulator.injected import KNOWN_FAULTS
 from plant_emulator.params import EmulatorConfig
 from plant_emulator.simulated_rig import SimulatedRig
 from plant_emulator.valve_node import Emergency, ValveState
 from program.realtime import percentiles_us
-from protocol.codec import CODECS, FrameDecoder
+from protocol.codec import CODECS, STANDARD_ID_MASK, FrameDecoder
 from protocol.dbc import sync_counter_overflow, truth_phase
+from protocol.devices import DEVICE_PROFILES
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import EmuCommand, EmuFault, NmtCommand, NmtState, Pacing
 from protocol.interfaces import attitude_values, leg_pressure_values, leg_state_values, rate_values, valve_command_of
@@ -50,6 +52,7 @@ SYNC_PHASES = ("response", "nodes", "send", "physics", "total")
 SP_RESPONSE, SP_NODES, SP_SEND, SP_PHYSICS, SP_TOTAL = range(len(SYNC_PHASES))
 SYNC_HISTORY = 1 << 16
 BABBLE_ID = 0x601                    # not in the DBC (an SDO request id of node 1)
+EMCY_BASE = 0x80                     # CiA 301: a node's EMCY at 0x80 + its id
 FREE_RUN_CATCH_UP_STEPS = 25         # free run: periods of physics per poll at most (a late wake-up)
 SYNC_TIMEOUT_EVENT = "emulator: event sync_timeout"   # a stderr line per SYNC-watchdog trip (JSON after it)
 # a stderr line per injected fault, at the first SYNC that sees it: the fault's onset cycle
@@ -94,7 +97,7 @@ class Emulator:
     """Nodes of one rig on one bus. `handle(msg)` for every received frame, `poll(now)` often."""
 
     def __init__(self, bus: can.BusABC | None, rig, cfg: EmulatorConfig, clock=time.monotonic,
-                 pacing: str | None = None):
+                 pacing: str | None = None, devices: str = "hydrapod"):
         self.bus, self.rig, self.cfg, self.clock = bus, rig, cfg, clock
         # its own --pacing, said against the controller's CTRL_STATUS.PACING (None: not checked)
         self.pacing = Pacing[pacing.upper()] if pacing is not None else None
@@ -102,14 +105,25 @@ class Emulator:
         self.sim = SimulatedRig(rig, cfg)
         self.legs = range(1, rig.n_legs + 1)
         self.has_imu = self.sim.has_imu
-        self.nodes = rig_nodes(rig.n_legs)
+        if devices not in DEVICE_PROFILES:
+            raise ValueError(f"devices must be one of {', '.join(DEVICE_PROFILES)}, got {devices!r}")
+        # the stock CANopen devices (canopen_nodes.py), or the project's own leg and IMU nodes
+        self.canopen = CanopenNodes(rig.n_legs, self._send) if devices == "canopen" else None
+        self.nodes = self.canopen.nodes if self.canopen is not None else rig_nodes(rig.n_legs)
         self.nmt = {n: NmtState.BOOTUP for n in self.nodes}
-        names = ["NMT", "SYNC", "EMU_CTRL", "EMU_KICK", "CTRL_STATUS"] + [f"VALVE_CMD_{n}" for n in self.legs]
+        names = ["NMT", "SYNC", "EMU_CTRL", "EMU_KICK", "CTRL_STATUS"]
+        if self.canopen is None:                 # the valves' VALVE_CMD ids are CANopen's RPDO1s
+            names += [f"VALVE_CMD_{n}" for n in self.legs]
         self.decoder = FrameDecoder(names)
-        self._cmd_slot = {CODECS[f"VALVE_CMD_{n}"].frame_id: n for n in self.legs}
+        self._cmd_slot = {CODECS[f"VALVE_CMD_{n}"].frame_id: n for n in self.legs} if self.canopen is None else {}
         self._ids = {name: CODECS[name].frame_id for name in names}
         self._pacing_index = CODECS["CTRL_STATUS"].index["PACING"]
         self.out = {name: Outbox(name) for name in self._tx_names()}
+        # each leg's valve node (the DBC profile's leg node); its EMCY on that node's id
+        self.valve_node = dict(self.canopen.valve_node) if self.canopen is not None else {n: n for n in self.legs}
+        self._leg_of_valve = {node: leg for leg, node in self.valve_node.items()}
+        for leg, node in self.valve_node.items():
+            self.out[f"EMCY_{leg}"].message.arbitration_id = EMCY_BASE + node
         self.counters = Counters()
         self.sync_counter = 0
         self.last_sync_time: float | None = None
@@ -122,9 +136,11 @@ class Emulator:
         self._delayed: list[can.Message] = []              # DELAY: frames sent at the next SYNC
         self._onsets: list[dict] = []                      # injected since the last SYNC
         self._leg_operational = np.zeros(rig.n_legs, dtype=bool)
+        self._leg_sensing = np.zeros(rig.n_legs, dtype=bool)         # a leg's sensors OPERATIONAL
         self._overflow = sync_counter_overflow()
         self.phase_s = np.zeros((SYNC_HISTORY, len(SYNC_PHASES)))     # per SYNC, seconds
-        self.devices = EmulatedDevices(self.nodes, cfg.nodes.leg_eds, cfg.nodes.imu_eds, self._send)
+        self.devices = self.canopen.sdo if self.canopen is not None else EmulatedDevices(
+            {n: cfg.nodes.imu_eds if n == IMU_NODE else cfg.nodes.leg_eds for n in self.nodes}, self._send)
 
     @property
     def valves(self) -> dict:
@@ -197,17 +213,22 @@ class Emulator:
         if self._fault(node, EmuFault.DUPLICATE):
             self._send(message)
 
-    def _emergency(self, node: int, emergency: Emergency) -> None:
-        box = self.out[f"EMCY_{node}"]
+    def _emergency(self, leg: int, emergency: Emergency) -> None:
+        """Leg `leg`'s valve says `emergency` (EMCY on its valve node's id)."""
+        box = self.out[f"EMCY_{leg}"]
         box.values[:] = (emergency.error_code, emergency.error_register, int(emergency.state),
                          int(emergency.reason), self.sync_counter % 256, emergency.info)
         self.counters.emergencies += 1
         if emergency.error_code:
             self.counters.valve_faults += 1
-        if not self._fault(node, EmuFault.SILENT) and box.encode():
+        if not self._fault(self.valve_node[leg], EmuFault.SILENT) and box.encode():
             self._send(box.message)
 
     def _heartbeat(self, node: int) -> None:
+        if self.canopen is not None:
+            if not self._fault(node, EmuFault.SILENT):
+                self._send(self.canopen.heartbeat(node, self.nmt[node]))
+            return
         box = self.out[f"HEARTBEAT_{node}"]
         box.values[0] = self.nmt[node]
         if not self._fault(node, EmuFault.SILENT) and box.encode():
@@ -225,7 +246,9 @@ class Emulator:
             self.nmt[n] = NmtState.BOOTUP
         self._heartbeats()
         for n in self.nodes:
-            self.nmt[n] = NmtState.OPERATIONAL if self.cfg.nodes.nmt_autostart else NmtState.PRE_OPERATIONAL
+            self.nmt[n] = NmtState.PRE_OPERATIONAL
+            if self.cfg.nodes.nmt_autostart:
+                self._start(n)
         self.next_heartbeat = self.clock() + self.cfg.nodes.heartbeat_s
 
     def poll(self, now: float | None = None) -> float:
@@ -298,7 +321,11 @@ class Emulator:
     # -- receive ------------------------------------------------------------------------------
     def can_filters(self) -> list[dict]:
         """The nodes' CAN controllers' acceptance filters: the DBC's frames they take, and SDO."""
-        return self.decoder.can_filters() + self.devices.can_filters()
+        filters = self.decoder.can_filters() + self.devices.can_filters()
+        if self.canopen is not None:
+            filters += [{"can_id": frame_id, "can_mask": STANDARD_ID_MASK, "extended": False}
+                        for frame_id in self.canopen.rpdo_ids()]
+        return filters
 
     def handle(self, msg: can.Message) -> None:
         self.counters.frames_in += 1
@@ -306,6 +333,10 @@ class Emulator:
         if node is not None:                  # SDO: served in every NMT state but STOPPED (CiA 301)
             if self.nmt[node] != NmtState.STOPPED and not self._fault(node, EmuFault.SILENT):
                 self.devices.answer(msg)
+            return
+        if self.canopen is not None and msg.arbitration_id in self.canopen.rpdo_of:
+            if not self._fault(CONTROLLER_NODE, EmuFault.DROP):
+                self.canopen.receive_rpdo(msg.arbitration_id, msg.data, self.sim.valves, self._operational)
             return
         status = self.decoder.receive_message(msg)
         frame_id = msg.arbitration_id
@@ -380,18 +411,29 @@ class Emulator:
         targets = self.nodes if node == 0 else [node] if node in self.nmt else []
         for n in targets:
             if command == NmtCommand.START:
-                self.nmt[n] = NmtState.OPERATIONAL
+                self._start(n)
             elif command == NmtCommand.STOP:
                 self.nmt[n] = NmtState.STOPPED
             elif command == NmtCommand.ENTER_PREOPERATIONAL:
                 self.nmt[n] = NmtState.PRE_OPERATIONAL
             elif command in (NmtCommand.RESET_NODE, NmtCommand.RESET_COMMUNICATION):
-                if command == NmtCommand.RESET_NODE and n in self.legs:
-                    self.sim.valves[n - 1] = self.sim.new_valve()
-                    self.sim.valves[n - 1].boot()
+                leg = self._leg_of_valve.get(n)
+                if command == NmtCommand.RESET_NODE and leg is not None:
+                    self.sim.valves[leg - 1] = self.sim.new_valve()
+                    self.sim.valves[leg - 1].boot()
+                if self.canopen is not None:          # a stock device forgets what a master wrote
+                    self.canopen.reset(n)
                 self.nmt[n] = NmtState.BOOTUP
                 self._heartbeat(n)
                 self.nmt[n] = NmtState.PRE_OPERATIONAL
+
+    def _start(self, node: int) -> None:
+        """NMT start: OPERATIONAL, a stock device only with PDOs it can carry."""
+        if self.canopen is None or self.canopen.start(node):
+            self.nmt[node] = NmtState.OPERATIONAL
+
+    def _operational(self, node: int) -> bool:
+        return self.nmt[node] == NmtState.OPERATIONAL
 
     def _emu_ctrl(self, command: float, target: float, kind: float, load_kg: float, param: float) -> None:
         command, target, kind, param = int(command), int(target), int(kind), int(param)
@@ -440,11 +482,16 @@ class Emulator:
         self._flush_delayed()
         sim = self.sim
         for i, n in enumerate(self.legs):
-            self._leg_operational[i] = self.nmt[n] == NmtState.OPERATIONAL
+            self._leg_operational[i] = self.nmt[self.valve_node[n]] == NmtState.OPERATIONAL
+        sensing = self._leg_operational
+        if self.canopen is not None:              # a leg's encoder and measuring device are nodes of their own
+            for i, n in enumerate(self.legs):
+                self._leg_sensing[i] = any(self._operational(d.node) for d in self.canopen.layout if d.leg == n)
+            sensing = self._leg_sensing
         for i, emergency in sim.valves_on_sync(self._leg_operational):
             self._emergency(i + 1, emergency)
         nodes = self.clock()
-        sim.sample(counter, self._leg_operational, self.has_imu and self.nmt[IMU_NODE] == NmtState.OPERATIONAL)
+        sim.sample(counter, sensing, self.has_imu and self.nmt[IMU_NODE] == NmtState.OPERATIONAL)
         self._send_samples()
         sent = self.clock()
         sim.apply_valves()
@@ -469,6 +516,10 @@ class Emulator:
     def _send_samples(self) -> None:
         """This SYNC's samples as frames: the IMU's first, each leg's LEG_STATE last."""
         sim = self.sim
+        if self.canopen is not None:
+            self.canopen.send_tpdos(self.sync_counter, sim, self._operational)
+            self._send_truth(self.sync_counter)
+            return
         if sim.attitude_due:
             attitude_values(self.out["IMU_ATTITUDE"].values, sim.attitude_rad)
             self._emit(IMU_NODE, "IMU_ATTITUDE")

@@ -12,6 +12,7 @@ from plant_emulator.params import LOCKSTEP_SYNC_TIMEOUT_PERIODS, ConfigError, lo
 from program.cliutil import StopFlag, number_in_range, output_file
 from program.realtime import applied, cpu_latency_measure, freeze_gc, lock_memory, set_fifo
 from program.sections import read_toml
+from protocol.devices import DEVICE_PROFILES
 from protocol.enums import PACINGS
 from protocol.nodes import RIGS
 
@@ -86,7 +87,7 @@ def run_emulator(args) -> int:
     rig = make_rig(args.rig, cfg)
     stop = StopFlag()
     bus = open_bus(spec)
-    emulator = Emulator(bus, rig, cfg, pacing=args.pacing)
+    emulator = Emulator(bus, rig, cfg, pacing=args.pacing, devices=args.devices)
     bus.set_filters(emulator.can_filters())   # the nodes' CAN controllers' acceptance filters
     # started: what start-up built leaves the collector's scans, so a collection in the run is short
     freeze_gc(disable=False)
@@ -124,6 +125,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                              f"[nodes].sync_timeout_periods, 3; with --pacing lockstep "
                              f"{LOCKSTEP_SYNC_TIMEOUT_PERIODS:g}, longer than the controller's wait for a "
                              "cycle's frames)")
+    parser.add_argument("--devices", choices=DEVICE_PROFILES, default="hydrapod",
+                        help="the nodes: the project's DBC nodes (hydrapod), or stock CANopen devices as "
+                             "protocol/devices/canopen-layout.toml places them (canopen: CiA 408 valves, CiA 406 "
+                             "encoders, CiA 404 measuring devices, each configured by SDO from its EDS)")
     parser.add_argument("--config", metavar="FILE", help="TOML overriding the emulator's data/emulator.toml")
     parser.add_argument("--summary", metavar="FILE", type=output_file, help="write the exit counters as JSON")
     parser.add_argument("--pacing", choices=PACINGS, default="realtime",

@@ -23,6 +23,7 @@ from program.sections import STR, Key
 from protocol.pdo import mapping_write_abort
 
 DEVICES_DIR = Path(__file__).parent
+DEVICE_PROFILES = ("hydrapod", "canopen")   # the project's DBC nodes, or stock CANopen devices
 SDO_REQUEST_BASE = 0x600                 # client -> server (the node's SDO server receives)
 SDO_RESPONSE_BASE = 0x580                # server -> client
 DEVICE_TYPE = (0x1000, 0)
