@@ -1,9 +1,10 @@
-"""`hydrapod bus-load`, `hydrapod protocol dump` and `hydrapod protocol bench`."""
+"""`hydrapod bus-load`, `hydrapod protocol dump`, `protocol bench` and `protocol configure`."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import logging
 from dataclasses import asdict
 
 from hil.tools.protocol_bench import format_bench, run_bench
@@ -13,10 +14,10 @@ from protocol import canopen_layout
 from protocol.busload import MAX_LOAD, MIN_COMPUTE_WINDOW_US, bus_budget, format_budget
 from protocol.codec import CODECS
 from protocol.dbc import dbc_path
+from protocol.devices import DEVICE_PROFILES
 from protocol.nodes import LEGS_OF_RIG, RIGS
 
 CLASSIC_CAN_MAX_BITRATE = 1_000_000
-DEVICES = ("hydrapod", "canopen")
 
 
 def add_parsers(sub) -> None:
@@ -24,7 +25,7 @@ def add_parsers(sub) -> None:
                        description="Bus load and cycle timeline on classic CAN of the DBC's schedule, or of "
                                    "the CANopen device profile's layout (protocol/devices/canopen-layout.toml, "
                                    "each device's PDOs from its EDS). Exit 0 if it fits the limits, 1 if not.")
-    p.add_argument("--devices", choices=DEVICES, default="hydrapod",
+    p.add_argument("--devices", choices=DEVICE_PROFILES, default="hydrapod",
                    help="hydrapod: the DBC's nodes (default); canopen: stock CiA 408/406/404 devices")
     p.add_argument("--rig", choices=RIGS, default="hexapod",
                    help="--devices canopen: the rig whose devices are budgeted (default hexapod)")
@@ -42,7 +43,7 @@ def add_parsers(sub) -> None:
     p.set_defaults(handler=cmd_bus_load)
 
     proto = sub.add_parser("protocol", help="protocol tools")
-    psub = proto.add_subparsers(dest="protocol_command", required=True, metavar="{dump,bench}")
+    psub = proto.add_subparsers(dest="protocol_command", required=True, metavar="{dump,bench,configure}")
     d = psub.add_parser("dump", help="messages, schedule, E2E and signal scaling as compiled from the DBC")
     d.add_argument("--json", action="store_true", help="print JSON")
     d.set_defaults(handler=cmd_protocol_dump)
@@ -51,6 +52,17 @@ def add_parsers(sub) -> None:
                    help="timed iterations per case (default 20000)")
     b.add_argument("--json", action="store_true", help="print JSON")
     b.set_defaults(handler=cmd_protocol_bench)
+    c = psub.add_parser("configure", help="configure a rig's stock CANopen devices by SDO and read them back",
+                        description="Write every stock device of the layout (protocol/devices/canopen-layout.toml) "
+                                    "its PDOs by SDO in CiA 301's order, with the layout's SYNC start values, and "
+                                    "read everything back. Exit 0 when every node holds it; a node that refuses, is "
+                                    "silent or reads back otherwise: one line naming it and the object, exit 2.")
+    c.add_argument("--bus", required=True, help="bus string (socketcan:can0, udp_multicast:..., virtual:NAME)")
+    c.add_argument("--rig", choices=RIGS, default="hexapod", help="the rig whose devices are configured")
+    c.add_argument("--sdo-timeout-ms", type=number_in_range(float, 1.0, 10_000.0), default=200.0,
+                   help="a node silent this long after a request is named (default 200)")
+    c.add_argument("--json", action="store_true", help="print JSON")
+    c.set_defaults(handler=cmd_protocol_configure)
 
 
 def cmd_bus_load(args: argparse.Namespace) -> int:
@@ -129,4 +141,46 @@ def cmd_protocol_dump(args: argparse.Namespace) -> int:
 def cmd_protocol_bench(args: argparse.Namespace) -> int:
     result = run_bench(args.iterations)
     print(json.dumps(result, indent=2) if args.json else format_bench(result))
+    return 0
+
+
+def cmd_protocol_configure(args: argparse.Namespace) -> int:
+    import can
+    import canopen
+
+    from firmware_py.runtime.configure import ConfigurationError, configure
+    from protocol.bus import open_bus, parse_bus_spec
+
+    devices = canopen_layout.load_layout(LEGS_OF_RIG[args.rig])
+    network = canopen.Network(open_bus(parse_bus_spec(args.bus)))
+    network.notifier = can.Notifier(network.bus, network.listeners, timeout=0.05)
+
+    def client_of(node: int):
+        sdo = network.add_node(node, canopen.ObjectDictionary()).sdo
+        sdo.RESPONSE_TIMEOUT, sdo.MAX_RETRIES = args.sdo_timeout_ms / 1e3, 1          # one request each
+        return sdo
+
+    quiet = logging.getLogger("canopen")            # its own log of an abort: the error line says it
+    level, quiet.level = quiet.level, logging.CRITICAL
+    try:
+        configure(client_of, devices)
+    except ConfigurationError as error:
+        raise UserInputError(f"protocol configure: {error}") from None
+    finally:
+        quiet.setLevel(level)
+        network.disconnect()
+    rows = []
+    for device in devices:
+        for schedule in canopen_layout.device_schedules(device):
+            if "PDO" in schedule.name:
+                rows.append({"node": device.node, "pdo": schedule.name, "cob_id": schedule.frame_id,
+                             "dlc": schedule.dlc, "every_nth_sync": schedule.sync_period,
+                             "phase": schedule.sync_phase})
+    if args.json:
+        print(json.dumps({"rig": args.rig, "configured": rows}, indent=2))
+        return 0
+    print(f"configured and read back: {len(devices)} node(s) of the {args.rig}")
+    for row in rows:
+        print(f"  node {row['node']:3d}  {row['pdo']:<24} id {row['cob_id']:#05x}  dlc {row['dlc']}  "
+              f"every {row['every_nth_sync']} SYNC(s), phase {row['phase']}")
     return 0

@@ -6,7 +6,6 @@ drives one valve DISABLED -> HOLD -> ACTIVE with a setpoint, sees its RPDO timeo
 reaction and EMCY and resets it, remaps a TPDO and sees the new
 mapping on the bus, and finds a reset node back at its EDS's mapping."""
 
-import threading
 import tomllib
 from pathlib import Path
 
@@ -14,16 +13,11 @@ import can
 import canopen
 import pytest
 
-from plant_emulator.emulator import Emulator
-from plant_emulator.params import load_config
-from plant_emulator.process import run
-from plant_emulator.rigs import make_rig
+from tests.support.canopen_rig import CanopenRig
 
 DEVICES = Path(__file__).resolve().parents[2] / "protocol" / "devices"
 LAYOUT = tomllib.loads((DEVICES / "canopen-layout.toml").read_text())
 KINDS = ("valve", "encoder", "leg_sensors")
-# the wall clock between the master's SYNCs is the test's, not 2 ms: the valves' SYNC watchdog off
-NO_WATCHDOG = {"nodes": {"sync_timeout_periods": 1e4}}     # 20 s
 DISABLED, HOLD, ACTIVE = 0x8, 0x8 | 0x3, 0x8 | 0x7         # CiA 408 status words: ready, D H M
 FAULT_HOLD = 0x3                                           # D H, not ready
 RPDO_TIMEOUT = 0x8250                                      # CiA 301's EMCY error code
@@ -42,29 +36,22 @@ def _devices(n_legs: int) -> dict[int, str]:
 
 @pytest.fixture
 def bus_with(request):
-    """The emulator of `rig` on a virtual channel in a thread of its own; the master's network."""
+    """The emulator of `rig` on a virtual channel (tests/support/canopen_rig.py); the master's network."""
     started = []
 
     def start(rig: str) -> canopen.Network:
         channel = f"canopen-devices-{rig}-{request.node.name}"
-        cfg = load_config(overrides=NO_WATCHDOG)
-        emulator_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
-        emulator = Emulator(emulator_bus, make_rig(rig, cfg), cfg, pacing="lockstep", devices="canopen")
-        stop = threading.Event()
-        thread = threading.Thread(target=run, args=(emulator, emulator_bus, stop.is_set), daemon=True)
-        thread.start()
+        emulated = CanopenRig(rig, channel)
         network = canopen.Network()
         network.bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
         network.notifier = can.Notifier(network.bus, network.listeners, timeout=0.02)
-        started.append((stop, thread, emulator_bus, network))
+        started.append((emulated, network))
         return network
 
     yield start
-    for stop, thread, emulator_bus, network in started:
+    for emulated, network in started:
         network.disconnect()
-        stop.set()
-        thread.join(timeout=5.0)
-        emulator_bus.shutdown()
+        emulated.close()
 
 
 def _mapped(pdo_map) -> list[tuple[int, int]]:
