@@ -5,8 +5,9 @@ the node ids of `protocol/devices/canopen-layout.toml`.
 Each device answers SDO from its EDS (canopen's `LocalNode`, which refuses a mapping the
 device cannot carry) and carries its PDOs as the master configured them: at its NMT start
 each device's PDOs are compiled (`protocol.pdo`) from its EDS and what was written to it,
-so a wrong mapping shows on the bus. A reset node forgets what was written, as a rebooted
-device does. The valves take their RPDO (control word, spool setpoint) into the same CiA
+so a wrong mapping shows on the bus; its heartbeat producer time (0x1017) and, a valve, its
+RPDO timeout (0x1400:5) are what was written too. A reset node forgets what was written, as a
+rebooted device does. The valves take their RPDO (control word, spool setpoint) into the same CiA
 408 state machine as the DBC profile's (`valve_node.py`), applied at the next SYNC; the
 sensors send their TPDOs at the SYNCs their transmission types and SYNC start values say,
 with the rig's samples in the profile's steps (`protocol.canopen_profile`).
@@ -27,6 +28,8 @@ from protocol.devices import written_values
 from protocol.pdo import RPDO, TPDO, PdoCodec, PdoError, pdo_maps
 
 HEARTBEAT_BASE = 0x700
+HEARTBEAT_TIME = (0x1017, 0)                              # producer heartbeat time, ms
+RPDO1_TIMEOUT = (0x1400, 5)                               # RPDO1's event timer: its deadline, ms
 LEG_PRESSURES = (cp.LEG_PA, cp.LEG_PB, cp.LEG_PS)        # in SimulatedRig.pressure's column order
 
 
@@ -81,6 +84,23 @@ class CanopenNodes:
             del self.rpdo_of[cob_id]
         self.rpdo_of.update({pdo.codec.frame_id: pdo for pdo in rpdos})
         return True
+
+    def setting(self, node: int, index: int, sub: int = 0) -> int:
+        """An object's value in the node: as written, else its EDS default (0: none)."""
+        local = self.sdo.nodes[node]
+        written = written_values(local)
+        if (index, sub) in written:
+            return written[(index, sub)]
+        variable = local.object_dictionary.get_variable(index, sub)
+        return int(variable.default) if variable is not None and variable.default is not None else 0
+
+    def heartbeat_s(self, node: int) -> float:
+        """The node's heartbeat producer time (0x1017; 0: it sends none)."""
+        return self.setting(node, *HEARTBEAT_TIME) / 1e3
+
+    def rpdo_timeout_ms(self, node: int) -> int:
+        """The node's RPDO1 timeout (its event timer, 0x1400:5; 0: not monitored)."""
+        return self.setting(node, *RPDO1_TIMEOUT)
 
     def reset(self, node: int) -> None:
         """NMT reset: the node powers up again with its EDS's defaults."""

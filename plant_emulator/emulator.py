@@ -23,6 +23,7 @@ fault test measures), until SYNC returns. The process around it: `process.py`.
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from dataclasses import dataclass, field
@@ -52,6 +53,7 @@ SYNC_PHASES = ("response", "nodes", "send", "physics", "total")
 SP_RESPONSE, SP_NODES, SP_SEND, SP_PHYSICS, SP_TOTAL = range(len(SYNC_PHASES))
 SYNC_HISTORY = 1 << 16
 BABBLE_ID = 0x601                    # not in the DBC (an SDO request id of node 1)
+NO_COMMAND_TIMEOUT = 1 << 62          # a stock valve whose RPDO timeout is 0: never times out
 EMCY_BASE = 0x80                     # CiA 301: a node's EMCY at 0x80 + its id
 FREE_RUN_CATCH_UP_STEPS = 25         # free run: periods of physics per poll at most (a late wake-up)
 SYNC_TIMEOUT_EVENT = "emulator: event sync_timeout"   # a stderr line per SYNC-watchdog trip (JSON after it)
@@ -129,7 +131,9 @@ class Emulator:
         self.last_sync_time: float | None = None
         self.last_sync_waited_s = 0.0          # how long that SYNC sat in the socket first
         self.sync_lost_reported = False
-        self.next_heartbeat = 0.0
+        self.next_heartbeat = 0.0                 # the earliest of the nodes' next heartbeats
+        self._beat_period: dict[int, float] = {}
+        self._next_beat: dict[int, float] = {}
         self._held: dict[str, bytes] = {}                  # REORDER: frame held back per message
         self._last_sent: dict[str, bytes] = {}             # REPEAT: the frame sent before the fault
         self._free_run_next: float | None = None           # wall time of the next free-run step
@@ -249,14 +253,33 @@ class Emulator:
             self.nmt[n] = NmtState.PRE_OPERATIONAL
             if self.cfg.nodes.nmt_autostart:
                 self._start(n)
-        self.next_heartbeat = self.clock() + self.cfg.nodes.heartbeat_s
+        now = self.clock()
+        self._beat_period = {n: self._heartbeat_period(n) for n in self.nodes}
+        self._next_beat = {n: now + period for n, period in self._beat_period.items()}
+        self.next_heartbeat = min(self._next_beat.values())
+
+    def _heartbeat_period(self, node: int) -> float:
+        """A node's heartbeat producer time, s (inf: it sends none): a stock device's 0x1017."""
+        period = self.canopen.heartbeat_s(node) if self.canopen is not None else self.cfg.nodes.heartbeat_s
+        return period if period > 0 else math.inf
+
+    def _heartbeat_changed(self, node: int) -> None:
+        """The node's heartbeat producer time written (SDO) or reset: it beats on the new one."""
+        period = self._heartbeat_period(node)
+        if period != self._beat_period[node]:
+            self._beat_period[node] = period
+            self._next_beat[node] = self.clock() + period
+            self.next_heartbeat = min(self._next_beat.values())
 
     def poll(self, now: float | None = None) -> float:
         """Timers: heartbeats and the SYNC watchdog. Returns seconds until the next timer."""
         now = self.clock() if now is None else now
         if now >= self.next_heartbeat:
-            self._heartbeats()
-            self.next_heartbeat = now + self.cfg.nodes.heartbeat_s
+            for n, due in self._next_beat.items():
+                if now >= due:
+                    self._heartbeat(n)
+                    self._next_beat[n] = now + self._beat_period[n]
+            self.next_heartbeat = min(self._next_beat.values())
         period = self.cfg.nodes.sync_period_s
         limit = self.cfg.nodes.sync_timeout_periods * period
         if self.last_sync_time is not None and not self.sync_lost_reported and now - self.last_sync_time > limit:
@@ -305,6 +328,8 @@ class Emulator:
         if self._free_run_next is not None:
             self._free_run_next += seconds
         self.next_heartbeat += seconds
+        for n in self._next_beat:
+            self._next_beat[n] += seconds
 
     def _free_run(self, steps: int, apply_valves: bool = True) -> None:
         """`steps` periods of physics without SYNC, the valves' spools as they are now (or,
@@ -333,6 +358,8 @@ class Emulator:
         if node is not None:                  # SDO: served in every NMT state but STOPPED (CiA 301)
             if self.nmt[node] != NmtState.STOPPED and not self._fault(node, EmuFault.SILENT):
                 self.devices.answer(msg)
+                if self.canopen is not None and node in self._beat_period:
+                    self._heartbeat_changed(node)
             return
         if self.canopen is not None and msg.arbitration_id in self.canopen.rpdo_of:
             if not self._fault(CONTROLLER_NODE, EmuFault.DROP):
@@ -423,14 +450,25 @@ class Emulator:
                     self.sim.valves[leg - 1].boot()
                 if self.canopen is not None:          # a stock device forgets what a master wrote
                     self.canopen.reset(n)
+                    if n in self._beat_period:
+                        self._heartbeat_changed(n)
                 self.nmt[n] = NmtState.BOOTUP
                 self._heartbeat(n)
                 self.nmt[n] = NmtState.PRE_OPERATIONAL
 
     def _start(self, node: int) -> None:
-        """NMT start: OPERATIONAL, a stock device only with PDOs it can carry."""
-        if self.canopen is None or self.canopen.start(node):
-            self.nmt[node] = NmtState.OPERATIONAL
+        """NMT start: OPERATIONAL, a stock device only with PDOs it can carry; a stock valve's
+        command timeout is its RPDO timeout as written (0x1400:5), in SYNC periods."""
+        if self.canopen is not None:
+            if not self.canopen.start(node):
+                return
+            leg = self._leg_of_valve.get(node)
+            if leg is not None:
+                timeout_ms = self.canopen.rpdo_timeout_ms(node)
+                period_ms = self.cfg.nodes.sync_period_s * 1e3
+                self.sim.valves[leg - 1].command_timeout_syncs = (
+                    math.ceil(timeout_ms / period_ms - 1e-9) if timeout_ms else NO_COMMAND_TIMEOUT)
+        self.nmt[node] = NmtState.OPERATIONAL
 
     def _operational(self, node: int) -> bool:
         return self.nmt[node] == NmtState.OPERATIONAL

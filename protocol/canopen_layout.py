@@ -13,6 +13,7 @@ import math
 import tomllib
 from dataclasses import dataclass
 
+from program.errors import UserInputError
 from protocol.dbc import CONTROLLER_NODE, Schedule, schedules
 from protocol.devices import DEVICES_DIR, object_dictionary
 from protocol.pdo import RPDO, TPDO, pdo_maps
@@ -33,6 +34,25 @@ class Device:
     node: int
     sync_start: int = 0        # every-n-th-SYNC TPDOs' start value (0: the EDS's)
     leg: int | None = None     # the leg it belongs to (None: the platform's, the IMU)
+    settings: tuple[tuple[int, int, int], ...] = ()    # (index, sub-index, value) written before the PDOs
+
+
+def _settings(entry: dict, kind: str, path) -> tuple[tuple[int, int, int], ...]:
+    """A kind's `settings` table as (index, sub-index, value), each an object of its EDS; a
+    key that is not one is a line naming the layout file, the kind and the key."""
+    od = object_dictionary(entry["eds"])
+    out = []
+    for key, value in entry.get("settings", {}).items():
+        index, _, sub = key.partition(":")
+        try:
+            where = (int(index, 16), int(sub or "0", 0))
+        except ValueError:
+            raise UserInputError(f"{path}: [{kind}] settings key {key!r} is not \"0xIIII\" or \"0xIIII:S\"") from None
+        if od.get_variable(*where) is None or not isinstance(value, int) or isinstance(value, bool):
+            raise UserInputError(f"{path}: [{kind}] settings {key} = {value!r}: not an integer object of "
+                                 f"{entry['eds']}")
+        out.append((*where, value))
+    return tuple(out)
 
 
 def load_layout(n_legs: int, path=LAYOUT_FILE) -> list[Device]:
@@ -45,9 +65,10 @@ def load_layout(n_legs: int, path=LAYOUT_FILE) -> list[Device]:
             entry = layout[kind]
             starts = entry.get("sync_start", [])
             devices.append(Device(f"LEG{leg}_{kind.upper()}", entry["eds"], entry["node"] + leg - 1,
-                                  starts[leg - 1] if starts else 0, leg))
+                                  starts[leg - 1] if starts else 0, leg, _settings(entry, kind, path)))
     if n_legs == 6:
-        devices.append(Device("IMU", layout["imu"]["eds"], layout["imu"]["node"]))
+        devices.append(Device("IMU", layout["imu"]["eds"], layout["imu"]["node"],
+                              settings=_settings(layout["imu"], "imu", path)))
     return devices
 
 

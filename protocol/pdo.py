@@ -33,10 +33,11 @@ SYNC_CYCLIC_MAX = 240                # transmission types 1..240: every n-th SYN
 DUMMY_INDEX_MAX = 0x001F             # entries at the data types' indices are padding (dummy mapping)
 
 
-# CiA 301 SDO abort codes with which a device refuses a mapping
+# CiA 301 SDO abort codes with which a device refuses a write
 SDO_ABORT_NOT_MAPPABLE = 0x06040041       # object cannot be mapped to the PDO
 SDO_ABORT_PDO_LENGTH = 0x06040042         # the objects to be mapped would exceed the PDO's length
 SDO_ABORT_TOO_HIGH = 0x06090031           # value of parameter written too high (more entries than it has)
+SDO_ABORT_TOO_LOW = 0x06090032            # value of parameter written too low
 
 
 class PdoError(ValueError):

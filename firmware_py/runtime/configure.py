@@ -1,6 +1,7 @@
-"""Configure stock CANopen devices before starting them: each node's PDOs as its EDS maps them,
-with the layout's SYNC start values (`protocol/devices/canopen-layout.toml`), written by SDO
-in CiA 301's order (the PDO disabled, its mapping's count 0, the entries, the count, its
+"""Configure stock CANopen devices before starting them: each node's layout settings (heartbeat
+producer, the valve's device and control mode, hold setpoint, RPDO timeout), then its PDOs as
+its EDS maps them with the layout's SYNC start values (`protocol/devices/canopen-layout.toml`),
+written by SDO in CiA 301's order (the PDO disabled, its mapping's count 0, the entries, the count, its
 transmission type and SYNC start, the PDO enabled again), then every object read back.
 
 The first write a node refuses (an SDO abort: an object it lacks, a mapping it cannot carry),
@@ -35,9 +36,10 @@ class Write:
 
 
 def node_writes(device: Device) -> list[Write]:
-    """The SDO writes that configure `device`'s PDOs, in CiA 301's order."""
+    """The SDO writes that configure `device`: its layout settings, then its PDOs in CiA 301's
+    order."""
     od = object_dictionary(device.eds, device.node)
-    writes = []
+    writes = [Write(index, sub, value) for index, sub, value in device.settings]
     for kind in (RPDO, TPDO):
         for pdo in pdo_maps(od, kind, device.name):
             comm, mapping = (base + pdo.number - 1 for base in PARAMETER_BASES[kind])

@@ -20,7 +20,7 @@ from canopen.objectdictionary.datatypes import INTEGER_TYPES
 
 from program.errors import UserInputError
 from program.sections import STR, Key
-from protocol.pdo import mapping_write_abort
+from protocol.pdo import SDO_ABORT_TOO_HIGH, SDO_ABORT_TOO_LOW, mapping_write_abort
 
 DEVICES_DIR = Path(__file__).parent
 DEVICE_PROFILES = ("hydrapod", "canopen")   # the project's DBC nodes, or stock CANopen devices
@@ -86,7 +86,8 @@ def identity_of(name: str) -> Identity:
 def local_node(node_id: int, name: str, identity: Identity | None = None) -> canopen.LocalNode:
     """A device of this EDS as a node that answers SDO (canopen's LocalNode: the emulator's
     devices); 0x1000 and 0x1018 from `identity` (default: the EDS's own). Like a stock device
-    it refuses, with CiA 301's abort code, a PDO mapping it cannot carry."""
+    it refuses, with CiA 301's abort code, a value beyond an object's EDS limits and a PDO
+    mapping it cannot carry."""
     identity = identity or identity_of(name)
     od = object_dictionary(name, node_id)
     node = canopen.LocalNode(node_id, od)
@@ -95,14 +96,30 @@ def local_node(node_id: int, name: str, identity: Identity | None = None) -> can
                                 (REVISION, identity.revision)):
         node.set_data(index, sub, value.to_bytes(4, "little"))
 
-    def refuse_a_bad_mapping(index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes):
-        code = mapping_write_abort(node.object_dictionary, written_values(node), index, subindex,
-                                   int(od.decode_raw(data)) if od.data_type in INTEGER_TYPES else 0, name)
+    def refuse_what_it_cannot_take(index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes):
+        if od.data_type not in INTEGER_TYPES:
+            return
+        value = int(od.decode_raw(data))
+        code = range_abort(od, value) or mapping_write_abort(node.object_dictionary, written_values(node), index,
+                                                             subindex, value, name)
         if code:
             raise canopen.SdoAbortedError(code)
 
-    node.add_write_callback(refuse_a_bad_mapping)
+    node.add_write_callback(refuse_what_it_cannot_take)
+    # canopen's own heartbeat producer on a write of 0x1017 (a thread of its own): the node's
+    # owner sends its heartbeats, on its clock (the emulator, plant_emulator/canopen_nodes.py)
+    if node.nmt.on_write in node._write_callbacks:
+        node._write_callbacks.remove(node.nmt.on_write)
     return node
+
+
+def range_abort(variable: canopen.objectdictionary.ODVariable, value: int) -> int:
+    """The SDO abort for `value` beyond the object's EDS LowLimit/HighLimit (0: within)."""
+    if variable.min is not None and value < variable.min:
+        return SDO_ABORT_TOO_LOW
+    if variable.max is not None and value > variable.max:
+        return SDO_ABORT_TOO_HIGH
+    return 0
 
 
 def written_values(node: canopen.LocalNode) -> dict[tuple[int, int], int]:

@@ -37,6 +37,14 @@ def master(request):
     emulated.close()
 
 
+def test_a_valves_settings_go_first_then_its_pdos():
+    (valve,) = [d for d in load_layout(6) if d.name == "LEG2_VALVE"]
+    writes = node_writes(valve)
+    assert writes[:5] == [Write(0x1017, 0, 100), Write(0x6042, 0, 1), Write(0x6043, 0, 1), Write(0x6314, 1, 0),
+                          Write(0x1400, 5, 6)]                                  # the layout's, in its order
+    assert writes[5] == Write(0x1400, 1, 0x202 | COB_ID_INVALID)
+
+
 def test_the_writes_follow_cia_301_s_order_for_a_remapping():
     (sensors,) = [d for d in load_layout(6) if d.name == "LEG3_LEG_SENSORS"]
     writes = node_writes(sensors)
@@ -54,7 +62,8 @@ def test_the_layout_configured_and_read_back_is_what_the_devices_then_send(maste
     configure(client_of, devices)
     node_of = {d.name: d.node for d in devices}
     stored = written_values(emulated.emulator.devices.nodes[node_of["LEG3_LEG_SENSORS"]])
-    assert stored[(0x1801, 6)] == 5 and stored[(0x1A01, 0)] == 3
+    assert stored[(0x1801, 6)] == 5 and stored[(0x1A01, 0)] == 3 and stored[(0x1017, 0)] == 100
+    assert written_values(emulated.emulator.devices.nodes[node_of["LEG4_VALVE"]])[(0x1400, 5)] == 6
 
     # started, the pressures' TPDO2 of each leg comes at its own SYNCs: legs 1-6 at 1, 3, 5, 9, 11, 13
     heard: dict[int, list[int]] = {}
@@ -125,6 +134,7 @@ def test_the_command_configures_a_rig_or_names_the_node_in_one_line(request):
                          "--sdo-timeout-ms", "50")
         assert wrong.returncode == 2 and wrong.stdout == ""
         assert wrong.stderr.strip().count("\n") == 0, wrong.stderr
-        assert "protocol configure: node 2 (LEG2_VALVE): 0x1400:1" in wrong.stderr and "no SDO answer" in wrong.stderr
+        assert "protocol configure: node 2 (LEG2_VALVE): 0x1017:0 (Producer heartbeat time): no SDO answer" \
+            in wrong.stderr
     finally:
         emulated.close()

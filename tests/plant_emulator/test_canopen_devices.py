@@ -97,6 +97,7 @@ def test_a_master_drives_a_stock_valve_to_active_and_its_remapping_shows_on_the_
     valve = network.add_node(LAYOUT["valve"]["node"], str(DEVICES / LAYOUT["valve"]["eds"]))
     valve.rpdo.read()
     valve.tpdo.read()
+    valve.sdo[0x1400][5].raw = 6                  # RPDO1's timeout (its event timer): three SYNCs of 2 ms
     valve.nmt.state = "OPERATIONAL"
     counter, trace = 0, []
     for control, setpoint, syncs in ((0x0, 0, 3), (0x3, 0, 3), (0x7, 4096, 40)):   # DISABLED, HOLD, ACTIVE 25 %
