@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import logging
 from dataclasses import asdict
 
 from hil.tools.protocol_bench import format_bench, run_bench
@@ -14,7 +13,7 @@ from protocol import canopen_layout
 from protocol.busload import MAX_LOAD, MIN_COMPUTE_WINDOW_US, bus_budget, format_budget
 from protocol.codec import CODECS
 from protocol.dbc import dbc_path
-from protocol.devices import DEVICE_PROFILES
+from protocol.devices import DEVICE_PROFILES, canopen_log_quiet
 from protocol.nodes import LEGS_OF_RIG, RIGS
 
 CLASSIC_CAN_MAX_BITRATE = 1_000_000
@@ -160,14 +159,12 @@ def cmd_protocol_configure(args: argparse.Namespace) -> int:
         sdo.RESPONSE_TIMEOUT, sdo.MAX_RETRIES = args.sdo_timeout_ms / 1e3, 1          # one request each
         return sdo
 
-    quiet = logging.getLogger("canopen")            # its own log of an abort: the error line says it
-    level, quiet.level = quiet.level, logging.CRITICAL
     try:
-        configure(client_of, devices)
+        with canopen_log_quiet():
+            configure(client_of, devices)
     except ConfigurationError as error:
         raise UserInputError(f"protocol configure: {error}") from None
     finally:
-        quiet.setLevel(level)
         network.disconnect()
     rows = []
     for device in devices:

@@ -11,6 +11,8 @@ SDO frames (0x600 + node to the node, 0x580 + node back) are CiA 301's and not i
 
 from __future__ import annotations
 
+import logging
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -48,6 +50,19 @@ class Identity:
     def value(self, name: str) -> int:
         return {"device type": self.device_type, "vendor id": self.vendor_id, "product code": self.product_code,
                 "revision": self.revision}[name]
+
+
+@contextmanager
+def canopen_log_quiet():
+    """canopen's own log (the abort it sends after a timeout) kept off stderr meanwhile: the
+    caller's one line says what failed."""
+    log = logging.getLogger("canopen")
+    level = log.level
+    log.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        log.setLevel(level)
 
 
 def device_file(name: str) -> Path:

@@ -2,6 +2,7 @@
 SDO and starts none (no NMT start, no valve command) when one is not its configured device;
 the refusal is one line naming the node and the object."""
 
+import logging
 import os
 import subprocess
 import sys
@@ -84,13 +85,16 @@ def test_one_node_of_another_product_is_named():
     assert NMT not in bus.order
 
 
-def test_a_node_that_does_not_answer_sdo_is_named_after_the_timeout():
+def test_a_node_that_does_not_answer_sdo_is_named_after_the_timeout(caplog):
+    caplog.set_level(logging.INFO, logger="canopen")
     loop, bus, _ = _loop(controller_overrides={"devices": {"sdo_timeout_ms": 50.0}})
     del bus.emulator.devices._request[SDO_REQUEST_BASE + 5]       # its heartbeat, no SDO server
     with pytest.raises(IdentityError, match=r"^node 5 \(LEG5\): no SDO answer reading its device type "
                                             r"\(0x1000:0\) within 50 ms$"):
         loop.activate()
     assert NMT not in bus.order
+    # the line above is all it says: not canopen's own log of the abort it sent too
+    assert not [r for r in caplog.records if r.name.startswith("canopen")], caplog.records
 
 
 def test_an_aborted_read_is_named_with_the_abort():
