@@ -25,7 +25,7 @@ from protocol import canopen_profile as cp
 from protocol.canopen_layout import Device, load_layout
 from protocol.codec import EncodeStatus
 from protocol.devices import written_values
-from protocol.pdo import RPDO, TPDO, PdoCodec, PdoError, pdo_maps
+from protocol.pdo import RPDO, TPDO, PdoCodec, PdoError, object_value, pdo_maps
 
 HEARTBEAT_BASE = 0x700
 HEARTBEAT_TIME = (0x1017, 0)                              # producer heartbeat time, ms
@@ -40,6 +40,10 @@ class _Pdo:
         self.device, self.codec = device, codec
         self.entries = codec.pdo.entries()
         self.values = np.zeros(len(self.entries))
+        # the samples it carries that the DBC profile's schedule may not have taken at a SYNC
+        self.pressures = device.leg is not None and any(e in LEG_PRESSURES for e in self.entries)
+        self.attitude = device.leg is None and any(e in cp.IMU_ATTITUDE for e in self.entries)
+        self.rate = device.leg is None and any(e in cp.IMU_RATE for e in self.entries)
         self.message = can.Message(arbitration_id=codec.frame_id, data=codec.new_buffer(), is_extended_id=False)
 
 
@@ -50,9 +54,12 @@ class CanopenNodes:
         self.layout = load_layout(n_legs)
         self.device = {d.node: d for d in self.layout}
         self.valve_node = {d.leg: d.node for d in self.layout if d.name.endswith("_VALVE")}
+        # each leg's nodes (its valve, encoder and measuring device): any started samples the leg
+        self.leg_nodes = {leg: tuple(d.node for d in self.layout if d.leg == leg) for leg in self.valve_node}
         self.sdo = EmulatedDevices({d.node: d.eds for d in self.layout}, send)
         self.send = send
         self.tpdos: dict[int, list[_Pdo]] = {}          # node -> its TPDOs as started
+        self._tx_order: list[int] = []                  # started nodes, the IMU's first, then by leg
         self.rpdo_of: dict[int, _Pdo] = {}              # COB-ID -> the RPDO it carries
         self.control = {leg: 0 for leg in self.valve_node}   # each valve's last control word
 
@@ -79,20 +86,23 @@ class CanopenNodes:
         except PdoError as error:
             print(f"emulator: node {node} not started: {error}", file=sys.stderr, flush=True)
             return False
+        self._forget(node)
         self.tpdos[node] = tpdos
-        for cob_id in [c for c, pdo in self.rpdo_of.items() if pdo.device.node == node]:
-            del self.rpdo_of[cob_id]
+        self._tx_order = sorted(self.tpdos, key=lambda n: self.device[n].leg or 0)
         self.rpdo_of.update({pdo.codec.frame_id: pdo for pdo in rpdos})
         return True
+
+    def _forget(self, node: int) -> None:
+        """The node's PDOs as started no longer carried."""
+        self.tpdos.pop(node, None)
+        self._tx_order = [n for n in self._tx_order if n != node]
+        for cob_id in [c for c, pdo in self.rpdo_of.items() if pdo.device.node == node]:
+            del self.rpdo_of[cob_id]
 
     def setting(self, node: int, index: int, sub: int = 0) -> int:
         """An object's value in the node: as written, else its EDS default (0: none)."""
         local = self.sdo.nodes[node]
-        written = written_values(local)
-        if (index, sub) in written:
-            return written[(index, sub)]
-        variable = local.object_dictionary.get_variable(index, sub)
-        return int(variable.default) if variable is not None and variable.default is not None else 0
+        return object_value(local.object_dictionary, written_values(local), index, sub) or 0
 
     def heartbeat_s(self, node: int) -> float:
         """The node's heartbeat producer time (0x1017; 0: it sends none)."""
@@ -105,9 +115,7 @@ class CanopenNodes:
     def reset(self, node: int) -> None:
         """NMT reset: the node powers up again with its EDS's defaults."""
         self.sdo.reset(node)
-        self.tpdos.pop(node, None)
-        for cob_id in [c for c, pdo in self.rpdo_of.items() if pdo.device.node == node]:
-            del self.rpdo_of[cob_id]
+        self._forget(node)
 
     # -- receive ------------------------------------------------------------------------------
     def receive_rpdo(self, frame_id: int, data, valves, operational) -> int | None:
@@ -133,7 +141,7 @@ class CanopenNodes:
     def send_tpdos(self, counter: int, sim, operational) -> None:
         """This SYNC's TPDOs of every OPERATIONAL device, the IMU's first (as the DBC
         profile's), with the samples of `sim` (`simulated_rig.SimulatedRig`)."""
-        for node in sorted(self.tpdos, key=lambda n: self.device[n].leg or 0):
+        for node in self._tx_order:
             if not operational(node):
                 continue
             for pdo in self.tpdos[node]:
@@ -151,11 +159,11 @@ class CanopenNodes:
         if leg is not None and not sim.sampled[i]:
             return False
         # what the DBC profile's schedule did not sample at this SYNC, sampled now
-        if leg is not None and not sim.pressure_due[i] and any(e in LEG_PRESSURES for e in pdo.entries):
+        if pdo.pressures and not sim.pressure_due[i]:
             sim.sensors.pressures(sim.rig, i, sim.pressure[i])
-        if leg is None and not sim.attitude_due and any(e in cp.IMU_ATTITUDE for e in pdo.entries):
+        if pdo.attitude and not sim.attitude_due:
             sim.sensors.attitude(sim.rig, sim.attitude_rad)
-        if leg is None and not sim.rate_due and any(e in cp.IMU_RATE for e in pdo.entries):
+        if pdo.rate and not sim.rate_due:
             sim.sensors.rate(sim.rig, sim.rate_rad_s)
         for k, entry in enumerate(pdo.entries):
             pdo.values[k] = self._value(entry, pdo.device, i, sim)

@@ -140,7 +140,7 @@ class Emulator:
         self._delayed: list[can.Message] = []              # DELAY: frames sent at the next SYNC
         self._onsets: list[dict] = []                      # injected since the last SYNC
         self._leg_operational = np.zeros(rig.n_legs, dtype=bool)
-        self._leg_sensing = np.zeros(rig.n_legs, dtype=bool)         # a leg's sensors OPERATIONAL
+        self._leg_sensing = np.zeros(rig.n_legs, dtype=bool)         # a leg's stock devices: any OPERATIONAL
         self._overflow = sync_counter_overflow()
         self.phase_s = np.zeros((SYNC_HISTORY, len(SYNC_PHASES)))     # per SYNC, seconds
         self.devices = self.canopen.sdo if self.canopen is not None else EmulatedDevices(
@@ -524,7 +524,7 @@ class Emulator:
         sensing = self._leg_operational
         if self.canopen is not None:              # a leg's encoder and measuring device are nodes of their own
             for i, n in enumerate(self.legs):
-                self._leg_sensing[i] = any(self._operational(d.node) for d in self.canopen.layout if d.leg == n)
+                self._leg_sensing[i] = any(self._operational(node) for node in self.canopen.leg_nodes[n])
             sensing = self._leg_sensing
         for i, emergency in sim.valves_on_sync(self._leg_operational):
             self._emergency(i + 1, emergency)

@@ -27,6 +27,7 @@ from protocol.codec import STANDARD_ID_MASK, EncodeStatus
 RPDO, TPDO = "RPDO", "TPDO"
 PARAMETER_BASES = {RPDO: (0x1400, 0x1600), TPDO: (0x1800, 0x1A00)}    # communication, mapping
 PDOS_PER_KIND = 512
+COB_ID, TRANSMISSION_TYPE, SYNC_START = 1, 2, 6       # the communication parameter's sub-indices
 COB_ID_INVALID = 1 << 31             # the PDO does not exist (CiA 301, 0x14xx/0x18xx:1 bit 31)
 PDO_MAX_BITS = 64
 SYNC_CYCLIC_MAX = 240                # transmission types 1..240: every n-th SYNC
@@ -99,7 +100,7 @@ class PdoMap:
         return tuple((obj.index, obj.subindex) for obj in self.objects if not obj.dummy)
 
 
-def _value(od: canopen.ObjectDictionary, written: dict, index: int, subindex: int) -> int | None:
+def object_value(od: canopen.ObjectDictionary, written: dict, index: int, subindex: int) -> int | None:
     """An object's value: as written, else its EDS default (None: the device lacks it)."""
     if (index, subindex) in written:
         return int(written[(index, subindex)])
@@ -133,12 +134,12 @@ def _mapping(od, kind: str, k: int, device: str, written: dict) -> tuple[MappedO
     """PDO k's (0-based) mapped objects, each checked against `od`."""
     map_index = PARAMETER_BASES[kind][1] + k
     where = f"{kind}{k + 1}"
-    count = _value(od, written, map_index, 0)
+    count = object_value(od, written, map_index, 0)
     if count is None:
         raise PdoError(f"{device} {where}: no mapping object 0x{map_index:04X}")
     objects, offset = [], 0
     for sub in range(1, count + 1):
-        entry = _value(od, written, map_index, sub)
+        entry = object_value(od, written, map_index, sub)
         if entry is None:
             raise PdoError(f"{device} {where}: mapping 0x{map_index:04X} has {count} entries, no sub-index {sub}",
                            SDO_ABORT_TOO_HIGH)
@@ -157,12 +158,12 @@ def pdo_maps(od: canopen.ObjectDictionary, kind: str, device: str = "device",
     comm_base = PARAMETER_BASES[kind][0]
     out = []
     for k in range(PDOS_PER_KIND):
-        cob_id = _value(od, written, comm_base + k, 1)
+        cob_id = object_value(od, written, comm_base + k, COB_ID)
         if cob_id is None or cob_id & COB_ID_INVALID:
             continue
         objects = _mapping(od, kind, k, device, written)
-        transmission = _value(od, written, comm_base + k, 2)
-        sync_start = _value(od, written, comm_base + k, 6) or 0
+        transmission = object_value(od, written, comm_base + k, TRANSMISSION_TYPE)
+        sync_start = object_value(od, written, comm_base + k, SYNC_START) or 0
         out.append(PdoMap(device, kind, k + 1, cob_id & STANDARD_ID_MASK, 255 if transmission is None else transmission,
                           sync_start, objects))
     return out

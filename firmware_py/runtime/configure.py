@@ -19,9 +19,7 @@ from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
 from protocol.canopen_layout import Device
 from protocol.devices import object_dictionary
-from protocol.pdo import COB_ID_INVALID, PARAMETER_BASES, RPDO, TPDO, pdo_maps
-
-COB_ID, TRANSMISSION_TYPE, SYNC_START = 1, 2, 6       # communication parameter sub-indices
+from protocol.pdo import COB_ID, COB_ID_INVALID, PARAMETER_BASES, RPDO, SYNC_START, TPDO, TRANSMISSION_TYPE, pdo_maps
 
 
 class ConfigurationError(RuntimeError):
