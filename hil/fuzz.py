@@ -129,7 +129,7 @@ def fuzz_decoder(count: int, seed: int) -> FuzzReport:
         except Exception as error:
             exceptions += 1
             first = first or f"{type(error).__name__}: {error}"
-    return _report("decoder", count, seed, decoder, exceptions, first, 0, 0, time.perf_counter() - start)
+    return _report("decoder", count, seed, (decoder,), exceptions, first, 0, 0, time.perf_counter() - start)
 
 
 def fuzz_controller(count: int, seed: int, controller: str = "model-based") -> FuzzReport:
@@ -139,7 +139,8 @@ def fuzz_controller(count: int, seed: int, controller: str = "model-based") -> F
     loop = ControllerLoop(_QuietBus(), ctl, 500.0, "lockstep", log=lambda _: None)
     rig.cycle()
     ctl.activated(True)
-    names = list(loop.decoder.names)
+    decoders = (loop.hardware.decoder, loop.decoder)         # the devices' frames and the host's
+    names = [name for decoder in decoders for name in decoder.names]
     exceptions, first, non_finite = 0, "", 0
     start = time.perf_counter()
     for i, msg in enumerate(frames(count, seed, names)):
@@ -152,16 +153,18 @@ def fuzz_controller(count: int, seed: int, controller: str = "model-based") -> F
         except Exception as error:
             exceptions += 1
             first = first or f"{type(error).__name__}: {error}"
-    return _report("controller", count, seed, loop.decoder, exceptions, first, loop.stats.host_commands,
+    return _report("controller", count, seed, decoders, exceptions, first, loop.stats.host_commands,
                    non_finite, time.perf_counter() - start)
 
 
-def _report(target, count, seed, decoder, exceptions, first, host_commands, non_finite, seconds) -> FuzzReport:
-    counts = decoder.counts.sum(axis=0)
-    counted = int(counts.sum()) - int(counts[RxStatus.NO_NEW_DATA]) + decoder.unknown_frames
+def _report(target, count, seed, decoders, exceptions, first, host_commands, non_finite, seconds) -> FuzzReport:
+    """`decoders` in the order a frame meets them: one the last does not know is not ours."""
+    counts = sum(decoder.counts.sum(axis=0) for decoder in decoders)
+    unknown = decoders[-1].unknown_frames
+    counted = int(counts.sum()) - int(counts[RxStatus.NO_NEW_DATA]) + unknown
     accepted = int(counts[RxStatus.OK])
     return FuzzReport(target, count, seed, exceptions, counted, accepted,
-                      counted - accepted - decoder.unknown_frames, decoder.unknown_frames, host_commands,
+                      counted - accepted - unknown, unknown, host_commands,
                       non_finite, round(seconds, 2), first)
 
 

@@ -127,16 +127,16 @@ class InProcessLoop:
 
 
 def bus_loop(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig, rig: str, kind: str,
-             activate: bool = True, pacing: str = "lockstep", outside=None):
+             activate: bool = True, pacing: str = "lockstep", outside=None, devices: str = "hydrapod"):
     """(loop, controller, bus): the controller's loop on an in-process bus with the emulator's
-    `rig` behind it (`outside`: called around the emulator's work); activated by default:
-    READY holding where the rig stands."""
+    `rig` behind it as `devices` (`outside`: called around the emulator's work); activated by
+    default: READY holding where the rig stands."""
     ctl = Controller(controller_cfg, rig, PERIOD_S, CONTROLLER_NAMES[kind])
     if pacing == "lockstep":                 # as `hil run`: the valves' watchdog outlasts the lockstep wait
         emulator_cfg = build(merge(emulator_cfg.raw, {"nodes": {"sync_timeout_periods": LOCKSTEP_SYNC_TIMEOUT_PERIODS}},
                                    "lockstep"))
-    bus = LoopbackBus(make_rig(rig, emulator_cfg), emulator_cfg, outside)
-    loop = ControllerLoop(bus, ctl, 1.0 / PERIOD_S, pacing, clock=bus.clock, log=lambda _: None)
+    bus = LoopbackBus(make_rig(rig, emulator_cfg), emulator_cfg, outside, devices)
+    loop = ControllerLoop(bus, ctl, 1.0 / PERIOD_S, pacing, clock=bus.clock, log=lambda _: None, devices=devices)
     if activate:
         loop.activate()
     return loop, ctl, bus

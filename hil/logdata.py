@@ -17,6 +17,7 @@ from pathlib import Path
 import can
 import numpy as np
 
+from hil.logdata_canopen import CanopenLog
 from program.errors import UserInputError
 from protocol.codec import CODECS, FrameDecoder
 from protocol.dbc import sync_counter_overflow, truth_phase
@@ -154,14 +155,15 @@ def _read_frames(path: Path) -> list[tuple]:
     return frames
 
 
-def _assign_cycles(frames: list[tuple]) -> np.ndarray:
+def _assign_cycles(frames: list[tuple], device_ids: frozenset = frozenset()) -> np.ndarray:
     """The cycle of every frame (see the module docstring).
 
     On a real bus, log order is bus order. On the on-host multicast bus the kernel can hand
     the recorder frames of different senders out of order (per-CPU queues), while each
     sender's own frames stay in order. So: SYNC counters number the cycles; the
-    controller's frames follow their SYNC; the emulator's cyclic frames belong to the cycle
-    of the EMU_TRUTH that closes them (it carries the SYNC counter's low 4 bits).
+    controller's frames follow their SYNC; the emulator's cyclic frames (and `device_ids`,
+    stock devices' TPDOs) belong to the cycle of the EMU_TRUTH that closes them (it carries
+    the SYNC counter's low 4 bits).
     """
     sync_id = CODECS["SYNC"].frame_id
     truth_id = CODECS["EMU_TRUTH"].frame_id
@@ -182,7 +184,7 @@ def _assign_cycles(frames: list[tuple]) -> np.ndarray:
         return by_order
     out = by_order.copy()
     emulator_ids = {c.frame_id for c in CODECS.values()
-                    if c.schedule.sender in EMULATOR_SENDERS and c.schedule.sync_period > 0}
+                    if c.schedule.sender in EMULATOR_SENDERS and c.schedule.sync_period > 0} | device_ids
     truth_cycle = {}
     previous, previous_t = None, -math.inf
     for i in truths:
@@ -212,15 +214,19 @@ def _assign_cycles(frames: list[tuple]) -> np.ndarray:
     return out
 
 
-def read_log(path: str | Path) -> LogData:
-    """Read and decode a BLF or ASC log; a missing or unreadable file is one line (UserInputError)."""
+def read_log(path: str | Path, devices: str = "hydrapod") -> LogData:
+    """Read and decode a BLF or ASC log of a run on `devices` (stock CANopen devices' PDOs read
+    as the DBC messages they stand for, `logdata_canopen`); a missing or unreadable file is
+    one line (UserInputError)."""
     path = Path(path)
     if path.suffix.lower() not in LOG_SUFFIXES:
         raise UserInputError(f"{path}: not a log this reads (expected {' or '.join(LOG_SUFFIXES)})")
     if not path.is_file():
         raise UserInputError(f"{path}: no such log file")
     frames = _read_frames(path)
-    cycles = _assign_cycles(frames)
+    canopen = CanopenLog() if devices == "canopen" else None
+    pdo_ids = frozenset(canopen.ids) if canopen is not None else frozenset()
+    cycles = _assign_cycles(frames, frozenset(canopen.tpdo_ids) if canopen is not None else frozenset())
     order = np.argsort(cycles, kind="stable")       # each sender's own order is kept
     decoder = FrameDecoder()
     rows: dict[str, list] = {name: [] for name in CODECS}
@@ -234,6 +240,9 @@ def read_log(path: str | Path) -> LogData:
     for i in order:
         frame_id, data, timestamp = frames[i]
         if frame_id is None:
+            continue
+        if frame_id in pdo_ids:
+            canopen.take(frame_id, data, int(cycles[i]), timestamp, rows)
             continue
         status = decoder.receive(frame_id, data)
         if status is not RxStatus.OK:
@@ -252,6 +261,10 @@ def read_log(path: str | Path) -> LogData:
             events.append(Event(cycle, timestamp, name, {s: float(values[k]) for s, k in codec.index.items()}))
         else:
             rows[name].append((cycle, timestamp, *values))
+    if canopen is not None:
+        canopen.flush(rows)
+        for name, cycles_rejected in canopen.rejected.items():
+            rejected.setdefault(name, []).extend(cycles_rejected)
     cycle = int(cycles.max()) if len(cycles) else -1
     series = {}
     for name, data in rows.items():
@@ -262,6 +275,8 @@ def read_log(path: str | Path) -> LogData:
                               dict(CODECS[name].index))
     rx_counts = {name: {s.name: int(decoder.counts[i, s]) for s in RxStatus if decoder.counts[i, s]}
                  for i, name in enumerate(decoder.names) if decoder.counts[i].any()}
+    if canopen is not None:
+        rx_counts.update(canopen.counts)
     lost = {name: int(decoder.lost[i]) for i, name in enumerate(decoder.names) if decoder.lost[i]}
     sync_time_s = np.full(cycle + 1, np.nan)
     for k, t in sync_times:

@@ -63,6 +63,7 @@ class RunOptions:
     bus: str | None = None           # None: a fresh multicast group and port; "default": the default bus
     pacing: str | None = None        # None: the scenario's
     rate_hz: float = 500.0
+    devices: str = "hydrapod"        # the rig's devices: the project's own nodes, or stock CANopen devices
     short: bool = False
     controllers: tuple[str, ...] | None = None
     loads: tuple[float, ...] | None = None    # kg; scenarios that sweep loads: these instead of the plan's
@@ -147,7 +148,8 @@ class Run:
         child = Child(name, ["-m", "plant_emulator", "--bus", str(self.spec), "--rig", self.scenario.rig,
                              "--rate-hz", str(self.options.rate_hz),
                              "--sync-watchdog-periods", f"{watchdog:g}", "--config", str(config),
-                             "--summary", str(self.out / f"{name}.json"), "--pacing", self.pacing], self.out)
+                             "--summary", str(self.out / f"{name}.json"), "--pacing", self.pacing,
+                             "--devices", self.options.devices], self.out)
         heartbeats = self.host.node_heartbeats
         child.start()                # realtime: it locks its memory and runs SCHED_FIFO itself
         self.children.append(child)
@@ -171,7 +173,7 @@ class Run:
         config.write_text(toml_sections(merged))
         child = Child(name, ["-m", "firmware_py", "--bus", str(self.spec), "--rig", self.scenario.rig,
                              "--rate-hz", str(self.options.rate_hz), "--pacing", self.pacing,
-                             "--controller", controller, "--config", str(config),
+                             "--controller", controller, "--config", str(config), "--devices", self.options.devices,
                              "--summary", str(self.out / f"{name}.json")], self.out)
         child.start()
         self.children.append(child)
@@ -381,7 +383,7 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
         bus.shutdown()
         thaw_gc()
     wall_s = time.monotonic() - started
-    log = read_log(out / LOG_NAME)
+    log = read_log(out / LOG_NAME, options.devices)
     unexplained = faults_in_windows(log, run.period_s, run.start_retries)
     if unexplained:
         failure = (failure + "\n" if failure else "") + \
@@ -391,7 +393,8 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
     if diverged:
         failure = (failure + "\n" if failure else "") + diverged
     doc = write_outputs(scenario, log, out, extra={
-        "bus": str(spec), "pacing": pacing, "rate_hz": options.rate_hz, "short": options.short,
+        "bus": str(spec), "pacing": pacing, "rate_hz": options.rate_hz, "devices": options.devices,
+        "short": options.short,
         "wall_time_s": round(wall_s, 1), "frames_sent_by_host": run.host.frames_sent,
         "frames_received_by_host": run.host.frames_received, "notes": run.notes,
         "children": children, "failure": failure}, plots=options.plots)
@@ -422,9 +425,9 @@ def _plant_diverged(children: dict) -> str | None:
     return None
 
 
-def analyze_log(scenario: Scenario, log_path: Path, out: Path) -> dict:
+def analyze_log(scenario: Scenario, log_path: Path, out: Path, devices: str = "hydrapod") -> dict:
     """`hydrapod hil analyze`: the same analysis on any recorded log (rig or emulator)."""
-    log = read_log(log_path)
+    log = read_log(log_path, devices)
     output_dir(out)
     return write_outputs(scenario, log, out, extra={"analysed_log": str(log_path)})
 

@@ -25,6 +25,7 @@ from protocol import canopen_profile as cp
 from protocol.canopen_layout import Device, load_layout
 from protocol.codec import EncodeStatus
 from protocol.devices import written_values
+from protocol.nodes import IMU_NODE
 from protocol.pdo import RPDO, TPDO, PdoCodec, PdoError, object_value, pdo_maps
 
 HEARTBEAT_BASE = 0x700
@@ -45,6 +46,7 @@ class _Pdo:
         self.attitude = device.leg is None and any(e in cp.IMU_ATTITUDE for e in self.entries)
         self.rate = device.leg is None and any(e in cp.IMU_RATE for e in self.entries)
         self.message = can.Message(arbitration_id=codec.frame_id, data=codec.new_buffer(), is_extended_id=False)
+        self.fault_node = device.leg if device.leg is not None else IMU_NODE     # EMU_CTRL's target for its frames
 
 
 class CanopenNodes:
@@ -88,7 +90,7 @@ class CanopenNodes:
             return False
         self._forget(node)
         self.tpdos[node] = tpdos
-        self._tx_order = sorted(self.tpdos, key=lambda n: self.device[n].leg or 0)
+        self._tx_order = sorted(self.tpdos, key=lambda n: (self.device[n].leg or 0, n))
         self.rpdo_of.update({pdo.codec.frame_id: pdo for pdo in rpdos})
         return True
 
@@ -138,19 +140,20 @@ class CanopenNodes:
         return pdo.device.node
 
     # -- transmit -----------------------------------------------------------------------------
-    def send_tpdos(self, counter: int, sim, operational) -> None:
+    def send_tpdos(self, counter: int, sim, operational, emit) -> None:
         """This SYNC's TPDOs of every OPERATIONAL device, the IMU's first (as the DBC
-        profile's), with the samples of `sim` (`simulated_rig.SimulatedRig`)."""
+        profile's), with the samples of `sim` (`simulated_rig.SimulatedRig`); each through
+        `emit(node, name, message)` (the injected frame faults of its leg's node id, the IMU's)."""
         for node in self._tx_order:
             if not operational(node):
                 continue
             for pdo in self.tpdos[node]:
-                if not _due(pdo.codec.pdo, counter):
+                if not pdo.codec.pdo.due_at(counter):
                     continue
                 if not self._fill(pdo, sim):
                     continue
                 if pdo.codec.encode_into(pdo.values, pdo.message.data) is not EncodeStatus.REJECTED:
-                    self.send(pdo.message)
+                    emit(pdo.fault_node, pdo.codec.name, pdo.message)
 
     def _fill(self, pdo: _Pdo, sim) -> bool:
         """The PDO's values from the rig's samples; False when its leg was not sampled."""
@@ -195,12 +198,3 @@ class CanopenNodes:
     def heartbeat(self, node: int, state: int) -> can.Message:
         return can.Message(arbitration_id=HEARTBEAT_BASE + node, data=bytes([int(state)]), is_extended_id=False)
 
-
-def _due(pdo, counter: int) -> bool:
-    """Whether a SYNC-cyclic PDO is sent at SYNC `counter` (1-based): every `sync_period`-th,
-    from its SYNC start value (CiA 301 0x18xx:6)."""
-    period = pdo.sync_period
-    if period <= 1:
-        return period == 1
-    start = pdo.sync_start or 1
-    return (counter - start) % period == 0

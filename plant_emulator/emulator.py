@@ -179,18 +179,21 @@ class Emulator:
     def _emit(self, node: int, name: str) -> None:
         """Encode and send a node's frame through the injected frame faults."""
         box = self.out[name]
-        if not box.encode():
-            return
+        if box.encode():
+            self.emit_frame(node, name, box.message)
+
+    def emit_frame(self, node: int, name: str, message: can.Message) -> None:
+        """Send frame `name` of `node` (the DBC's node id: a leg's, the IMU's) through the
+        injected frame faults (a stock device's frames: those of its leg's node id)."""
         if not self.sim.faults:                # the common case: nothing injected
-            self._last_sent[name] = bytes(box.message.data)
-            self._send(box.message)
+            self._last_sent[name] = bytes(message.data)
+            self._send(message)
             return
         if self.sim.silent(node):
             return
         loss = self._fault(node, EmuFault.FRAME_LOSS)
         if loss is not None and self.sim.sensors.rng.random() * 100.0 < loss[1]:
             return
-        message = box.message
         if self._fault(node, EmuFault.REPEAT):
             last = self._last_sent.get(name)
             if last is not None:               # the frame before the fault again, counter and all
@@ -555,7 +558,7 @@ class Emulator:
         """This SYNC's samples as frames: the IMU's first, each leg's LEG_STATE last."""
         sim = self.sim
         if self.canopen is not None:
-            self.canopen.send_tpdos(self.sync_counter, sim, self._operational)
+            self.canopen.send_tpdos(self.sync_counter, sim, self._operational, self.emit_frame)
             self._send_truth(self.sync_counter)
             return
         if sim.attitude_due:

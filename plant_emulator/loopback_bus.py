@@ -46,16 +46,17 @@ class _EmulatorSide:
 
 
 class LoopbackBus:
-    """The controller's end of a bus with `rig` (configured by `cfg`) emulated behind it."""
+    """The controller's end of a bus with `rig` (configured by `cfg`) emulated behind it, as
+    `devices` (the project's own nodes, or stock CANopen devices)."""
 
-    def __init__(self, rig, cfg: EmulatorConfig, outside=None):
+    def __init__(self, rig, cfg: EmulatorConfig, outside=None, devices: str = "hydrapod"):
         self.enter, self.leave = outside or (_nothing, _nothing)
         self.clock = SimulatedClock()
         self.period_s = cfg.nodes.sync_period_s
         self.queue: deque[can.Message] = deque()
         self.sent: Counter = Counter()                 # frames the controller sent, by id
         self.last_sent: dict[int, bytes] = {}          # ... and the data of each id's last one
-        self.emulator = Emulator(_EmulatorSide(self), rig, cfg, clock=self.clock)
+        self.emulator = Emulator(_EmulatorSide(self), rig, cfg, clock=self.clock, devices=devices)
         self.emulator.boot()
         self._sync_id = CODECS["SYNC"].frame_id
 

@@ -63,3 +63,22 @@ def status_word(state: ValveState) -> int:
 def counts(value_si: float, step_si: float) -> int:
     """A quantity in its object's counts (the codec saturates it at the object's type)."""
     return round(value_si / step_si)
+
+
+STATE_OF_STATUS = {word: state for state, word in STATUS_OF_STATE.items() if state != ValveState.INIT}
+
+
+def valve_state(word: int) -> ValveState:
+    """The CiA 408 state a status word reports (bits D, H, M and ready; 0: a fault with the
+    power stage off, since a device sends no TPDO before it is started)."""
+    return STATE_OF_STATUS.get(word & (BIT_D | BIT_H | BIT_M | STATUS_READY), ValveState.FAULT_DISABLED)
+
+
+# what a leg's devices measure, by object: (the quantity, SI per count); the IMU's by axis
+LEG_MEASURED = {POSITION: ("position", POSITION_STEP_M), LEG_FORCE: ("force", FORCE_STEP_N),
+                SPOOL_ACTUAL: ("spool", 1.0 / SPOOL_FULL_SCALE), STATUS_WORD: ("valve_state", 1.0),
+                LEG_PA: ("pressure", PRESSURE_STEP_PA), LEG_PB: ("pressure", PRESSURE_STEP_PA),
+                LEG_PS: ("pressure", PRESSURE_STEP_PA)}
+LEG_PRESSURE_COLUMN = {LEG_PA: 0, LEG_PB: 1, LEG_PS: 2}      # PA, PB, PS as Measurements has them
+# every cycle from each leg: what a LEG_STATE carries in the project's own profile
+LEG_EVERY_CYCLE = ("position", "force", "valve_state", "spool")

@@ -95,6 +95,14 @@ class PdoMap:
         """Every n-th SYNC (0: not SYNC-cyclic: acyclic, or event-driven)."""
         return self.transmission_type if 1 <= self.transmission_type <= SYNC_CYCLIC_MAX else 0
 
+    def due_at(self, counter: int) -> bool:
+        """Whether a SYNC-cyclic PDO is sent at SYNC `counter` (1-based): every
+        `sync_period`-th, from its SYNC start value (CiA 301 0x18xx:6)."""
+        period = self.sync_period
+        if period <= 1:
+            return period == 1
+        return (counter - (self.sync_start or 1)) % period == 0
+
     def entries(self) -> tuple[tuple[int, int], ...]:
         """The mapped objects' (index, sub-index), padding left out, in mapping order."""
         return tuple((obj.index, obj.subindex) for obj in self.objects if not obj.dummy)

@@ -6,6 +6,7 @@ import argparse
 
 from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
 from program.cliutil import number_in_range, output_file
+from protocol.devices import DEVICE_PROFILES
 from protocol.enums import PACINGS
 from protocol.nodes import RIGS
 
@@ -21,6 +22,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate-hz", type=number_in_range(float, 1.0, 1000.0), default=500.0)
     parser.add_argument("--pacing", choices=PACINGS, default="realtime")
     parser.add_argument("--controller", choices=tuple(CONTROLLER_NAMES), default="pi")
+    parser.add_argument("--devices", choices=DEVICE_PROFILES, default="hydrapod",
+                        help="the rig's devices: the project's own nodes (hydrapod, the DBC with E2E) or stock "
+                             "CANopen devices (canopen: CiA 408 valves, CiA 406/404 sensors, each configured by "
+                             "SDO from protocol/devices/canopen-layout.toml)")
     parser.add_argument("--config", metavar="FILE", help="controller TOML overriding the packaged defaults")
     parser.add_argument("--summary", metavar="FILE", type=output_file,
                         help="write the run's summary as JSON on exit")

@@ -15,6 +15,8 @@ from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
 from program.cliutil import StopFlag
 from program.realtime import applied, cpu_latency_measure, freeze_gc, lock_memory, pin_cpu, set_fifo, thaw_gc
 
+CLASSIC_BITRATE = 1e6                  # a classic CAN bus at its highest rate
+
 
 def log(text: str) -> None:
     print(f"controller: {text}", file=sys.stderr, flush=True)
@@ -38,8 +40,34 @@ def realtime_teardown() -> None:
     thaw_gc()
 
 
+def bus_budget_note(devices: str, n_legs: int, rate_hz: float, spec) -> str:
+    """Stock devices on one bus: what their frames take of a 1 Mbit/s bus at this rate. More
+    than the budget on a real interface is refused (one line, naming the rate one bus
+    carries); on a virtual bus (multicast, in-process, a vcan interface: no bit timing) it is
+    said and run."""
+    if devices != "canopen":
+        return ""
+    from program.errors import UserInputError
+    from protocol import canopen_layout
+    from protocol.bus import default_bus_spec
+    from protocol.busload import MAX_LOAD
+
+    spec = spec or default_bus_spec()
+    budget = canopen_layout.budgets(rate_hz, CLASSIC_BITRATE, n_legs, 1)[0]
+    if budget["fits"]:
+        return ""
+    rate = canopen_layout.highest_rate(CLASSIC_BITRATE, n_legs, rate_hz)
+    said = (f"--devices canopen at {rate_hz:g} Hz: the stock devices' frames need {100 * budget['total_load']:.1f} % "
+            f"of a 1 Mbit/s bus (budget {100 * MAX_LOAD:g} %); one bus carries them at {rate:g} Hz at most "
+            f"(`hydrapod bus-load --devices canopen`)")
+    if spec.kind == "socketcan" and not spec.channel.startswith("vcan"):
+        raise UserInputError(said + f": use --rate-hz {rate:g}")
+    return said + f"; {spec} has no bit timing (virtual): run as asked"
+
+
 def run_daemon(args) -> int:
     from firmware_py.controller import Controller
+    from firmware_py.runtime.configure import ConfigurationError
     from firmware_py.runtime.identify import IdentityError
     from firmware_py.runtime.loop import ActivationError, ControllerLoop
     from protocol.bus import open_bus, parse_bus_spec
@@ -48,8 +76,11 @@ def run_daemon(args) -> int:
     cfg = load_config(args.config)
     controller = Controller(cfg, args.rig, 1.0 / args.rate_hz, CONTROLLER_NAMES[args.controller])
     stop = StopFlag()
+    budget_note = bus_budget_note(args.devices, controller.status.n_legs, args.rate_hz, spec)
     bus = open_bus(spec)
-    loop = ControllerLoop(bus, controller, args.rate_hz, args.pacing, log=log)
+    loop = ControllerLoop(bus, controller, args.rate_hz, args.pacing, log=log, devices=args.devices)
+    if budget_note:
+        log(budget_note)
     bus.set_filters(loop.can_filters())               # the CAN controller's acceptance filter
     code = 0
     notes = realtime_setup(cfg, args.pacing == "realtime")
@@ -58,7 +89,7 @@ def run_daemon(args) -> int:
     try:
         try:
             loop.activate(stop)
-        except IdentityError as exc:              # the configuration names a device the bus lacks
+        except (IdentityError, ConfigurationError) as exc:     # a device the bus lacks, or refusing its setup
             log(f"activation refused: {exc}")
             code = 2
         except ActivationError as exc:

@@ -42,11 +42,18 @@ class _LoopSdoClient(SdoClient):
         return super().read_response()           # the answer, an abort, or "no SDO response"
 
 
-def node_name(node: int) -> str:
-    return f"node {node} ({SENDER_OF_NODE.get(node, '?')})"
+def loop_sdo_clients(bus, receive, dispatch, clock, timeout_s: float):
+    """`client_of(node)`: canopen's SDO client to `node`, sending on `bus` and waiting for its
+    answer by `receive(timeout_s)`, every other frame meanwhile handed to `dispatch`."""
+    network = canopen.Network(bus)               # sends on the loop's bus; no listener of its own
+    return lambda node: _LoopSdoClient(node, network, receive, dispatch, clock, timeout_s)
 
 
-def read_identity(client: SdoClient, node: int) -> Identity:
+def node_name(node: int, names: dict[int, str] | None = None) -> str:
+    return f"node {node} ({(names or SENDER_OF_NODE).get(node, '?')})"
+
+
+def read_identity(client: SdoClient, node: int, names: dict[int, str] | None = None) -> Identity:
     """The node's device type, vendor, product and revision, by SDO; one line naming the node
     and the object it could not read (IdentityError)."""
     values = {}
@@ -57,32 +64,31 @@ def read_identity(client: SdoClient, node: int) -> Identity:
             if name == "revision":               # optional in 0x1018
                 values[name] = 0
                 continue
-            raise IdentityError(f"{node_name(node)}: reading its {name} (0x{index:04X}:{sub}) was aborted: "
+            raise IdentityError(f"{node_name(node, names)}: reading its {name} (0x{index:04X}:{sub}) was aborted: "
                                 f"{error}") from None
         except SdoCommunicationError:
-            raise IdentityError(f"{node_name(node)}: no SDO answer reading its {name} (0x{index:04X}:{sub}) "
+            raise IdentityError(f"{node_name(node, names)}: no SDO answer reading its {name} (0x{index:04X}:{sub}) "
                                 f"within {client._timeout_s * 1e3:g} ms") from None
         values[name] = int.from_bytes(bytes(data[:4]), "little")
     return Identity(values["device type"], values["vendor id"], values["product code"], values["revision"])
 
 
-def check(node: int, found: Identity, expected: Identity, eds: str) -> None:
+def check(node: int, found: Identity, expected: Identity, eds: str, names: dict[int, str] | None = None) -> None:
     """One line naming the node, the object and both values when `found` is not `expected`."""
     for name, (index, sub) in CHECKED:
         if found.value(name) != expected.value(name):
-            raise IdentityError(f"{node_name(node)}: {name} (0x{index:04X}:{sub}) is 0x{found.value(name):08X}, "
+            raise IdentityError(f"{node_name(node, names)}: {name} (0x{index:04X}:{sub}) is 0x{found.value(name):08X}, "
                                 f"{eds} says 0x{expected.value(name):08X}: not started")
 
 
-def identify(bus, expected: dict[int, tuple[Identity, str]], receive, dispatch, clock,
-             timeout_s: float) -> dict[int, Identity]:
-    """Every node's identity read and checked against `expected` (node -> (identity, its EDS));
-    the identities read, or IdentityError for the first node that differs or is silent."""
-    network = canopen.Network(bus)               # sends on the loop's bus; no listener of its own
+def identify(client_of, expected: dict[int, tuple[Identity, str]],
+             names: dict[int, str] | None = None) -> dict[int, Identity]:
+    """Every node's identity read through `client_of(node)` and checked against `expected`
+    (node -> (identity, its EDS)); the identities read, or IdentityError for the first node
+    that differs or is silent (`names`: node -> the device's name, for that line)."""
     found = {}
     with canopen_log_quiet():                    # a silent node: our one line, not canopen's log too
         for node, (identity, eds) in expected.items():
-            client = _LoopSdoClient(node, network, receive, dispatch, clock, timeout_s)
-            found[node] = read_identity(client, node)
-            check(node, found[node], identity, eds)
+            found[node] = read_identity(client_of(node), node, names)
+            check(node, found[node], identity, eds, names)
     return found

@@ -1,19 +1,23 @@
-"""The controller on the bus (its hardware interface): lifecycle (configure -> activate ->
-run -> shut down) and the fixed-step cycle SYNC -> collect -> read -> update -> write.
+"""The controller on the bus: lifecycle (configure -> activate -> run -> shut down) and the
+fixed-step cycle SYNC -> collect -> read -> update -> write. The rig's devices sit behind a
+hardware interface (`hardware.py`: the project's own nodes, `hardware_dbc.py`, or stock
+CANopen devices, `hardware_canopen.py`, by `devices`); the loop owns the SYNC, the host's
+frames and its own (CTRL_*, its heartbeat and EMCY).
 
 configure (constructor): codecs compiled at import, every array and CAN message allocated.
 activate: every node heard (its heartbeat), then identified by SDO (runtime/identify.py: a
-node that is not the configured device is never started), then NMT start (repeated until
-every node's heartbeat says OPERATIONAL), then
+node that is not the configured device is never started) and prepared (stock devices:
+configured by SDO and read back), then NMT start (repeated until every node's heartbeat
+says OPERATIONAL), then
 `hold_cycles` cycles with the valves in HOLD (the first with a Reset pulse, clearing faults
 left by an earlier session), then IDLE or READY (auto_enable).
-cycle k: send SYNC k; collect cycle k's LEG_STATE frames until all are in or the window
+cycle k: send SYNC k; collect the devices' samples of cycle k until all are in or the window
 closes (realtime: a fraction of the period; lockstep: the emulator's EMU_TRUTH of that SYNC,
 its last frame, or a timeout for a dead emulator); `read` fills the
-Measurements; `Controller.update(meas, cmd)`; `write` encodes the ValveCommands as
-VALVE_CMD_* (applied by the valves at SYNC k+1), CTRL_STATUS when due, CTRL_ACK for host
+Measurements; `Controller.update(meas, cmd)`; `write` puts the ValveCommands on the bus
+(applied by the valves at SYNC k+1), CTRL_STATUS when due, CTRL_ACK for host
 frames and the heartbeat when due; then the controller's host work that must not delay
-VALVE_CMD (a waypoint commit).
+the valves' commands (a waypoint commit).
 The loop decides nothing: it records what it saw (frames, heartbeats, EMCY, a stall of its
 own) and the controller's supervisor raises the faults, in the cycle they are seen.
 pacing: `realtime` - absolute deadlines on the monotonic clock, sleep then spin, late
@@ -22,8 +26,9 @@ cycles counted as overruns and skipped (never bursts); a stall (the clock
 update, which faults OVERRUN before acting on anything received meanwhile. `lockstep` -
 SYNC k+1 as soon as cycle k's exchange is complete.
 nodes: a node that boots again (boot-up heartbeat: power cycle, reset) restarts its alive
-counters, and the NMT master starts it again on the host's RESET (CiA 302's boot-up of a
-slave), so RESET + ENABLE recovers from a plant that was restarted.
+counters (a stock device has forgotten its configuration), and the NMT master identifies,
+prepares and starts it again on the host's RESET (CiA 302's boot-up of a slave), so RESET +
+ENABLE recovers from a plant that was restarted.
 shutdown: valves HOLD for `shutdown_hold_cycles`, DISABLED for `shutdown_disable_cycles`.
 """
 
@@ -39,26 +44,25 @@ from dataclasses import dataclass
 import numpy as np
 
 from firmware_py.controller import Controller
-from firmware_py.runtime.identify import IdentityError, identify
+from firmware_py.runtime.configure import ConfigurationError
+from firmware_py.runtime.hardware import Hardware
+from firmware_py.runtime.hardware_canopen import CanopenHardware
+from firmware_py.runtime.hardware_dbc import DbcHardware
+from firmware_py.runtime.identify import IdentityError, identify, loop_sdo_clients
 from firmware_py.supervision.supervisor import LATCHED, emergency_code
 from physics.constants import BAR
 from program.realtime import percentiles_us
 from protocol.codec import CODECS, STANDARD_ID_MASK, FrameDecoder
 from protocol.dbc import sync_counter_overflow, truth_phase
-from protocol.devices import SDO_RESPONSE_BASE, identity_of
+from protocol.devices import DEVICE_PROFILES, SDO_RESPONSE_BASE
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import PACINGS, Fault, NmtCommand, NmtState, Pacing
 from protocol.interfaces import (
-    attitude_into,
     clock_values,
-    leg_pressure_into,
-    leg_state_into,
     load_values,
     payload_values,
-    rate_into,
-    valve_command_values,
 )
-from protocol.nodes import CONTROLLER_NODE, IMU_NODE, SENDER_OF_NODE, rig_nodes
+from protocol.nodes import CONTROLLER_NODE
 from protocol.outbox import Outbox
 
 HISTORY = 1 << 16                       # cycles kept for the timing percentiles
@@ -89,22 +93,28 @@ class _CountedSend:
 
 
 class _Reidentification:
-    """Rebooted nodes identified again beside the running cycle (a thread: the SDO exchanges
-    take tens of ms, which the cycle's SYNC and the valves' watchdogs cannot wait); the loop
-    hands it the SDO answers it receives and reads the verdict when `done`."""
+    """Rebooted nodes identified and prepared again beside the running cycle (a thread: the
+    SDO exchanges take tens of ms, which the cycle's SYNC and the valves' watchdogs cannot
+    wait); the loop hands it the SDO answers it receives and reads the verdict when `done`."""
 
-    def __init__(self, loop, expected: dict):
+    def __init__(self, loop, nodes: list[int]):
         self.answers: queue.SimpleQueue = queue.SimpleQueue()
         self.send = _CountedSend(loop)
-        self.refusal: IdentityError | None = None
-        self._thread = threading.Thread(target=self._run, args=(expected, loop.clock, loop.cfg.devices.sdo_timeout_s),
+        self.refusal: Exception | None = None
+        self.prepared = None
+        hardware = loop.hardware
+        client_of = loop_sdo_clients(self.send, self._receive, lambda msg: None, loop.clock,
+                                     loop.cfg.devices.sdo_timeout_s)
+        self._thread = threading.Thread(target=self._run, args=(hardware, client_of, nodes),
                                         name="reidentify", daemon=True)
         self._thread.start()
 
-    def _run(self, expected: dict, clock, timeout_s: float) -> None:
+    def _run(self, hardware, client_of, nodes: list[int]) -> None:
+        expected = hardware.expected_devices()
         try:
-            identify(self.send, expected, self._receive, lambda msg: None, clock, timeout_s)
-        except IdentityError as refusal:
+            identify(client_of, {n: expected[n] for n in nodes}, hardware.names)
+            self.prepared = hardware.prepare(client_of, nodes)
+        except (IdentityError, ConfigurationError) as refusal:
             self.refusal = refusal
 
     def _receive(self, timeout_s: float):
@@ -133,7 +143,7 @@ class Stats:
 
 class ControllerLoop:
     def __init__(self, bus, controller: Controller, rate_hz: float, pacing: str, clock=time.perf_counter,
-                 log=None):
+                 log=None, devices: str = "hydrapod"):
         if pacing not in PACINGS:
             raise ValueError(f"pacing must be one of {PACINGS}, got {pacing!r}")
         self.bus, self.controller, self.pacing, self.clock = bus, controller, pacing, clock
@@ -141,40 +151,27 @@ class ControllerLoop:
         self.cfg = controller.cfg
         self.period_s = 1.0 / rate_hz
         self.log = log or (lambda text: print(f"controller: {text}", file=sys.stderr, flush=True))
-        self.meas, self.cmd = controller.new_interfaces()
         n = controller.status.n_legs
-        self.legs = range(1, n + 1)
-        self.nodes = rig_nodes(n)
-        rx = [f"LEG_STATE_{i}" for i in self.legs] + [f"VALVE_STATUS_{i}" for i in self.legs]
-        rx += [f"LEG_PRESSURE_{i}" for i in self.legs] + [f"EMCY_{i}" for i in self.nodes]
-        rx += [f"HEARTBEAT_{i}" for i in self.nodes] + list(HOST_FRAMES)
         has_imu = controller.status.n_nodes > n
-        if has_imu:
-            rx += ["IMU_ATTITUDE", "IMU_RATE"]
+        self.stats = Stats()
+        if devices not in DEVICE_PROFILES:
+            raise ValueError(f"devices must be one of {', '.join(DEVICE_PROFILES)}, got {devices!r}")
+        # the rig's devices: the project's own nodes, or stock CANopen devices
+        self.hardware: Hardware = DbcHardware(n, has_imu, self.cfg.devices, self.stats, clock) \
+            if devices == "hydrapod" else CanopenHardware(n, has_imu, self.stats, clock)
+        self.meas, self.cmd = self.hardware.new_measurements(), controller.new_interfaces()[1]
+        self.nodes = self.hardware.nodes
+        rx = list(HOST_FRAMES)
         if pacing == "lockstep":            # the emulator's last frame of each SYNC closes the window
             rx.append("EMU_TRUTH")
         self.decoder = FrameDecoder(rx)
-        self.expected = self.decoder.expected_mask([f"LEG_STATE_{i}" for i in self.legs])
-        self._leg_slots = [self.decoder.slot[f"LEG_STATE_{i}"] for i in self.legs]
-        self._leg_values = [self.decoder.values[f"LEG_STATE_{i}"] for i in self.legs]
-        self._leg_of_id = {CODECS[f"LEG_STATE_{i}"].frame_id: i - 1 for i in self.legs}
-        self._heartbeat_of_id = {CODECS[f"HEARTBEAT_{node}"].frame_id: k for k, node in enumerate(self.nodes)}
-        self._heartbeat_values = [self.decoder.values[f"HEARTBEAT_{node}"] for node in self.nodes]
-        self._emcy_of_id = {CODECS[f"EMCY_{node}"].frame_id: node for node in self.nodes}
         self._host_ids = {CODECS[name].frame_id: name for name in HOST_FRAMES}
-        self._pressure_of_id = {CODECS[f"LEG_PRESSURE_{i}"].frame_id: i - 1 for i in self.legs}
-        self._pressure_values = [self.decoder.values[f"LEG_PRESSURE_{i}"] for i in self.legs]
-        self._imu_attitude_id = CODECS["IMU_ATTITUDE"].frame_id if has_imu else -1
-        self._imu_values = self.decoder.values["IMU_ATTITUDE"] if has_imu else None
-        self._imu_rate_id = CODECS["IMU_RATE"].frame_id if has_imu else -1
-        self._imu_rate_values = self.decoder.values["IMU_RATE"] if has_imu else None
         self._truth_id = CODECS["EMU_TRUTH"].frame_id if pacing == "lockstep" else -1
         self._truth_values = self.decoder.values["EMU_TRUTH"] if pacing == "lockstep" else None
         self._truth_phase = CODECS["EMU_TRUTH"].index["SYNC_PHASE"]
         self._closed = False                        # lockstep: this SYNC's EMU_TRUTH came
         self.out_sync = Outbox("SYNC")
         self.out_nmt = Outbox("NMT")
-        self.out_cmd = [Outbox(f"VALVE_CMD_{i}") for i in self.legs]
         self.out_status = Outbox("CTRL_STATUS")
         self.out_ack = Outbox("CTRL_ACK")
         self.out_heartbeat = Outbox(f"HEARTBEAT_{CONTROLLER_NODE}")
@@ -192,10 +189,6 @@ class ControllerLoop:
         self._load_schedule, self._load_leg = CODECS["CTRL_LOAD"].schedule, 0
         self._overflow = sync_counter_overflow()
         self.sync_counter = 0
-        self.heartbeat_seen = np.full(len(self.nodes), -np.inf)
-        self._now = np.zeros(())                    # read's clock as a 0-d array: no conversion per cycle
-        self.nmt_state = {node: -1 for node in self.nodes}
-        self.stats = Stats()
         self.compute_s = np.zeros(HISTORY)
         self.period_error_s = np.zeros(HISTORY)
         self.phase_s = np.zeros((HISTORY, len(PHASES)))
@@ -208,28 +201,17 @@ class ControllerLoop:
         self._overrun = False
         self._next_deadline = math.inf          # realtime: the next SYNC's deadline (lockstep: none)
         self._stalled = False                        # seen since the last read
-        self._emergency = False                     # an EMCY from a valve node ...
-        self._imu_emergency = False                 # ... from the IMU
         self._latched = False                       # the last EMCY_16 said: a fault is latched
-        self._attitude_new = False
-        # the latest valid LEG_PRESSURE (PA, PB, PS) and IMU attitude, and whether one came since the last read
-        self._pressure = np.zeros((len(self.legs), 3))
-        self._rejected = np.zeros(len(self.legs), dtype=bool)     # a LEG_STATE failed E2E this cycle
-        self._pressure_valid = np.zeros(len(self.legs), dtype=bool)
-        self._pressure_new = np.zeros(len(self.legs), dtype=bool)
-        self._attitude = np.zeros(3)
-        self._rate = np.zeros(3)                    # the latest valid IMU_RATE, body frame
-        self._rate_new = False
         self._stall_s = self.cfg.timing.stall_fault_periods * self.period_s if pacing == "realtime" else math.inf
         self._restarts_seen = 0                     # the controller's restart requests carried out
-        self._booted: set[int] = set()              # nodes that booted since they were identified
         self._reidentification: _Reidentification | None = None     # ... being identified again
         self.state_at_stop = None                   # the controller's state when the shutdown began
 
     def can_filters(self) -> list[dict]:
-        """The acceptance filter: the DBC's frames this loop takes, and its nodes' SDO answers."""
-        return self.decoder.can_filters() + [{"can_id": SDO_RESPONSE_BASE + node, "can_mask": STANDARD_ID_MASK,
-                                              "extended": False} for node in self.nodes]
+        """The acceptance filter: the devices' frames, the host's (and EMU_TRUTH), the nodes' SDO answers."""
+        return self.hardware.filters() + self.decoder.can_filters() + [
+            {"can_id": SDO_RESPONSE_BASE + node, "can_mask": STANDARD_ID_MASK, "extended": False}
+            for node in self.nodes]
 
     # -- receive --------------------------------------------------------------------------
     def dispatch(self, msg) -> None:
@@ -239,6 +221,8 @@ class ControllerLoop:
         if job is not None and SDO_RESPONSE_BASE < frame_id < SDO_RESPONSE_BASE + 0x80:
             job.answers.put(msg)                     # an answer for the nodes being identified
             return
+        if self.hardware.dispatch(msg):
+            return
         status = self.decoder.receive_message(msg)
         if status is RxStatus.UNKNOWN_ID:
             self.stats.unknown_frames += 1
@@ -246,48 +230,9 @@ class ControllerLoop:
         if status is not RxStatus.OK:
             if status in E2E_REJECTED:
                 self.stats.e2e_errors += 1
-                leg = self._leg_of_id.get(frame_id)
-                if leg is not None:
-                    self._rejected[leg] = True
-            return
-        if frame_id in self._leg_of_id:
-            return                                   # read() copies it after the window
-        leg = self._pressure_of_id.get(frame_id)
-        if leg is not None:                          # SI (Pa) from the codec, kept for the next read
-            valid = leg_pressure_into(self._pressure_values[leg], self._pressure, leg)
-            self._pressure_valid[leg] = valid        # a transducer fault: no piston force
-            if valid:
-                self._pressure_new[leg] = True
-            return
-        if frame_id == self._imu_attitude_id:
-            if attitude_into(self._imu_values, self._attitude):
-                self._attitude_new = True
-            return
-        if frame_id == self._imu_rate_id:
-            if rate_into(self._imu_rate_values, self._rate):
-                self._rate_new = True
             return
         if frame_id == self._truth_id:               # the emulator has sent all it had for this SYNC
             self._closed = int(self._truth_values[self._truth_phase]) == truth_phase(self.sync_counter)
-            return
-        k = self._heartbeat_of_id.get(frame_id)
-        if k is not None:
-            self.heartbeat_seen[k] = self.clock()
-            state = int(self._heartbeat_values[k][0])
-            node = self.nodes[k]
-            if state == NmtState.BOOTUP:             # the node restarted: so did its alive counters
-                self.decoder.restart_sender(SENDER_OF_NODE[node])
-                self._booted.add(node)               # ... and may be another device now
-            self.nmt_state[node] = state
-            return
-        node = self._emcy_of_id.get(frame_id)
-        if node is not None:
-            self.stats.emergencies += 1
-            if self.decoder.values[f"EMCY_{node}"][0] != 0:     # ERROR_CODE 0 announces a reset
-                if node == IMU_NODE:
-                    self._imu_emergency = True
-                else:
-                    self._emergency = True
             return
         name = self._host_ids.get(frame_id)
         if name is not None:
@@ -313,7 +258,7 @@ class ControllerLoop:
         Lockstep: the emulator's EMU_TRUTH for this SYNC closes it too (a lost frame costs no
         wait, and a machine stall shorter than the timeout loses nothing)."""
         self._closed = False
-        while not self._all_fresh() and not self._closed:
+        while not self.hardware.all_fresh() and not self._closed:
             remaining = deadline - self.clock()
             msg = self.bus.recv(timeout=max(remaining, 0.0))
             self._note_stall()
@@ -324,13 +269,6 @@ class ControllerLoop:
             received = self.clock()
             self.dispatch(msg)
             self._decode_s += self.clock() - received
-
-    def _all_fresh(self) -> bool:
-        fresh = self.decoder.fresh
-        for slot in self._leg_slots:
-            if not fresh[slot]:
-                return False
-        return True
 
     def _drain_until(self, deadline: float) -> None:
         """Between cycles: handle host and node frames until `deadline - spin`, then spin."""
@@ -353,31 +291,11 @@ class ControllerLoop:
 
     # -- read / write ---------------------------------------------------------------------
     def read(self, now: float) -> None:
-        """The cycle's Measurements (the one place they are filled): LEG_STATE of the legs whose
-        frame came, the latest pressures and attitude, and the events since the last read."""
-        meas, fresh = self.meas, self.decoder.fresh
-        for leg, slot in enumerate(self._leg_slots):
-            values = self._leg_values[leg]
-            ok = bool(fresh[slot])
-            meas.fresh[leg] = ok
-            if ok:
-                leg_state_into(values, meas, leg)
-        np.copyto(meas.rejected, self._rejected)
+        """The cycle's Measurements (the one place they are filled): the devices' samples and
+        events (`Hardware.read`), and the loop's own since the last read."""
+        meas = self.meas
+        self.hardware.read(meas, now)
         meas.nodes_starting = self._reidentification is not None
-        self._now[()] = now
-        np.subtract(self._now, self.heartbeat_seen, out=meas.heartbeat_age_s)
-        meas.attitude_rad[:] = self._attitude
-        meas.attitude_fresh, self._attitude_new = self._attitude_new, False
-        meas.rate_rad_s[:] = self._rate
-        meas.rate_fresh, self._rate_new = self._rate_new, False
-        np.copyto(meas.pressure_valid, self._pressure_valid)
-        meas.pa_pa[:] = self._pressure[:, 0]
-        meas.pb_pa[:] = self._pressure[:, 1]
-        meas.ps_pa[:] = self._pressure[:, 2]
-        np.copyto(meas.pressure_fresh, self._pressure_new)
-        self._pressure_new.fill(False)
-        meas.emergency, self._emergency = self._emergency, False
-        meas.imu_emergency, self._imu_emergency = self._imu_emergency, False
         meas.stalled, self._stalled = self._stalled, False
         meas.overrun = self._overrun
 
@@ -391,11 +309,9 @@ class ControllerLoop:
             self.stats.frames_sent += 1
 
     def write(self) -> None:
-        """VALVE_CMD_* from the ValveCommands, CTRL_STATUS when due, CTRL_ACK, NMT start."""
+        """The valves' commands (the hardware's), CTRL_STATUS when due, CTRL_ACK, NMT start."""
         status, cmd = self.controller.status, self.cmd
-        for leg, box in enumerate(self.out_cmd):
-            valve_command_values(box.values, cmd, leg)
-            self._send(box)
+        self.hardware.write(cmd, self._send)
         if self._status_schedule.due(self.sync_counter):
             v = self.out_status.values
             i = self.out_status.index
@@ -427,14 +343,15 @@ class ControllerLoop:
         self._send_acks()
         if status.restart_requests != self._restarts_seen and self._reidentification is None:
             self._restarts_seen = status.restart_requests
-            if any(self.nmt_state[n] != NmtState.OPERATIONAL for n in self.nodes):
+            if not self.hardware.all_in_state(lambda state: state == NmtState.OPERATIONAL):
                 self._restart_booted()               # nodes that rebooted since activation
         job = self._reidentification
         if job is not None and job.done:
             self._reidentification = None
             self.stats.frames_sent += job.send.sent
             if job.refusal is None:
-                self._booted.clear()
+                self.hardware.adopt(job.prepared)
+                self.hardware.booted.clear()
                 self._nmt_start()
             else:
                 self.log(f"restart refused: {job.refusal}")
@@ -477,12 +394,12 @@ class ControllerLoop:
         self._send(self.out_sync)
         sent = self.clock()
         self.decoder.begin_cycle()
-        self._rejected.fill(False)
+        self.hardware.begin_cycle(self.sync_counter)
         window = self.cfg.timing.sync_window_fraction * self.period_s if self.pacing == "realtime" \
             else self.cfg.timing.lockstep_timeout_s
         self._decode_s = 0.0
         self._collect(now + window)
-        self.stats.missing_frames += self.decoder.end_cycle(self.expected)
+        self.stats.missing_frames += self.hardware.end_cycle()
         start = self.clock()
         status = self.controller.status
         faults_before = status.faults
@@ -531,12 +448,11 @@ class ControllerLoop:
         legs' frames were missing or rejected how many cycles in a row, and what the receiver
         last made of each; the leg a SENSOR_TIMEOUT or E2E_ERROR came from is named here."""
         s = self.controller.status
-        last = [RxStatus(int(self.decoder.last_status[slot])).name for slot in self._leg_slots]
         leg = f" leg {s.fault_leg}" if s.fault_leg else ""
         self.log(f"fault {s.fault.name}{leg} at cycle {self.stats.cycles}: residual/threshold "
                  f"{[round(r, 2) for r in s.residual_ratio.tolist()]}, missing in a row "
-                 f"{s.missing_in_row.tolist()}, rejected in a row {s.rejected_in_row.tolist()}, last LEG_STATE "
-                 f"status {last}, overruns in a row {s.overruns_in_row}, this cycle "
+                 f"{s.missing_in_row.tolist()}, rejected in a row {s.rejected_in_row.tolist()}, "
+                 f"{self.hardware.leg_report()}, overruns in a row {s.overruns_in_row}, this cycle "
                  f"{1e6 * (self.clock() - sync_time):.0f} us after its SYNC{self._supply_note(s)}")
 
     @staticmethod
@@ -551,21 +467,25 @@ class ControllerLoop:
 
     # -- lifecycle ------------------------------------------------------------------------
     def activate(self, should_stop=lambda: False) -> None:
-        """Every node heard, identified, then NMT start until every node reports OPERATIONAL,
-        then HOLD cycles, then IDLE/READY. A node that is not its configured device:
-        IdentityError naming it, and no node is started."""
+        """Every node heard, identified and prepared (a stock device: configured by SDO), then
+        NMT start until every node reports OPERATIONAL, then HOLD cycles, then IDLE/READY. A
+        node that is not its configured device: IdentityError naming it; one that refuses its
+        configuration: ConfigurationError; no node is started then."""
         cfg = self.cfg
         give_up = self.clock() + cfg.timing.activation_timeout_s
         self._wait(lambda state: state != -1, "heartbeat", give_up, should_stop)
+        hardware = self.hardware
         sdo = _CountedSend(self)
+        client_of = loop_sdo_clients(sdo, self.bus.recv, self.dispatch, self.clock, cfg.devices.sdo_timeout_s)
         try:                                         # before the first SYNC: the loop may wait
-            found = identify(sdo, self.expected_devices(), self.bus.recv, self.dispatch, self.clock,
-                             cfg.devices.sdo_timeout_s)
+            found = identify(client_of, hardware.expected_devices(), hardware.names)
+            hardware.adopt(hardware.prepare(client_of, hardware.nodes))
         finally:
             self.stats.frames_sent += sdo.sent
-        self._booted.clear()
+        hardware.booted.clear()
         revisions = sorted({f"{identity.revision:#x}" for identity in found.values()})
-        self.log(f"identified node(s) {sorted(found)} as configured ([devices]; revision(s) {', '.join(revisions)})")
+        self.log(f"identified node(s) {sorted(found)} as configured ({hardware.describe()}; revision(s) "
+                 f"{', '.join(revisions)})")
         self._nmt_start()                 # always: a new master's frames start their E2E counters afresh
         self._wait(lambda state: state == NmtState.OPERATIONAL, "OPERATIONAL heartbeat", give_up, should_stop,
                    self._nmt_start)
@@ -576,30 +496,24 @@ class ControllerLoop:
         self.log(f"active: rig={status.rig} state={status.state.name} pacing={self.pacing} "
                  f"rate={1.0 / self.period_s:g} Hz")
 
-    def expected_devices(self) -> dict:
-        """Node id -> (the identity its configured EDS gives, that EDS's name)."""
-        devices = self.cfg.devices
-        return {node: (identity_of(eds), eds) for node in self.nodes
-                for eds in [devices.imu_eds if node == IMU_NODE else devices.leg_eds]}
-
     def _restart_booted(self) -> None:
         """NMT start for the nodes that stopped; those that booted since they were identified
         are identified again first, beside the cycle (`_Reidentification`), and started when
         they prove to be their configured device."""
-        if not self._booted:
+        booted = self.hardware.booted
+        if not booted:
             self._nmt_start()
             return
-        expected = self.expected_devices()
-        self._reidentification = _Reidentification(self, {n: expected[n] for n in sorted(self._booted)})
+        self._reidentification = _Reidentification(self, sorted(booted))
 
     def _wait(self, ready, what: str, give_up: float, should_stop, every_200_ms=None) -> None:
         """Receive until `ready(state)` holds for every node's NMT state (heard: not -1);
         `every_200_ms` sent meanwhile; ActivationError naming the nodes at `give_up`."""
         next_send = 0.0
-        while not all(ready(self.nmt_state[n]) for n in self.nodes):
+        while not self.hardware.all_in_state(ready):
             now = self.clock()
             if now > give_up or should_stop():
-                missing = [n for n in self.nodes if not ready(self.nmt_state[n])]
+                missing = self.hardware.not_in_state(ready)
                 raise ActivationError(f"no {what} from node(s) {missing} within "
                                       f"{self.cfg.timing.activation_timeout_s:g} s")
             if every_200_ms is not None and now >= next_send:

@@ -11,6 +11,7 @@ from physics.actuator import PAYLOAD
 from physics.constants import MM
 from program.cliutil import number_in_range, output_dir
 from program.errors import UserInputError
+from protocol.devices import DEVICE_PROFILES
 
 
 def _scenario(name: str):
@@ -21,6 +22,8 @@ def _scenario(name: str):
 
 
 TIME_SCALES = number_in_range(float, 0.5, 10.0)
+DEVICES_HELP = ("the rig's devices, for the emulator and the controller alike: the project's own nodes "
+                "(hydrapod, default) or stock CANopen devices (canopen: CiA 408 valves, CiA 406/404 sensors)")
 
 
 def _time_scale(text: str) -> float | str:
@@ -89,7 +92,8 @@ def _run(args) -> int:
     from hil.runner import RunOptions, run_scenario
     scenario = _scenario(args.scenario)
     out = Path(args.out) if args.out else Path("hil-out") / scenario.name
-    options = RunOptions(out_dir=out, bus=args.bus, pacing=args.pacing, rate_hz=500.0, short=args.short,
+    options = RunOptions(out_dir=out, bus=args.bus, pacing=args.pacing, rate_hz=500.0, devices=args.devices,
+                         short=args.short,
                          controllers=_controllers(args.controllers), loads=_loads(args.loads),
                          positions_m=_positions(args.positions), inject=_inject(args.inject),
                          duration_s=args.duration_s, plots=not args.no_plots,
@@ -128,7 +132,8 @@ def _faults(args) -> int:
     from hil.faults import format_terminal, run_matrix
     out = output_dir(args.out or Path("hil-out") / "faults")
     doc = run_matrix(out, short=args.short, bus=args.bus, start_timeout_s=args.start_timeout_s,
-                     pacings=(args.pacing,) if args.pacing else ("lockstep", "realtime"), payload_kg=args.payload_kg)
+                     pacings=(args.pacing,) if args.pacing else ("lockstep", "realtime"), payload_kg=args.payload_kg,
+                     devices=args.devices)
     print(json.dumps(doc, indent=1, default=str) if args.json else format_terminal(doc))
     return 0 if doc["passed"] else 1
 
@@ -160,7 +165,7 @@ def _analyze(args) -> int:
     scenario = _scenario(args.scenario)
     log = Path(args.log)
     out = Path(args.out) if args.out else log.parent
-    return _finish(args, analyze_log(scenario, log, out))
+    return _finish(args, analyze_log(scenario, log, out, args.devices))
 
 
 def _list(args) -> int:
@@ -187,6 +192,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pacing", choices=("lockstep", "realtime"), default=None,
                    help="default: the scenario's (lockstep, realtime for the timing scenarios)")
     p.add_argument("--out", metavar="DIR", help="output directory (default: hil-out/SCENARIO)")
+    p.add_argument("--devices", choices=DEVICE_PROFILES, default="hydrapod", help=DEVICES_HELP)
     p.add_argument("--short", action="store_true", help="the short variant (what make test runs)")
     p.add_argument("--controllers", metavar="LIST", help="comma-separated subset of the scenario's controllers")
     p.add_argument("--loads", metavar="LIST",
@@ -229,6 +235,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--start-timeout-s", type=number_in_range(float, 1.0, 3600.0), default=90.0)
     p.add_argument("--payload-kg", type=number_in_range(float, *PAYLOAD.range), default=0.0,
                    help="a payload on the hexapod's platform, declared to its controller (default 0)")
+    p.add_argument("--devices", choices=DEVICE_PROFILES, default="hydrapod",
+                   help=DEVICES_HELP + "; on canopen the cases an E2E check judges are not run")
     p.add_argument("--json", action="store_true", help="print faults.json instead of the table")
     p.set_defaults(handler=_faults)
     p = hil_sub.add_parser("soak", help="realtime hexapod trajectory loop with random frame faults: jitter, "
@@ -257,6 +265,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("log", metavar="LOG")
     p.add_argument("--scenario", required=True)
     p.add_argument("--out", metavar="DIR", help="where metrics.json, plots and report.md go (default: beside LOG)")
+    p.add_argument("--devices", choices=DEVICE_PROFILES, default="hydrapod", help=DEVICES_HELP)
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_analyze)
     p = hil_sub.add_parser("list", help="the scenarios")

@@ -17,7 +17,8 @@ from tests.support.loops import command as host_command
 CYCLES = 2_000                 # a leak of 4 bytes per cycle would reach the 8 kB bound (one
                                # Python object a cycle is 16 bytes or more)
 SEGMENTS = 30                  # the movement: back and forth by 5 mm, 0.2 s a segment (3,000 cycles)
-CASES = [(rig, controller) for rig in ("testbench", "hexapod") for controller in CONTROLLER_NAMES]
+CASES = [(rig, controller, "hydrapod") for rig in ("testbench", "hexapod") for controller in CONTROLLER_NAMES]
+CASES.append(("hexapod", "model-based", "canopen"))       # stock devices: their PDOs in and out
 # tracemalloc and the counting hook slow everything: the heartbeat supervision has its own tests
 RELAXED = {"timing": {"heartbeat_timeout_ms": 60000.0}}
 
@@ -44,10 +45,10 @@ def buffers(loop, counts, n: int) -> int:
     return counts.numpy_buffers - before
 
 
-@pytest.mark.parametrize("rig,controller", CASES)
-def test_a_steady_cycle_makes_no_numpy_buffer_and_keeps_nothing(rig, controller):
+@pytest.mark.parametrize("rig,controller,devices", CASES)
+def test_a_steady_cycle_makes_no_numpy_buffer_and_keeps_nothing(rig, controller, devices):
     with counting() as counts:
-        loop, ctl, bus = bus_loop(rig, controller, RELAXED, outside=(counts.pause, counts.resume))
+        loop, ctl, bus = bus_loop(rig, controller, RELAXED, outside=(counts.pause, counts.resume), devices=devices)
         moving(loop, ctl)
         cycles(loop, 200)
         made = buffers(loop, counts, CYCLES)

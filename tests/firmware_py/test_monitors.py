@@ -12,7 +12,6 @@ from physics.hydraulics import S_Y
 from protocol.dbc import load_database
 from protocol.enums import Ack, Command, EmcyCode, EmuFault, Fault, NmtCommand, NmtState, State, ValveState
 from protocol.nodes import CONTROLLER_NODE, IMU_NODE
-from protocol.outbox import Outbox
 from tests.support.loops import (
     bus_loop,
     clear,
@@ -22,6 +21,7 @@ from tests.support.loops import (
     cycles_while_starting,
     frames_sent,
     inject,
+    nmt,
     valve_states,
     valve_words,
 )
@@ -142,14 +142,6 @@ def test_a_stalled_realtime_loop_faults_overrun_and_stays_held_until_reset():
     assert ctl.status.state is State.READY
 
 
-def nmt(bus, node_command: NmtCommand, node: int) -> None:
-    """An NMT frame to the nodes from another master (a test's)."""
-    box = Outbox("NMT")
-    box.values[:] = (int(node_command), node)
-    assert box.encode()
-    bus.emulator.handle(box.message)
-
-
 def test_lockstep_cycles_close_at_the_emulators_last_frame_not_at_the_timeout():
     """Lockstep: a lost LEG_STATE costs no wait (EMU_TRUTH of the same SYNC closes the window)
     and is still counted missing; an EMU_TRUTH of an earlier SYNC closes nothing."""
@@ -177,7 +169,7 @@ def test_nodes_that_reboot_are_started_again_on_reset():
     assert ctl.status.fault in (Fault.SENSOR_TIMEOUT, Fault.VALVE_FAULT)
     heartbeat_s, period_s = bus.emulator.cfg.nodes.heartbeat_s, bus.period_s
     cycles(loop, math.ceil(heartbeat_s / period_s) + 1)            # its first heartbeat after the boot-up
-    assert loop.nmt_state[1] == NmtState.PRE_OPERATIONAL
+    assert loop.hardware.nmt_state[1] == NmtState.PRE_OPERATIONAL
     starts = frames_sent(bus, "NMT")
     ctl.host.command(int(Command.RESET), 0, 1)
     assert cycles_while_starting(loop)                        # identified again beside the cycle ...

@@ -63,7 +63,7 @@ def test_estop_disables_valves_in_the_same_cycle_and_reset_recovers():
     assert command(ctl, Command.ENABLE) is Ack.BAD_STATE
     assert command(ctl, Command.RESET) is Ack.ACCEPTED
     loop.cycle()
-    assert loop.out_cmd[0].values[loop.out_cmd[0].index["CW_R"]] == 1.0    # the reset pulse
+    assert loop.hardware.out_cmd[0].values[loop.hardware.out_cmd[0].index["CW_R"]] == 1.0    # the reset pulse
     cycles(loop, 3)
     assert ctl.status.state is State.IDLE and valve_states(bus) == [ValveState.HOLD]
     assert command(ctl, Command.ENABLE) is Ack.ACCEPTED

@@ -34,6 +34,7 @@ FLOORS = {
         {"__main__"},
     ],
     "hil": [
+        {"logdata_canopen"},
         {"logdata", "plotting", "injection", "identification", "experiments", "host", "processes", "in_process"},
         {"fuzz"},
         {"logquery", "metrics", "monitor", "reference_rebuild", "scenario", "estimates"},

@@ -14,16 +14,17 @@ from plant_emulator.params import load_config as load_emulator_config
 from protocol.codec import CODECS
 from protocol.enums import Ack, AckKind, EmuFault, State
 from protocol.interfaces import VC_D, VC_H, VC_M, VC_SPOOL
+from protocol.outbox import Outbox
 
 
 def bus_loop(rig: str, controller: str, overrides: dict | None = None, emulator: dict | None = None,
-             pacing: str = "lockstep", activate: bool = True, outside=None):
+             pacing: str = "lockstep", activate: bool = True, outside=None, devices: str = "hydrapod"):
     """(loop, controller, bus): the controller's loop on an in-process bus with the emulator's
-    `rig` behind it (`overrides`, `emulator`: config sections over the packaged ones;
-    `outside`: called around the emulator's work); activated by default: READY holding where
-    the rig stands."""
+    `rig` behind it as `devices` (`overrides`, `emulator`: config sections over the packaged
+    ones; `outside`: called around the emulator's work); activated by default: READY holding
+    where the rig stands."""
     return in_process.bus_loop(load_config(overrides=overrides), load_emulator_config(overrides=emulator), rig,
-                               controller, activate, pacing, outside)
+                               controller, activate, pacing, outside, devices)
 
 
 def cycles(loop, n: int) -> None:
@@ -84,7 +85,7 @@ def send_waypoint(ctl, seq: int, x: float, y: float, z: float, rpy=(0.0, 0.0, 0.
 
 def valve_words(loop, leg: int = 0):
     """What the controller last wrote to a leg: (D, H, M, spool)."""
-    v = loop.out_cmd[leg].values
+    v = loop.hardware.out_cmd[leg].values
     return v[VC_D], v[VC_H], v[VC_M], v[VC_SPOOL]
 
 
@@ -105,3 +106,11 @@ def clear(bus, node: int, fault: EmuFault) -> None:
 def frames_sent(bus, name: str) -> int:
     """How many frames of DBC message `name` the controller sent."""
     return bus.sent[CODECS[name].frame_id]
+
+
+def nmt(bus, node_command: int, node: int) -> None:
+    """An NMT frame to the nodes from another master (a test's)."""
+    box = Outbox("NMT")
+    box.values[:] = (int(node_command), node)
+    assert box.encode()
+    bus.emulator.handle(box.message)
