@@ -381,7 +381,7 @@ class Controller:
         if sup.state is not State.BOOT:
             sup.fault(self.loop_monitor.check(meas.stalled, meas.overrun))
             sup.fault(self.node_monitor.check_heartbeats(meas.heartbeat_age_s))
-        sup.fault(self.node_monitor.check_emergency(meas.emergency, meas.imu_emergency, self.reset_cycles > 0))
+        sup.fault(self.node_monitor.check_emergency(meas.emergency, meas.sensor_emergency, self.reset_cycles > 0))
         # host frames received since the last update: carried out as between two cycles (a
         # trajectory they start is at t = T in this cycle, the rule a log's analysis rebuilds)
         self.host.run_before_update(self)

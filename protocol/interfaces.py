@@ -40,7 +40,7 @@ class Measurements:
         self.rate_fresh = False                        # a valid sample arrived since the last cycle
         # node events
         self.emergency = False                         # an EMCY with an error code from a valve node
-        self.imu_emergency = False                     # ... from the IMU
+        self.sensor_emergency = False                  # ... from a sensor's (the IMU; a stock encoder or transducer)
         self.heartbeat_age_s = np.zeros(n_nodes)       # since each node's last heartbeat
         self.stalled = False                           # the loop's clock ran past the stall limit
         self.overrun = False                           # the previous cycle missed its deadline

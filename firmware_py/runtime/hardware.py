@@ -30,8 +30,9 @@ class Hardware:
         self.nmt_state = {node: -1 for node in self.nodes}
         self.heartbeat_seen = np.full(len(self.nodes), -np.inf)
         self.booted: set[int] = set()                    # nodes that booted since they were identified
-        self._emergency = False                          # an EMCY with an error code from a leg's node ...
-        self._imu_emergency = False                      # ... from the IMU
+        self.valve_nodes: set[int] = set()               # nodes whose EMCY is a valve's (else a sensor's)
+        self._emergency = False                          # an EMCY with an error code from a valve ...
+        self._sensor_emergency = False                   # ... from a sensor
         # the latest valid samples that do not come every cycle, and whether one came since the last read
         self._pressure = np.zeros((n_legs, 3))           # PA, PB, PS
         self._pressure_valid = np.zeros(n_legs, dtype=bool)
@@ -64,10 +65,10 @@ class Hardware:
         self.stats.emergencies += 1
         if error_code == 0:
             return
-        if node == self.imu_node:
-            self._imu_emergency = True
-        else:
+        if node in self.valve_nodes:
             self._emergency = True
+        else:
+            self._sensor_emergency = True
 
     def all_in_state(self, ready) -> bool:
         return all(ready(self.nmt_state[n]) for n in self.nodes)
@@ -94,7 +95,7 @@ class Hardware:
         np.copyto(meas.pressure_fresh, self._pressure_new)
         self._pressure_new.fill(False)
         meas.emergency, self._emergency = self._emergency, False
-        meas.imu_emergency, self._imu_emergency = self._imu_emergency, False
+        meas.sensor_emergency, self._sensor_emergency = self._sensor_emergency, False
 
     def begin_cycle(self, counter: int) -> None:
         """SYNC `counter` was sent: its window opens."""

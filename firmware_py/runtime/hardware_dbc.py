@@ -28,6 +28,7 @@ class DbcHardware(Hardware):
         super().__init__(n_legs, rig_nodes(n_legs), IMU_NODE if has_imu else None, stats, clock)
         self.devices_cfg = devices_cfg
         self.names = {node: SENDER_OF_NODE[node] for node in self.nodes}
+        self.valve_nodes = {node for node in self.nodes if node != IMU_NODE}      # a leg node drives its valve
         legs = range(1, n_legs + 1)
         rx = [f"LEG_STATE_{i}" for i in legs] + [f"VALVE_STATUS_{i}" for i in legs]
         rx += [f"LEG_PRESSURE_{i}" for i in legs] + [f"EMCY_{i}" for i in self.nodes]

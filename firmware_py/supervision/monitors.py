@@ -95,13 +95,13 @@ class NodeMonitor:
         return Fault.HEARTBEAT_LOST if any_above(heartbeat_age_s, self.heartbeat_timeout_s) else Fault.NONE
 
     @staticmethod
-    def check_emergency(valve: bool, imu: bool, in_reset: bool) -> Fault:
-        """An EMCY with an error code, named by its source (a valve node: VALVE_FAULT, the IMU:
-        SENSOR_FAULT), except while the nodes' faults are being reset (they announce the reset
-        with EMCYs of their own)."""
+    def check_emergency(valve: bool, sensor: bool, in_reset: bool) -> Fault:
+        """An EMCY with an error code, named by its source (a valve: VALVE_FAULT, a sensor's
+        node, the IMU or a stock encoder or transducer: SENSOR_FAULT), except while the nodes'
+        faults are being reset (they announce the reset with EMCYs of their own)."""
         if in_reset:
             return Fault.NONE
-        return Fault.VALVE_FAULT if valve else Fault.SENSOR_FAULT if imu else Fault.NONE
+        return Fault.VALVE_FAULT if valve else Fault.SENSOR_FAULT if sensor else Fault.NONE
 
     def check_valves(self, valve_state: np.ndarray) -> Fault:
         """A valve that reports a fault state in its LEG_STATE."""

@@ -6,6 +6,7 @@ configuration that leaves a leg without a sample refused with one line."""
 import math
 from types import SimpleNamespace
 
+import can
 import numpy as np
 import pytest
 
@@ -180,3 +181,13 @@ def test_on_stock_devices_a_lost_frame_or_node_faults_as_on_the_projects_own(tar
     assert ctl.status.fault is expect and taken <= limit
     if fault is EmuFault.DROP and target == CONTROLLER_NODE:
         assert valve_states(bus) == [ValveState.FAULT_HOLD] and loop.stats.emergencies > emergencies
+
+
+@pytest.mark.parametrize("node,expect", [(33, Fault.SENSOR_FAULT), (49, Fault.SENSOR_FAULT), (1, Fault.VALVE_FAULT)])
+def test_an_emcy_names_its_device_a_sensor_or_the_valve(node, expect):
+    loop, ctl, bus = bus_loop("testbench", "pi", devices="canopen")
+    cycles(loop, 20)
+    bus.deliver(can.Message(arbitration_id=0x80 + node, data=bytes([0x00, 0x50, 0x01, 0, 0, 0, 0, 0]),
+                            is_extended_id=False))         # CiA 301 0x5000: device hardware
+    cycles(loop, 2)
+    assert ctl.status.fault is expect

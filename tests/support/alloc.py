@@ -8,7 +8,6 @@ from collections.abc import Callable
 
 import numpy as np
 
-
 TRACE_FRAMES = 12                 # deep enough to see that an allocation is the plant's own work
 
 
