@@ -22,7 +22,7 @@ import numpy as np
 
 from plant_emulator.devices import EmulatedDevices
 from protocol import canopen_profile as cp
-from protocol.canopen_layout import Device, load_layout
+from protocol.canopen_layout import LAYOUT_FILE, Device, load_layout
 from protocol.codec import EncodeStatus
 from protocol.devices import written_values
 from protocol.nodes import IMU_NODE
@@ -50,10 +50,11 @@ class _Pdo:
 
 
 class CanopenNodes:
-    """The stock devices of a rig with `n_legs` legs; `send(message)` puts a frame on the bus."""
+    """The stock devices of a rig with `n_legs` legs, as `layout` places them; `send(message)`
+    puts a frame on the bus."""
 
-    def __init__(self, n_legs: int, send):
-        self.layout = load_layout(n_legs)
+    def __init__(self, n_legs: int, send, layout=LAYOUT_FILE):
+        self.layout = load_layout(n_legs, layout)
         self.device = {d.node: d for d in self.layout}
         self.valve_node = {d.leg: d.node for d in self.layout if d.name.endswith("_VALVE")}
         # each leg's nodes (its valve, encoder and measuring device): any started samples the leg

@@ -38,6 +38,7 @@ from plant_emulator.params import EmulatorConfig
 from plant_emulator.simulated_rig import SimulatedRig
 from plant_emulator.valve_node import Emergency, ValveState
 from program.realtime import percentiles_us
+from protocol.canopen_layout import LAYOUT_FILE
 from protocol.codec import CODECS, STANDARD_ID_MASK, FrameDecoder
 from protocol.dbc import sync_counter_overflow, truth_phase
 from protocol.devices import DEVICE_PROFILES
@@ -99,7 +100,7 @@ class Emulator:
     """Nodes of one rig on one bus. `handle(msg)` for every received frame, `poll(now)` often."""
 
     def __init__(self, bus: can.BusABC | None, rig, cfg: EmulatorConfig, clock=time.monotonic,
-                 pacing: str | None = None, devices: str = "hydrapod"):
+                 pacing: str | None = None, devices: str = "hydrapod", layout=LAYOUT_FILE):
         self.bus, self.rig, self.cfg, self.clock = bus, rig, cfg, clock
         # its own --pacing, said against the controller's CTRL_STATUS.PACING (None: not checked)
         self.pacing = Pacing[pacing.upper()] if pacing is not None else None
@@ -110,7 +111,7 @@ class Emulator:
         if devices not in DEVICE_PROFILES:
             raise ValueError(f"devices must be one of {', '.join(DEVICE_PROFILES)}, got {devices!r}")
         # the stock CANopen devices (canopen_nodes.py), or the project's own leg and IMU nodes
-        self.canopen = CanopenNodes(rig.n_legs, self._send) if devices == "canopen" else None
+        self.canopen = CanopenNodes(rig.n_legs, self._send, layout) if devices == "canopen" else None
         self.nodes = self.canopen.nodes if self.canopen is not None else rig_nodes(rig.n_legs)
         self.nmt = {n: NmtState.BOOTUP for n in self.nodes}
         names = ["NMT", "SYNC", "EMU_CTRL", "EMU_KICK", "CTRL_STATUS"]

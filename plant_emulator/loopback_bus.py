@@ -17,6 +17,7 @@ import can
 
 from plant_emulator.emulator import Emulator
 from plant_emulator.params import EmulatorConfig
+from protocol.canopen_layout import LAYOUT_FILE
 from protocol.codec import CODECS
 
 
@@ -47,16 +48,16 @@ class _EmulatorSide:
 
 class LoopbackBus:
     """The controller's end of a bus with `rig` (configured by `cfg`) emulated behind it, as
-    `devices` (the project's own nodes, or stock CANopen devices)."""
+    `devices` (the project's own nodes, or stock CANopen devices as `layout` places them)."""
 
-    def __init__(self, rig, cfg: EmulatorConfig, outside=None, devices: str = "hydrapod"):
+    def __init__(self, rig, cfg: EmulatorConfig, outside=None, devices: str = "hydrapod", layout=LAYOUT_FILE):
         self.enter, self.leave = outside or (_nothing, _nothing)
         self.clock = SimulatedClock()
         self.period_s = cfg.nodes.sync_period_s
         self.queue: deque[can.Message] = deque()
         self.sent: Counter = Counter()                 # frames the controller sent, by id
         self.last_sent: dict[int, bytes] = {}          # ... and the data of each id's last one
-        self.emulator = Emulator(_EmulatorSide(self), rig, cfg, clock=self.clock, devices=devices)
+        self.emulator = Emulator(_EmulatorSide(self), rig, cfg, clock=self.clock, devices=devices, layout=layout)
         self.emulator.boot()
         self._sync_id = CODECS["SYNC"].frame_id
 

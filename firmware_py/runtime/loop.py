@@ -52,6 +52,7 @@ from firmware_py.runtime.identify import IdentityError, identify, loop_sdo_clien
 from firmware_py.supervision.supervisor import LATCHED, emergency_code
 from physics.constants import BAR
 from program.realtime import percentiles_us
+from protocol.canopen_layout import LAYOUT_FILE
 from protocol.codec import CODECS, STANDARD_ID_MASK, FrameDecoder
 from protocol.dbc import sync_counter_overflow, truth_phase
 from protocol.devices import DEVICE_PROFILES, SDO_RESPONSE_BASE
@@ -143,7 +144,7 @@ class Stats:
 
 class ControllerLoop:
     def __init__(self, bus, controller: Controller, rate_hz: float, pacing: str, clock=time.perf_counter,
-                 log=None, devices: str = "hydrapod"):
+                 log=None, devices: str = "hydrapod", layout=LAYOUT_FILE):
         if pacing not in PACINGS:
             raise ValueError(f"pacing must be one of {PACINGS}, got {pacing!r}")
         self.bus, self.controller, self.pacing, self.clock = bus, controller, pacing, clock
@@ -158,7 +159,7 @@ class ControllerLoop:
             raise ValueError(f"devices must be one of {', '.join(DEVICE_PROFILES)}, got {devices!r}")
         # the rig's devices: the project's own nodes, or stock CANopen devices
         self.hardware: Hardware = DbcHardware(n, has_imu, self.cfg.devices, self.stats, clock) \
-            if devices == "hydrapod" else CanopenHardware(n, has_imu, self.stats, clock)
+            if devices == "hydrapod" else CanopenHardware(n, has_imu, self.stats, clock, layout)
         self.meas, self.cmd = self.hardware.new_measurements(), controller.new_interfaces()[1]
         self.nodes = self.hardware.nodes
         rx = list(HOST_FRAMES)

@@ -10,9 +10,16 @@ import can
 import numpy as np
 import pytest
 
+from firmware_py.config import load_config
+from firmware_py.controller import Controller
+from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
 from firmware_py.runtime.configure import ConfigurationError
 from firmware_py.runtime.daemon import bus_budget_note
 from firmware_py.runtime.hardware_canopen import CanopenHardware
+from firmware_py.runtime.loop import ControllerLoop
+from plant_emulator.loopback_bus import LoopbackBus
+from plant_emulator.params import load_config as load_emulator_config
+from plant_emulator.rigs import make_rig
 from program.errors import UserInputError
 from protocol import canopen_profile as cp
 from protocol.bus import BusSpec
@@ -191,3 +198,33 @@ def test_an_emcy_names_its_device_a_sensor_or_the_valve(node, expect):
                             is_extended_id=False))         # CiA 301 0x5000: device hardware
     cycles(loop, 2)
     assert ctl.status.fault is expect
+
+
+def test_which_object_travels_where_is_the_devices_mapping_not_code(tmp_path):
+    """A measuring device whose pressure TPDO carries the supply first, then chamber A and B
+    (its DCF, not the shipped EDS): emulator and controller both follow it, and every
+    pressure lands where it belongs."""
+    eds = (LAYOUT_FILE.parent / "canopen-leg-sensors.eds").read_text()
+    for sub, entry in ((1, "0x71300410"), (2, "0x71300210"), (3, "0x71300310")):
+        section = f"[1A01sub{sub}]"
+        head, rest = eds.split(section, 1)
+        old = rest.split("DefaultValue=", 1)[1].split("\n", 1)[0]
+        eds = head + section + rest.replace(f"DefaultValue={old}", f"DefaultValue={entry}", 1)
+    dcf = tmp_path / "leg-sensors.dcf"
+    dcf.write_text(eds)
+    layout = tmp_path / "layout.toml"
+    layout.write_text(LAYOUT_FILE.read_text().replace('eds = "canopen-leg-sensors.eds"', f'eds = "{dcf}"'))
+    cfg = load_emulator_config()
+    ctl = Controller(load_config(), "testbench", 0.002, CONTROLLER_NAMES["pi"])
+    bus = LoopbackBus(make_rig("testbench", cfg), cfg, devices="canopen", layout=layout)
+    loop = ControllerLoop(bus, ctl, 500.0, "lockstep", clock=bus.clock, log=lambda _: None, devices="canopen",
+                          layout=layout)
+    loop.activate()
+    cycles(loop, 40)
+    assert ctl.status.fault is Fault.NONE and loop.meas.pressure_valid[0]
+    truth = bus.sim.pressure[0]                      # PA, PB, PS as the emulator sampled them last
+    measured = (loop.meas.pa_pa[0], loop.meas.pb_pa[0], loop.meas.ps_pa[0])
+    # a sample a few SYNCs older than the truth's: within 0.15 bar, where A and B differ by ~0.4
+    np.testing.assert_allclose(measured, truth, atol=0.15e5)
+    assert abs(truth[0] - truth[1]) > 0.3e5
+    assert loop.meas.ps_pa[0] > 2 * loop.meas.pa_pa[0]            # the supply, not a chamber
