@@ -24,11 +24,10 @@ from plant_emulator.devices import EmulatedDevices
 from protocol import canopen_profile as cp
 from protocol.canopen_layout import LAYOUT_FILE, Device, load_layout
 from protocol.codec import EncodeStatus
-from protocol.devices import written_values
+from protocol.devices import HEARTBEAT_BASE, written_values
 from protocol.nodes import IMU_NODE
 from protocol.pdo import RPDO, TPDO, PdoCodec, PdoError, object_value, pdo_maps
 
-HEARTBEAT_BASE = 0x700
 HEARTBEAT_TIME = (0x1017, 0)                              # producer heartbeat time, ms
 RPDO1_TIMEOUT = (0x1400, 5)                               # RPDO1's event timer: its deadline, ms
 LEG_PRESSURES = (cp.LEG_PA, cp.LEG_PB, cp.LEG_PS)        # in SimulatedRig.pressure's column order

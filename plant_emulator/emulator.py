@@ -41,7 +41,7 @@ from program.realtime import percentiles_us
 from protocol.canopen_layout import LAYOUT_FILE
 from protocol.codec import CODECS, STANDARD_ID_MASK, FrameDecoder
 from protocol.dbc import sync_counter_overflow, truth_phase
-from protocol.devices import DEVICE_PROFILES
+from protocol.devices import DEVICE_PROFILES, EMCY_BASE
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import EmuCommand, EmuFault, NmtCommand, NmtState, Pacing
 from protocol.interfaces import attitude_values, leg_pressure_values, leg_state_values, rate_values, valve_command_of
@@ -55,7 +55,6 @@ SP_RESPONSE, SP_NODES, SP_SEND, SP_PHYSICS, SP_TOTAL = range(len(SYNC_PHASES))
 SYNC_HISTORY = 1 << 16
 BABBLE_ID = 0x601                    # not in the DBC (an SDO request id of node 1)
 NO_COMMAND_TIMEOUT = 1 << 62          # a stock valve whose RPDO timeout is 0: never times out
-EMCY_BASE = 0x80                     # CiA 301: a node's EMCY at 0x80 + its id
 FREE_RUN_CATCH_UP_STEPS = 25         # free run: periods of physics per poll at most (a late wake-up)
 SYNC_TIMEOUT_EVENT = "emulator: event sync_timeout"   # a stderr line per SYNC-watchdog trip (JSON after it)
 # a stderr line per injected fault, at the first SYNC that sees it: the fault's onset cycle

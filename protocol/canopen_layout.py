@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 from program.errors import UserInputError
 from protocol.dbc import CONTROLLER_NODE, Schedule, schedules
-from protocol.devices import DEVICES_DIR, object_dictionary
+from protocol.devices import DEVICES_DIR, EMCY_BASE, HEARTBEAT_BASE, object_dictionary
 from protocol.pdo import RPDO, TPDO, pdo_maps
 
 LAYOUT_FILE = DEVICES_DIR / "canopen-layout.toml"
@@ -89,9 +89,9 @@ def device_schedules(device: Device) -> list[Schedule]:
     frames += _pdos(device, od, device.name, TPDO)
     heartbeat_ms = int(od[0x1017].default) if 0x1017 in od else 0
     if heartbeat_ms:
-        frames.append(Schedule(f"{device.name}_HEARTBEAT", 0x700 + device.node, HEARTBEAT_DLC, device.name, 0, 0,
-                               heartbeat_ms, None))
-    frames.append(Schedule(f"{device.name}_EMCY", 0x80 + device.node, EMCY_DLC, device.name, 0, 0, 0, None))
+        frames.append(Schedule(f"{device.name}_HEARTBEAT", HEARTBEAT_BASE + device.node, HEARTBEAT_DLC, device.name,
+                               0, 0, heartbeat_ms, None))
+    frames.append(Schedule(f"{device.name}_EMCY", EMCY_BASE + device.node, EMCY_DLC, device.name, 0, 0, 0, None))
     return frames
 
 

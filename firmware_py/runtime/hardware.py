@@ -12,14 +12,17 @@ here the same way for both.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+
 import numpy as np
 
 from protocol.enums import NmtState
 from protocol.interfaces import Measurements, ValveCommands
 
 
-class Hardware:
-    """The bookkeeping both profiles share; a profile implements the frames."""
+class Hardware(ABC):
+    """The bookkeeping both profiles share; a profile implements the frames (its abstract
+    methods: a profile lacking one cannot be built)."""
 
     profile = ""
 
@@ -103,51 +106,55 @@ class Hardware:
         self.begin_window(counter)
 
     # -- per profile ---------------------------------------------------------------------------
+    @abstractmethod
     def filters(self) -> list[dict]:
         """python-can acceptance filters for the devices' frames (SDO answers are the loop's)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def dispatch(self, msg) -> bool:
         """A received frame: True when it was a device's (taken, or counted as rejected)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def begin_window(self, counter: int) -> None:
-        raise NotImplementedError
+        """SYNC `counter` was sent: this cycle's samples are awaited from now."""
 
+    @abstractmethod
     def end_cycle(self) -> int:
         """The cycle's window closed: how many of the samples due every cycle did not come."""
-        raise NotImplementedError
 
+    @abstractmethod
     def all_fresh(self) -> bool:
         """Every leg's samples of this cycle are in."""
-        raise NotImplementedError
 
+    @abstractmethod
     def read_legs(self, meas: Measurements) -> None:
-        raise NotImplementedError
+        """Each leg's samples of this cycle (and whether they came) into `meas`."""
 
+    @abstractmethod
     def write(self, cmd: ValveCommands, send) -> None:
         """Each valve's command, `send(message)` for each frame."""
-        raise NotImplementedError
 
+    @abstractmethod
     def restarted(self, node: int) -> None:
         """A node booted again: its frames' state starts afresh."""
 
+    @abstractmethod
     def expected_devices(self) -> dict:
         """Node id -> (the identity its configured EDS gives, that EDS's name)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def prepare(self, client_of, nodes) -> object:
         """After `nodes` were identified, before their NMT start: configure them through
         `client_of(node)` (an SDO client); what `adopt` takes on the loop's thread."""
-        return None
 
+    @abstractmethod
     def adopt(self, prepared) -> None:
         """What `prepare` gave, taken on the loop's thread."""
 
+    @abstractmethod
     def leg_report(self) -> str:
         """What the receiver last made of each leg's frames, for a fault's line."""
-        return ""
 
+    @abstractmethod
     def describe(self) -> str:
         """Where the devices expected are configured, for the activation's log."""
-        raise NotImplementedError

@@ -25,10 +25,9 @@ from firmware_py.runtime.hardware import Hardware
 from protocol import canopen_profile as cp
 from protocol.canopen_layout import LAYOUT_FILE, Device, load_layout
 from protocol.codec import STANDARD_ID_MASK, EncodeStatus
-from protocol.devices import identity_of, object_dictionary
+from protocol.devices import EMCY_BASE, HEARTBEAT_BASE, identity_of, object_dictionary
 from protocol.pdo import RPDO, TPDO, PdoCodec, PdoError, pdo_maps
 
-HEARTBEAT_BASE, EMCY_BASE = 0x700, 0x80
 # what a TPDO's object goes into: the leg's (or the IMU's) latest value, or the valve state
 POSITION, FORCE, SPOOL, VALVE_STATE, PRESSURE, ATTITUDE, RATE = range(7)
 _SINK_OF_QUANTITY = {"position": POSITION, "force": FORCE, "spool": SPOOL, "valve_state": VALVE_STATE,

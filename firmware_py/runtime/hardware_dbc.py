@@ -123,6 +123,12 @@ class DbcHardware(Hardware):
         return {node: (identity_of(eds), eds) for node in self.nodes
                 for eds in [devices.imu_eds if node == IMU_NODE else devices.leg_eds]}
 
+    def prepare(self, client_of, nodes) -> None:
+        """The project's nodes carry their frames as built: nothing to configure."""
+
+    def adopt(self, prepared) -> None:
+        """Nothing was prepared."""
+
     def leg_report(self) -> str:
         last = [RxStatus(int(self.decoder.last_status[slot])).name for slot in self._leg_slots]
         return f"last LEG_STATE status {last}"
