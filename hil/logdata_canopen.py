@@ -51,10 +51,14 @@ class _Pdo:
         self.values = np.zeros(len(self.targets))
 
 
-class CanopenLog:
-    """Takes a log's PDO frames in cycle order (`take`), gives the DBC messages' rows (`rows`)."""
+class PdoReader:
+    """Each PDO frame of the layout's devices decoded into the DBC messages it stands for
+    (`read`); per PDO name and status the frames taken (`counts`). The log's reader and the
+    monitor's live view both read through it."""
 
-    def __init__(self):
+    def __init__(self, values_of):
+        """`values_of(name)`: the values array of DBC message `name` to write into."""
+        self.values_of = values_of
         self.pdos: dict[int, _Pdo] = {}
         self.tpdo_ids: set[int] = set()                     # the devices' own: answers to a SYNC
         for device in load_layout(N_LEGS):
@@ -65,31 +69,25 @@ class CanopenLog:
                     self.pdos[pdo.cob_id] = _Pdo(PdoCodec(pdo), device.leg)
                     if kind == TPDO:
                         self.tpdo_ids.add(pdo.cob_id)
-        self.latest: dict[str, np.ndarray] = {}            # message -> its values as last taken
-        self._touched: dict[str, float] = {}                # message -> time of its latest PDO this cycle
-        self._cycle = None
         self.counts: dict[str, dict[str, int]] = {}         # PDO name -> status -> frames
-        self.rejected: dict[str, list[int]] = {}            # message -> cycles of short PDOs
 
     @property
     def ids(self) -> set[int]:
         return set(self.pdos)
 
-    def take(self, frame_id: int, data: bytes, cycle: int, time_s: float, rows: dict) -> None:
-        if cycle != self._cycle:
-            self.flush(rows)
-            self._cycle = cycle
+    def read(self, frame_id: int, data: bytes) -> list[str] | None:
+        """The DBC messages frame `frame_id` wrote into, or None: shorter than its mapping."""
         pdo = self.pdos[frame_id]
         counts = self.counts.setdefault(pdo.codec.name, {})
         if not pdo.codec.decode_into(data, pdo.values):
             counts["BAD_LENGTH"] = counts.get("BAD_LENGTH", 0) + 1
-            self.rejected.setdefault(pdo.codec.name, []).append(cycle)
-            return
+            return None
         counts["OK"] = counts.get("OK", 0) + 1
+        touched = []
         for k, targets in pdo.targets:
             for prefix, signal, step in targets:
                 name = prefix if pdo.leg is None else f"{prefix}_{pdo.leg}"
-                values = self._values(name)
+                values = self.values_of(name)
                 index = CODECS[name].index
                 raw = pdo.values[k]
                 if signal == "VALVE_STATE":
@@ -99,13 +97,54 @@ class CanopenLog:
                         values[index[bit]] = on
                 else:
                     values[index[signal]] = raw * step
-                self._touched[name] = time_s
+                if name not in touched:
+                    touched.append(name)
+        return touched
+
+
+def imu_valid(name: str, values: np.ndarray) -> None:
+    """A stock inclinometer has no status signal: its IMU messages read VALID."""
+    if name.startswith("IMU_"):
+        values[CODECS[name].index["STATUS"]] = int(ImuStatus.VALID)
+
+
+class CanopenLog:
+    """Takes a log's PDO frames in cycle order (`take`), gives the DBC messages' rows (`rows`)."""
+
+    def __init__(self):
+        self.reader = PdoReader(self._values)
+        self.latest: dict[str, np.ndarray] = {}            # message -> its values as last taken
+        self._touched: dict[str, float] = {}                # message -> time of its latest PDO this cycle
+        self._cycle = None
+        self.rejected: dict[str, list[int]] = {}            # message -> cycles of short PDOs
+
+    @property
+    def ids(self) -> set[int]:
+        return self.reader.ids
+
+    @property
+    def tpdo_ids(self) -> set[int]:
+        return self.reader.tpdo_ids
+
+    @property
+    def counts(self) -> dict[str, dict[str, int]]:
+        return self.reader.counts
+
+    def take(self, frame_id: int, data: bytes, cycle: int, time_s: float, rows: dict) -> None:
+        if cycle != self._cycle:
+            self.flush(rows)
+            self._cycle = cycle
+        touched = self.reader.read(frame_id, data)
+        if touched is None:
+            self.rejected.setdefault(self.reader.pdos[frame_id].codec.name, []).append(cycle)
+            return
+        for name in touched:
+            self._touched[name] = time_s
 
     def _values(self, name: str) -> np.ndarray:
         if name not in self.latest:
             self.latest[name] = CODECS[name].new_values()
-            if name.startswith("IMU_"):
-                self.latest[name][CODECS[name].index["STATUS"]] = int(ImuStatus.VALID)
+            imu_valid(name, self.latest[name])
         return self.latest[name]
 
     def flush(self, rows: dict) -> None:

@@ -14,6 +14,7 @@ import numpy as np
 from program.cliutil import number_in_range, output_file
 from program.errors import UserInputError
 from protocol.bus import open_bus
+from protocol.devices import DEVICE_PROFILES
 
 SNAPSHOT_SIZE = (160, 48)          # columns, rows of the screen without a terminal
 LIVE_NICE = 10                     # live: below the controller, the emulator and the HIL host
@@ -55,7 +56,7 @@ def _monitor(args: argparse.Namespace) -> int:
     from hil.monitor.app import MonitorApp
     from hil.monitor.sources import CommandSender, LiveSource, ReplaySource, check_log
     from hil.monitor.view import BusView
-    view = BusView()
+    view = BusView(devices=args.devices)
     bus = None
     if args.replay:
         source = ReplaySource(view, check_log(args.replay), args.speed)
@@ -98,6 +99,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                                        "(a live bus or a replayed log)")
     p.add_argument("--bus", metavar="SPEC", help="the bus to watch (default: socketcan:vcan0 if present, else the "
                                                  "default on-host multicast group)")
+    p.add_argument("--devices", choices=DEVICE_PROFILES, default="hydrapod",
+                   help="the nodes' profile: the project's own (default) or stock CANopen devices, whose PDOs "
+                        "are shown as the messages they stand for")
     p.add_argument("--replay", metavar="LOG", help="replay a recorded .blf or .asc log instead")
     p.add_argument("--speed", type=number_in_range(float, 0.0, 1000.0), default=1.0,
                    help="replay speed, times the log's own pace (0: as fast as it can; default 1)")

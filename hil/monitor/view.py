@@ -16,8 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
+from hil.logdata_canopen import PdoReader, imu_valid
 from protocol.busload import frame_bits_nominal
+from protocol.canopen_layout import load_layout
 from protocol.codec import CODECS, FrameDecoder
+from protocol.devices import HEARTBEAT_BASE
 from protocol.e2e import E2E_REJECTED, RxStatus
 from protocol.enums import (
     Ack,
@@ -131,7 +134,9 @@ class Snapshot:
 class BusView:
     """Every frame through `feed`; `snapshot` and `history` for the screen."""
 
-    def __init__(self, period_s: float = 0.002, history_s: float = HISTORY_S):
+    def __init__(self, period_s: float = 0.002, history_s: float = HISTORY_S, devices: str = "hydrapod"):
+        """`devices`: the nodes' profile (`canopen`: stock devices' PDOs read as the DBC's
+        messages they stand for, their heartbeats by device name)."""
         self.lock = threading.Lock()
         self.decoder = FrameDecoder()
         self.period_s = period_s
@@ -168,6 +173,16 @@ class BusView:
         self.rates: dict[str, float] = {}
         self.load = 0.0
         self._handlers = self._make_handlers()
+        self.pdo: PdoReader | None = None
+        self._stock_heartbeats: dict[int, str] = {}
+        self._pdo_rate_counts: dict[str, int] = {}
+        if devices == "canopen":
+            self.pdo = PdoReader(lambda name: self.decoder.values[name])
+            for name in ("IMU_ATTITUDE", "IMU_RATE"):
+                imu_valid(name, self.decoder.values[name])
+            dbc_heartbeats = {c.frame_id for n, c in CODECS.items() if n.startswith("HEARTBEAT_")}
+            self._stock_heartbeats = {HEARTBEAT_BASE + d.node: d.name for d in load_layout(N_LEGS)
+                                      if HEARTBEAT_BASE + d.node not in dbc_heartbeats}
 
     # -- frames ------------------------------------------------------------------------
     def feed(self, time_s: float, frame_id: int, data, is_extended: bool = False) -> RxStatus:
@@ -179,12 +194,34 @@ class BusView:
             if is_extended:
                 self.decoder.unknown_frames += 1
                 return RxStatus.UNKNOWN_ID
+            if self.pdo is not None and frame_id in self.pdo.pdos:
+                return self._feed_pdo(time_s, frame_id, data)
+            if frame_id in self._stock_heartbeats and len(data) >= 1:
+                self.heartbeats[self._stock_heartbeats[frame_id]] = (_name(NmtState, data[0] & 0x7F), time_s)
+                self._roll_rates(time_s)
+                return RxStatus.OK
             status = self.decoder.receive(frame_id, data)
             handler = self._handlers.get(frame_id)
             if handler is not None:
                 handler(time_s, status)
             self._roll_rates(time_s)
             return status
+
+    def _feed_pdo(self, time_s: float, frame_id: int, data) -> RxStatus:
+        """A stock device's PDO: each DBC message it wrote into handled as if received."""
+        touched = self.pdo.read(frame_id, data)
+        if touched is not None:
+            for name in touched:
+                handler = self._handlers.get(CODECS[name].frame_id)
+                if handler is not None:
+                    handler(time_s, RxStatus.OK)
+        self._roll_rates(time_s)
+        return RxStatus.OK if touched is not None else RxStatus.BAD_LENGTH
+
+    def _pdo_counts(self, status: str) -> dict[str, int]:
+        if self.pdo is None:
+            return {}
+        return {name: c[status] for name, c in self.pdo.counts.items() if c.get(status)}
 
     def _make_handlers(self) -> dict:
         h = {CODECS["SYNC"].frame_id: self._sync, CODECS["CTRL_STATUS"].frame_id: self._status,
@@ -361,6 +398,9 @@ class BusView:
         counts = self.decoder.counts.sum(axis=1)
         per_s = (counts - self._rate_counts) / dt
         self.rates = {n: float(r) for n, r in zip(self.decoder.names, per_s, strict=True) if r > 0}
+        pdo = self._pdo_counts("OK")
+        self.rates.update({n: (c - self._pdo_rate_counts.get(n, 0)) / dt for n, c in pdo.items()})
+        self._pdo_rate_counts = pdo
         self.load = (self.bits - self._rate_bits) / dt / BITRATE_BIT_S
         self._rate_counts[:] = counts
         self._rate_bits, self._rate_t = self.bits, t
@@ -391,7 +431,7 @@ class BusView:
             self._velocities()
             period, p99, worst = self._sync_stats()
             counts = self.decoder.counts
-            rejected = int(sum(counts[:, s].sum() for s in E2E_REJECTED))
+            rejected = int(sum(counts[:, s].sum() for s in E2E_REJECTED)) + sum(self._pdo_counts("BAD_LENGTH").values())
             return Snapshot(
                 now_s=self.now_s, state=self.state, fault=self.fault, fault_leg=self.fault_leg,
                 controller=self.controller, active_waypoint=self.active_waypoint, overruns=self.overruns,
@@ -438,9 +478,9 @@ class BusView:
         with self.lock:
             counts = self.decoder.counts
             return {n: int(sum(counts[k, s] for s in E2E_REJECTED)) for k, n in enumerate(self.decoder.names)
-                    if any(counts[k, s] for s in E2E_REJECTED)}
+                    if any(counts[k, s] for s in E2E_REJECTED)} | self._pdo_counts("BAD_LENGTH")
 
     def ok_by_message(self) -> dict[str, int]:
         with self.lock:
             return {n: int(self.decoder.counts[k, RxStatus.OK]) for k, n in enumerate(self.decoder.names)
-                    if self.decoder.counts[k, RxStatus.OK]}
+                    if self.decoder.counts[k, RxStatus.OK]} | self._pdo_counts("OK")

@@ -1,10 +1,15 @@
 """A log of a run on stock CANopen devices reads as the DBC's messages its PDOs stand for: the
-positions, pressures and valve commands the controller had, cycle by cycle."""
+positions, pressures and valve commands the controller had, cycle by cycle; the monitor shows
+them the same way."""
+
+import json
 
 import can
 import numpy as np
 
+from hil.cli import main
 from hil.logdata import read_log
+from hil.monitor.view import BusView
 from protocol import canopen_profile as cp
 from protocol.enums import Ack, WaypointFlag
 from tests.support.loops import bus_loop, send_waypoint
@@ -62,3 +67,32 @@ def test_a_stock_device_log_reads_as_the_dbc_messages(tmp_path):
     pressures = log.get("LEG_PRESSURE_1")
     assert CYCLES // 16 <= len(pressures) and np.all(pressures["PS"] > 20e5)
     assert "LEG1_VALVE_TPDO1" in log.rx_counts
+
+
+def test_the_monitor_shows_a_stock_device_run_as_the_controller_saw_it(tmp_path, capsys):
+    """`hydrapod monitor --devices canopen`: the valve's, encoder's and measuring device's PDOs
+    fill the leg's row (position, spool command, valve state, pressures); read as the project's
+    own nodes, the same log shows no leg."""
+    path = tmp_path / "run.blf"
+    read, spool, _ = _recorded_run(path)
+    stock, own = BusView(devices="canopen"), BusView()
+    with can.LogReader(str(path)) as reader:
+        for msg in reader:
+            for view in (stock, own):
+                view.feed(msg.timestamp, msg.arbitration_id, msg.data, msg.is_extended_id)
+    leg = stock.snapshot().legs[0]
+    assert abs(leg.position_m - read[-1]) <= cp.POSITION_STEP_M / 2
+    assert abs(leg.spool_cmd - spool[-1]) <= 1.0 / cp.SPOOL_FULL_SCALE
+    assert leg.valve_state == "ACTIVE" and leg.control_bits == "DHM-"          # R only resets a fault
+    assert 1e5 < leg.pa_pa < 3e6 and 1e5 < leg.pb_pa < 3e6
+    assert stock.snapshot().rejected == 0
+    # the stock sensors' heartbeats (node ids the DBC has not) by device name
+    assert stock.heartbeats["LEG1_ENCODER"][0] == stock.heartbeats["LEG1_LEG_SENSORS"][0] == "OPERATIONAL"
+    assert {"LEG1_VALVE_TPDO1", "LEG1_ENCODER_TPDO1"} <= set(stock.ok_by_message())
+    mine = own.snapshot()
+    assert mine.n_legs == 0 and mine.rejected > 0 and mine.unknown > 0     # RPDOs fail the E2E check
+
+    assert main(["monitor", "--replay", str(path), "--devices", "canopen", "--speed", "0", "--snapshot",
+                 str(tmp_path / "s.svg"), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["legs"] == 1 and summary["e2e_rejected"] == 0
