@@ -225,8 +225,8 @@ def read_log(path: str | Path, devices: str = "hydrapod") -> LogData:
         raise UserInputError(f"{path}: no such log file")
     frames = _read_frames(path)
     canopen = CanopenLog() if devices == "canopen" else None
-    pdo_ids = frozenset(canopen.ids) if canopen is not None else frozenset()
-    cycles = _assign_cycles(frames, frozenset(canopen.tpdo_ids) if canopen is not None else frozenset())
+    pdo_ids = frozenset(canopen.reader.ids) if canopen is not None else frozenset()
+    cycles = _assign_cycles(frames, frozenset(canopen.reader.tpdo_ids) if canopen is not None else frozenset())
     order = np.argsort(cycles, kind="stable")       # each sender's own order is kept
     decoder = FrameDecoder()
     rows: dict[str, list] = {name: [] for name in CODECS}
@@ -276,7 +276,7 @@ def read_log(path: str | Path, devices: str = "hydrapod") -> LogData:
     rx_counts = {name: {s.name: int(decoder.counts[i, s]) for s in RxStatus if decoder.counts[i, s]}
                  for i, name in enumerate(decoder.names) if decoder.counts[i].any()}
     if canopen is not None:
-        rx_counts.update(canopen.counts)
+        rx_counts.update(canopen.reader.counts)
     lost = {name: int(decoder.lost[i]) for i, name in enumerate(decoder.names) if decoder.lost[i]}
     sync_time_s = np.full(cycle + 1, np.nan)
     for k, t in sync_times:

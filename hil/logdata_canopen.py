@@ -44,11 +44,21 @@ _CONTROL_BITS = ("CW_D", "CW_H", "CW_M", "CW_R")
 
 
 class _Pdo:
+    """A PDO's codec and, per mapped object, the DBC messages and signals it stands for
+    (resolved once: `messages` are the ones every frame of it writes into)."""
+
     def __init__(self, codec: PdoCodec, leg: int | None):
-        self.codec, self.leg = codec, leg
+        self.codec = codec
         table = _IMU_SIGNALS if leg is None else _LEG_SIGNALS
-        self.targets = [(k, table.get(entry, ())) for k, entry in enumerate(codec.pdo.entries())]
-        self.values = np.zeros(len(self.targets))
+        self.targets = []                      # (object's slot, message, signal, its index, SI per count)
+        for k, entry in enumerate(codec.pdo.entries()):
+            for prefix, signal, step in table.get(entry, ()):
+                name = prefix if leg is None else f"{prefix}_{leg}"
+                index = CODECS[name].index
+                slot = [index[b] for b in _CONTROL_BITS] if signal == "CONTROL_WORD" else index[signal]
+                self.targets.append((k, name, signal, slot, step))
+        self.messages = list(dict.fromkeys(name for _, name, _, _, _ in self.targets))
+        self.values = np.zeros(len(codec.pdo.entries()))
 
 
 class PdoReader:
@@ -83,23 +93,16 @@ class PdoReader:
             counts["BAD_LENGTH"] = counts.get("BAD_LENGTH", 0) + 1
             return None
         counts["OK"] = counts.get("OK", 0) + 1
-        touched = []
-        for k, targets in pdo.targets:
-            for prefix, signal, step in targets:
-                name = prefix if pdo.leg is None else f"{prefix}_{pdo.leg}"
-                values = self.values_of(name)
-                index = CODECS[name].index
-                raw = pdo.values[k]
-                if signal == "VALVE_STATE":
-                    values[index[signal]] = cp.valve_state(int(raw))
-                elif signal == "CONTROL_WORD":
-                    for bit, on in zip(_CONTROL_BITS, cp.control_bits(int(raw))):
-                        values[index[bit]] = on
-                else:
-                    values[index[signal]] = raw * step
-                if name not in touched:
-                    touched.append(name)
-        return touched
+        for k, name, signal, slot, step in pdo.targets:
+            values, raw = self.values_of(name), pdo.values[k]
+            if signal == "VALVE_STATE":
+                values[slot] = cp.valve_state(int(raw))
+            elif signal == "CONTROL_WORD":
+                for bit_slot, on in zip(slot, cp.control_bits(int(raw))):
+                    values[bit_slot] = on
+            else:
+                values[slot] = raw * step
+        return pdo.messages
 
 
 def imu_valid(name: str, values: np.ndarray) -> None:
@@ -117,18 +120,6 @@ class CanopenLog:
         self._touched: dict[str, float] = {}                # message -> time of its latest PDO this cycle
         self._cycle = None
         self.rejected: dict[str, list[int]] = {}            # message -> cycles of short PDOs
-
-    @property
-    def ids(self) -> set[int]:
-        return self.reader.ids
-
-    @property
-    def tpdo_ids(self) -> set[int]:
-        return self.reader.tpdo_ids
-
-    @property
-    def counts(self) -> dict[str, dict[str, int]]:
-        return self.reader.counts
 
     def take(self, frame_id: int, data: bytes, cycle: int, time_s: float, rows: dict) -> None:
         if cycle != self._cycle:
