@@ -1,4 +1,4 @@
-"""The controller's cycle allocates nothing: 2,000 steady cycles per controller and rig through
+"""The controller's cycle allocates nothing: 1,000 steady cycles per controller and rig through
 the real loop (SYNC, collect, read, update, write) on the in-process bus, the emulated rig
 behind it; not one NumPy buffer is made, transient ones included (a counting hook on NumPy's
 memory handler, `hil/tools/alloc_count.py`), and nothing the cycle keeps grows (tracemalloc).
@@ -14,9 +14,11 @@ from tests.support.alloc import allocations
 from tests.support.loops import bus_loop, cycles, send_waypoint
 from tests.support.loops import command as host_command
 
-CYCLES = 2_000                 # a leak of 4 bytes per cycle would reach the 8 kB bound (one
-                               # Python object a cycle is 16 bytes or more)
-SEGMENTS = 30                  # the movement: back and forth by 5 mm, 0.2 s a segment (3,000 cycles)
+CYCLES = 1_000                 # moving: 2 s, every periodic frame and check many times over
+STATE_CYCLES = 250             # each other steady state
+TRACED_CYCLES = 500            # a leak of 16 bytes per cycle (one Python object) reaches the 8 kB bound
+SEGMENTS = 18                  # the movement: back and forth by 5 mm, 0.2 s a segment (1,800 cycles:
+                               # still moving when the counted and traced windows end)
 CASES = [(rig, controller, "hydrapod") for rig in ("testbench", "hexapod") for controller in CONTROLLER_NAMES]
 CASES.append(("hexapod", "model-based", "canopen"))       # stock devices: their PDOs in and out
 # tracemalloc and the counting hook slow everything: the heartbeat supervision has its own tests
@@ -53,7 +55,7 @@ def test_a_steady_cycle_makes_no_numpy_buffer_and_keeps_nothing(rig, controller,
         cycles(loop, 200)
         made = buffers(loop, counts, CYCLES)
         assert made == 0, f"{made} NumPy buffers in {CYCLES} cycles moving"
-        grown, gained = allocations(lambda: cycles(loop, 500), ("*/firmware_py/*", "*/protocol/*"))
+        grown, gained = allocations(lambda: cycles(loop, TRACED_CYCLES), ("*/firmware_py/*", "*/protocol/*"))
         # the loop really ran: moving, no faults, tracking, E2E clean
         status = ctl.status
         assert status.state is State.RUNNING, status.fault.name
@@ -67,8 +69,8 @@ def test_a_steady_cycle_makes_no_numpy_buffer_and_keeps_nothing(rig, controller,
                 loop.cycle()
             cycles(loop, 10)
             assert ctl.status.state is state, ctl.status.state.name
-            made = buffers(loop, counts, 500)
-            assert made == 0, f"{made} NumPy buffers in 500 cycles {state.name}"
+            made = buffers(loop, counts, STATE_CYCLES)
+            assert made == 0, f"{made} NumPy buffers in {STATE_CYCLES} cycles {state.name}"
     assert grown == []
     assert gained < 8192, f"traced memory grew by {gained} bytes"
 

@@ -7,7 +7,10 @@ nothing here skips when they are missing: it fails and says what to install.
 
 Under software emulation numba's compiler takes minutes, so the kernels are compiled for a
 generic x86-64 CPU (NUMBA_CPU_NAME=generic, a portable cache) by a host run of the same
-scenario first, in a directory the VM may write (`--rwdir`); the VM loads them from there.
+scenario first. The guest's root is the host's over 9p, where every file a process opens is
+a round trip through qemu: the checkout (its venv included), the standard library and the
+kernel cache go to the guest as ext4 disk images (`mke2fs -d`) mounted over the same paths,
+and only the run's output crosses 9p (`--rwdir`). docs/MEASUREMENTS.md has the figures.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import os
 import shutil
 import subprocess
 import sys
+import sysconfig
 from pathlib import Path
 
 import pytest
@@ -28,7 +32,18 @@ BIN = Path(sys.executable).parent
 # path is what is under test, and emulated, it is ~20x slower
 SCENARIO = ["hil", "run", "sha-step", "--short", "--controllers", "pi", "--loads", "0", "--positions", "140",
             "--no-plots"]
-VM_TIMEOUT_S = 1500
+VM_TIMEOUT_S = 900                # ~3x the slowest run seen inside `make test`
+
+
+def _image(tree: Path, image: Path) -> None:
+    """An ext4 image of `tree` (mke2fs -d, no journal), room to spare for the guest's writes
+    (bytecode, numba's index)."""
+    du = subprocess.run(["du", "-sk", str(tree)], capture_output=True, text=True, check=True)
+    used_kb = int(du.stdout.split()[0])
+    files = sum(len(names) + 1 for _, _, names in os.walk(tree))
+    size_mb = used_kb * 13 // 10 // 1024 + 128
+    subprocess.run(["mke2fs", "-q", "-F", "-t", "ext4", "-O", "^has_journal", "-N", str(files * 2 + 4096),
+                    "-d", str(tree), str(image), f"{size_mb}M"], check=True, capture_output=True, timeout=300)
 
 
 def _kernel() -> str:
@@ -45,23 +60,45 @@ def test_sha_step_over_socketcan_vcan0_inside_a_vm(tmp_path):
     assert shutil.which("qemu-system-x86_64"), "qemu-system-x86_64 missing: apt-get install qemu-system-x86"
     kernel = _kernel()
     work = tmp_path
-    env = {"NUMBA_CACHE_DIR": str(work / "numba"), "NUMBA_CPU_NAME": "generic"}
+    stdlib = Path(sysconfig.get_paths()["stdlib"])
+    aux = work / "aux"                    # the image's tree: the standard library, numba's cache
+    # the base interpreter's own packages, tests and static library: never imported by the venv's runs
+    shutil.copytree(stdlib, aux / "stdlib", symlinks=True,
+                    ignore=shutil.ignore_patterns("site-packages", "test", "idle_test", "config-*"))
+    env = {"NUMBA_CACHE_DIR": str(aux / "numba"), "NUMBA_CPU_NAME": "generic"}
 
     # on the host: the portable kernel cache (and a reference run)
     host = subprocess.run([str(BIN / "hydrapod"), *SCENARIO, "--out", str(work / "host"), "--json"],
                           capture_output=True, text=True, timeout=600, env={**os.environ, **env}, cwd=ROOT)
     assert host.returncode == 0, host.stdout[-2000:] + host.stderr[-2000:]
+    _image(ROOT, work / "checkout.ext4")
+    _image(aux, work / "aux.ext4")
 
     exports = " ".join(f"{k}={v}" for k, v in env.items())
-    script = (f"modprobe vcan && ip link add dev vcan0 type vcan && ip link set up vcan0 && cd {ROOT} && "
-              f"{exports} {BIN / 'hydrapod'} {' '.join(SCENARIO)} --bus socketcan:vcan0 --start-timeout-s 900 "
-              f"--out {work / 'vm'} --json > {work / 'vm.json'} 2> {work / 'vm.stderr'}; echo VM_EXIT=$?")
+    # the disks are /dev/vda and /dev/vdb in --disk order; the aux image mounts where it was
+    # built, so the cache's paths are the host run's
+    # each stage echoes its name: a failed run's output says how far the guest came
+    script = ("echo STAGE=booted && modprobe vcan && ip link add dev vcan0 type vcan && ip link set up vcan0 && "
+              f"modprobe ext4 && mount /dev/vda {ROOT} && mount /dev/vdb {aux} && "
+              f"mount --bind {aux / 'stdlib'} {stdlib} && echo STAGE=mounted && "
+              f"cd {ROOT} && {exports} {BIN / 'hydrapod'} {' '.join(SCENARIO)} --bus socketcan:vcan0 "
+              f"--start-timeout-s 900 --out {work / 'vm'} --json > {work / 'vm.json'} 2> {work / 'vm.stderr'}; "
+              "echo VM_EXIT=$?")
+    # a file, not the command itself: vng passes --exec on the kernel's command line, which
+    # the kernel cuts at 2048 bytes (the guest then hangs at boot, saying nothing)
+    (work / "guest.sh").write_text(script + "\n")
     # one vCPU: the run inside is lockstep (one process busy at a time), and under software
     # emulation each vCPU is a host thread that the other test worker needs
-    vm = subprocess.run([str(vng), "--run", kernel, "--disable-kvm", "--cpus", "1", "--memory", "2G",
-                         "--rwdir", str(work),
-                         "--exec", script], capture_output=True, text=True, timeout=VM_TIMEOUT_S,
-                        env={**os.environ, "PATH": f"{BIN}:{os.environ.get('PATH', '')}"})
+    try:
+        vm = subprocess.run([str(vng), "--run", kernel, "--disable-kvm", "--cpus", "1", "--memory", "2G",
+                             "--rwdir", str(work), "--disk", str(work / "checkout.ext4"),
+                             "--disk", str(work / "aux.ext4"), "--exec", f"sh {work / 'guest.sh'}"],
+                            capture_output=True, text=True, timeout=VM_TIMEOUT_S,
+                            env={**os.environ, "PATH": f"{BIN}:{os.environ.get('PATH', '')}"})
+    except subprocess.TimeoutExpired as late:
+        said = (late.stdout or b"").decode(errors="replace")[-2000:] if isinstance(late.stdout, bytes) \
+            else (late.stdout or "")[-2000:]
+        pytest.fail(f"the VM did not finish within {VM_TIMEOUT_S} s; its output: {said!r}")
     stderr_tail = (work / "vm.stderr").read_text()[-2000:] if (work / "vm.stderr").exists() else ""
     # exit 1 is a failed check: the run's own report says which
     report = (work / "vm.json").read_text()[-3000:] if (work / "vm.json").exists() else ""
