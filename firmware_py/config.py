@@ -35,8 +35,9 @@ from physics.constants import BAR, MM, MS, US
 from physics.lugre import LugreSection
 from program.errors import UserInputError
 from program.realtime import CPU_LATENCY, REALTIME_PRIORITY
-from program.sections import ConfigFile, Section, flag, frozen, key, load_file, numbers, table
+from program.sections import STR, ConfigFile, Section, flag, frozen, key, load_file, numbers, table
 from protocol.devices import IMU_EDS, LEG_EDS, check_files
+from protocol.enums import SYNC_SOURCES
 from protocol.nodes import HEARTBEAT
 
 PCT = 100.0                         # a percentage is divided by it
@@ -68,6 +69,11 @@ class Timing(Section):
     cpu: int = key("cpu", -1, 1023)
     cpu_latency_us: int = key(CPU_LATENCY)
     stall_fault_periods: float = key("stall_fault_periods", 1.0, 10000.0)
+    sync_source: str = key("sync_source", kind=STR)
+
+    def validate(self, where, error) -> None:
+        if self.sync_source not in SYNC_SOURCES:
+            raise error(f"{where}.sync_source = {self.sync_source!r}: must be one of {', '.join(SYNC_SOURCES)}")
 
 
 @frozen

@@ -60,6 +60,9 @@ EmuFault = _enum("EmuFault", value_table("EMU_CTRL", "FAULT"))               # f
 KickAxis = _enum("KickAxis", value_table("EMU_KICK", "AXIS"))                # EMU_KICK's push
 
 PACINGS = tuple(p.name.lower() for p in Pacing)       # the command lines' --pacing
+# who sends the SYNC ([timing] sync_source): the loop, the bus's periodic sender (SocketCAN: the
+# kernel's broadcast manager), or auto (the bus on SocketCAN in realtime, else the loop)
+SYNC_SOURCES = ("auto", "loop", "bus")
 
 VALVE_FAULT_STATES = (ValveState.FAULT_HOLD, ValveState.FAULT_DISABLED)
 

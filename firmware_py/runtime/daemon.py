@@ -70,10 +70,12 @@ def run_daemon(args) -> int:
     from firmware_py.runtime.configure import ConfigurationError
     from firmware_py.runtime.identify import IdentityError
     from firmware_py.runtime.loop import ActivationError, ControllerLoop
-    from protocol.bus import open_bus, parse_bus_spec
+    from firmware_py.runtime.sync import check_sync_source
+    from protocol.bus import default_bus_spec, open_bus, parse_bus_spec
 
     spec = parse_bus_spec(args.bus) if args.bus is not None else None     # a bad string fails first
     cfg = load_config(args.config)
+    check_sync_source(cfg.timing.sync_source, args.pacing, (spec or default_bus_spec()).kind == "socketcan")
     controller = Controller(cfg, args.rig, 1.0 / args.rate_hz, CONTROLLER_NAMES[args.controller])
     stop = StopFlag()
     budget_note = bus_budget_note(args.devices, controller.status.n_legs, args.rate_hz, spec)

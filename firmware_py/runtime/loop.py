@@ -23,7 +23,11 @@ own) and the controller's supervisor raises the faults, in the cycle they are se
 pacing: `realtime` - absolute deadlines on the monotonic clock, sleep then spin, late
 cycles counted as overruns and skipped (never bursts); a stall (the clock
 `stall_fault_periods` past the last SYNC, seen after any wait) is reported to the next
-update, which faults OVERRUN before acting on anything received meanwhile. `lockstep` -
+update, which faults OVERRUN before acting on anything received meanwhile. With the bus's
+SYNC (`runtime/sync.py`: on SocketCAN the kernel sends it) the loop sleeps on the bus
+instead and starts each cycle when its SYNC arrives, timed from the frame's receive stamp;
+a SYNC taken later than the sensor window is an overrun and skipped, and none within
+`stall_fault_periods` is a stall: the cycle runs without it and faults OVERRUN. `lockstep` -
 SYNC k+1 as soon as cycle k's exchange is complete.
 nodes: a node that boots again (boot-up heartbeat: power cycle, reset) restarts its alive
 counters (a stock device has forgotten its configuration), and the NMT master identifies,
@@ -49,6 +53,7 @@ from firmware_py.runtime.hardware import Hardware
 from firmware_py.runtime.hardware_canopen import CanopenHardware
 from firmware_py.runtime.hardware_dbc import DbcHardware
 from firmware_py.runtime.identify import IdentityError, identify, loop_sdo_clients
+from firmware_py.runtime.sync import BusSync, bus_sends_sync
 from firmware_py.supervision.supervisor import LATCHED, emergency_code
 from physics.constants import BAR
 from program.realtime import percentiles_us
@@ -140,6 +145,8 @@ class Stats:
     host_commands: int = 0
     unknown_frames: int = 0
     frames_sent: int = 0          # every frame the bus accepted (a log must hold as many of ours)
+    syncs_skipped: int = 0        # the bus's SYNC: ones the loop did not run a cycle on (late, lost)
+    syncs_missing: int = 0        # ... stretches of stall_fault_periods without one
 
 
 class ControllerLoop:
@@ -190,6 +197,11 @@ class ControllerLoop:
         self._load_schedule, self._load_leg = CODECS["CTRL_LOAD"].schedule, 0
         self._overflow = sync_counter_overflow()
         self.sync_counter = 0
+        # the bus's periodic SYNC, or None: the loop sends it
+        self.bus_sync = BusSync(bus, self.period_s, self._overflow) \
+            if bus_sends_sync(self.cfg.timing.sync_source, pacing, bus) else None
+        self._sync_id = CODECS["SYNC"].frame_id
+        self._pending_sync = None                    # a SYNC received outside the wait for it
         self.compute_s = np.zeros(HISTORY)
         self.period_error_s = np.zeros(HISTORY)
         self.phase_s = np.zeros((HISTORY, len(PHASES)))
@@ -209,8 +221,11 @@ class ControllerLoop:
         self.state_at_stop = None                   # the controller's state when the shutdown began
 
     def can_filters(self) -> list[dict]:
-        """The acceptance filter: the devices' frames, the host's (and EMU_TRUTH), the nodes' SDO answers."""
-        return self.hardware.filters() + self.decoder.can_filters() + [
+        """The acceptance filter: the devices' frames, the host's (and EMU_TRUTH), the nodes' SDO
+        answers, and the bus's SYNC when the bus sends it."""
+        sync = [{"can_id": self._sync_id, "can_mask": STANDARD_ID_MASK, "extended": False}] \
+            if self.bus_sync is not None else []
+        return self.hardware.filters() + self.decoder.can_filters() + sync + [
             {"can_id": SDO_RESPONSE_BASE + node, "can_mask": STANDARD_ID_MASK, "extended": False}
             for node in self.nodes]
 
@@ -218,6 +233,10 @@ class ControllerLoop:
     def dispatch(self, msg) -> None:
         """One received frame: decoded, and recorded for the next read or queued for the host link."""
         frame_id = msg.arbitration_id
+        if frame_id == self._sync_id and self.bus_sync is not None:
+            self.stats.frames_sent += 1              # the bus's SYNC is the loop's frame
+            self._pending_sync = msg                 # the newest: the wait for the next SYNC takes it
+            return
         job = self._reidentification
         if job is not None and SDO_RESPONSE_BASE < frame_id < SDO_RESPONSE_BASE + 0x80:
             job.answers.put(msg)                     # an answer for the nodes being identified
@@ -378,9 +397,10 @@ class ControllerLoop:
             self._next_heartbeat = now + self.cfg.timing.heartbeat_s
 
     # -- one cycle ------------------------------------------------------------------------
-    def cycle(self) -> None:
-        """SYNC, collect, read, update, write, then host work (pacing is `_run_cycles`'s)."""
-        now = self.clock()
+    def cycle(self, sync_at: float | None = None) -> None:
+        """SYNC, collect, read, update, write, then host work (pacing is `_run_cycles`'s).
+        `sync_at`: the bus sent this cycle's SYNC then (its counter is `sync_counter`)."""
+        now = self.clock() if sync_at is None else sync_at
         self._note_stall()
         k = self.stats.cycles % HISTORY
         phase = self.phase_s[k]
@@ -390,9 +410,10 @@ class ControllerLoop:
             self.period_error_s[k] = error
             self._period_error_max = max(self._period_error_max, error)
         self._last_sync = now
-        self.sync_counter = self.sync_counter % self._overflow + 1
-        self.out_sync.values[0] = self.sync_counter
-        self._send(self.out_sync)
+        if sync_at is None:
+            self.sync_counter = self.sync_counter % self._overflow + 1
+            self.out_sync.values[0] = self.sync_counter
+            self._send(self.out_sync)
         sent = self.clock()
         self.decoder.begin_cycle()
         self.hardware.begin_cycle(self.sync_counter)
@@ -525,6 +546,9 @@ class ControllerLoop:
                 self.dispatch(msg)
 
     def _run_cycles(self, count: int | None, should_stop) -> None:
+        if self.bus_sync is not None:
+            self._run_bus_cycles(count, should_stop)
+            return
         deadline = self.clock()
         done = 0
         while (count is None or done < count) and not should_stop():
@@ -542,6 +566,54 @@ class ControllerLoop:
                 self.cycle()
             done += 1
 
+    def _run_bus_cycles(self, count: int | None, should_stop) -> None:
+        """Realtime on the bus's SYNC: each cycle when its SYNC arrives."""
+        self.bus_sync.start()
+        done = 0
+        while (count is None or done < count) and not should_stop():
+            sync_at = self._await_sync()
+            self._next_deadline = sync_at + self.period_s
+            self.cycle(sync_at)
+            done += 1
+
+    def _await_sync(self) -> float:
+        """Handle frames until the bus's next SYNC; when it was sent, on the loop's clock (its
+        receive stamp's age subtracted). A SYNC older than the sensor window is an overrun and
+        skipped (the next is taken instead, never a burst); none within `stall_fault_periods`
+        of the last is a stall, and the cycle runs now without one."""
+        window = self.cfg.timing.sync_window_fraction * self.period_s
+        give_up = (self.clock() if math.isnan(self._last_sync) else self._last_sync) + \
+            self.cfg.timing.stall_fault_periods * self.period_s
+        self._overrun = False
+        while True:
+            msg, self._pending_sync = self._pending_sync, None
+            if msg is None:
+                remaining = give_up - self.clock()
+                if remaining <= 0.0:
+                    self._stalled = True
+                    self.stats.syncs_missing += 1
+                    return self.clock()
+                msg = self.bus.recv(timeout=remaining)
+                if msg is None:
+                    continue
+                self.dispatch(msg)
+                msg, self._pending_sync = self._pending_sync, None
+                if msg is None:
+                    continue
+            age = max(time.time() - msg.timestamp, 0.0) if msg.timestamp > 0.0 else 0.0
+            if age > window:                             # taken too late to collect its samples
+                self._overrun = True
+                self.stats.overruns += 1
+                continue
+            self._note_sync_counter(msg.data[0])
+            return self.clock() - age
+
+    def _note_sync_counter(self, counter: int) -> None:
+        """The bus's counter becomes the cycle's; the SYNCs between are counted as skipped."""
+        if self.sync_counter:
+            self.stats.syncs_skipped += (counter - self.sync_counter - 1) % self._overflow
+        self.sync_counter = counter
+
     def run(self, should_stop) -> None:
         self._run_cycles(None, should_stop)
 
@@ -553,6 +625,8 @@ class ControllerLoop:
         self._run_cycles(self.cfg.timing.shutdown_hold_cycles, never)
         self.controller.power_off()
         self._run_cycles(self.cfg.timing.shutdown_disable_cycles, never)
+        if self.bus_sync is not None:
+            self.bus_sync.stop()
 
     def timing(self) -> dict:
         """Percentiles (us) of the compute time, the period error and each phase of the cycle,
@@ -572,4 +646,6 @@ class ControllerLoop:
                 "missing_frames": s.missing_frames, "faults": s.faults, "fault_code": status.fault.name,
                 **status.margins.as_dict(),
                 "state": (self.state_at_stop or status.state).name, "emergencies": s.emergencies,
-                "host_commands": s.host_commands, "frames_sent": s.frames_sent, "timing": self.timing()}
+                "host_commands": s.host_commands, "frames_sent": s.frames_sent,
+                "sync_source": "bus" if self.bus_sync is not None else "loop",
+                "syncs_skipped": s.syncs_skipped, "syncs_missing": s.syncs_missing, "timing": self.timing()}

@@ -1,4 +1,5 @@
-"""`hydrapod bus-load`, `hydrapod protocol dump`, `protocol bench` and `protocol configure`."""
+"""`hydrapod bus-load`, `hydrapod protocol dump`, `protocol bench`, `protocol configure` and
+`protocol sync-check`."""
 
 from __future__ import annotations
 
@@ -42,7 +43,7 @@ def add_parsers(sub) -> None:
     p.set_defaults(handler=cmd_bus_load)
 
     proto = sub.add_parser("protocol", help="protocol tools")
-    psub = proto.add_subparsers(dest="protocol_command", required=True, metavar="{dump,bench,configure}")
+    psub = proto.add_subparsers(dest="protocol_command", required=True, metavar="{dump,bench,configure,sync-check}")
     d = psub.add_parser("dump", help="messages, schedule, E2E and signal scaling as compiled from the DBC")
     d.add_argument("--json", action="store_true", help="print JSON")
     d.set_defaults(handler=cmd_protocol_dump)
@@ -62,6 +63,19 @@ def add_parsers(sub) -> None:
                    help="a node silent this long after a request is named (default 200)")
     c.add_argument("--json", action="store_true", help="print JSON")
     c.set_defaults(handler=cmd_protocol_configure)
+    k = psub.add_parser("sync-check", help="the kernel's SYNC on a SocketCAN interface: counters and period",
+                        description="Start the SYNC as the controller does on SocketCAN (the kernel's broadcast "
+                                    "manager repeating the counter sequence), receive it back and judge it from "
+                                    "the kernel's receive stamps. Exit 0 when every counter came in order, 1 if "
+                                    "not; the period's error is printed (a benchmark). Nothing else may send "
+                                    "SYNC on the interface meanwhile.")
+    k.add_argument("--bus", required=True, help="socketcan:<interface> (e.g. socketcan:can0)")
+    k.add_argument("--rate-hz", type=number_in_range(float, 1.0, 10_000.0), default=500.0,
+                   help="SYNC rate (default 500)")
+    k.add_argument("--seconds", type=number_in_range(float, 0.1, 3600.0), default=2.0,
+                   help="how long to listen (default 2)")
+    k.add_argument("--json", action="store_true", help="print JSON")
+    k.set_defaults(handler=cmd_protocol_sync_check)
 
 
 def cmd_bus_load(args: argparse.Namespace) -> int:
@@ -181,3 +195,20 @@ def cmd_protocol_configure(args: argparse.Namespace) -> int:
         print(f"  node {row['node']:3d}  {row['pdo']:<24} id {row['cob_id']:#05x}  dlc {row['dlc']}  "
               f"every {row['every_nth_sync']} SYNC(s), phase {row['phase']}")
     return 0
+
+
+def cmd_protocol_sync_check(args: argparse.Namespace) -> int:
+    from hil.tools.sync_check import format_sync_check, sync_check
+    from protocol.bus import open_bus, parse_bus_spec
+    from protocol.dbc import sync_counter_overflow
+
+    spec = parse_bus_spec(args.bus)
+    if spec.kind != "socketcan":
+        raise UserInputError(f"--bus {args.bus}: the kernel's SYNC needs a SocketCAN interface (socketcan:<name>)")
+    bus = open_bus(spec)
+    try:
+        doc = sync_check(bus, args.rate_hz, args.seconds, sync_counter_overflow())
+    finally:
+        bus.shutdown()
+    print(json.dumps(doc, indent=2) if args.json else format_sync_check(doc))
+    return 0 if doc["passed"] else 1
