@@ -3,7 +3,7 @@
 #                pm-circle at the thesis's timing, the thesis's two controllers and computed torque,
 #                in lockstep (PACING=realtime: at 500 Hz on the wall clock); metrics and plots in hil-out/
 #   make test    creates .venv if needed; the suite but the realtime tier (what .ci/run runs)
-#   make check   the suite without the HIL runs and the VM (a few minutes)
+#   make check   the suite without the HIL runs, the VM and the slow in-process runs (~2 min)
 #   make realtime  the realtime HIL tier alone (a benchmark: an idle machine that keeps 500 Hz)
 #   make lint    ruff over the tree
 PYTHON ?= python3
@@ -53,7 +53,7 @@ realtime: $(STAMP)
 	$(PYTEST) -m realtime --durations=5
 
 check: $(STAMP)
-	$(PYTEST) -n $(WORKERS) --dist loadgroup -m "not hil and not realtime and not vm"
+	$(PYTEST) -n $(WORKERS) --dist loadgroup -m "not hil and not realtime and not vm and not slow"
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

@@ -19,8 +19,10 @@ STATE_CYCLES = 250             # each other steady state
 TRACED_CYCLES = 500            # a leak of 16 bytes per cycle (one Python object) reaches the 8 kB bound
 SEGMENTS = 18                  # the movement: back and forth by 5 mm, 0.2 s a segment (1,800 cycles:
                                # still moving when the counted and traced windows end)
-CASES = [(rig, controller, "hydrapod") for rig in ("testbench", "hexapod") for controller in CONTROLLER_NAMES]
-CASES.append(("hexapod", "model-based", "canopen"))       # stock devices: their PDOs in and out
+# the hexapod's cases (six legs of emulated physics a cycle) are `make test`'s; the bench's run in `make check`
+CASES = [pytest.param(rig, controller, "hydrapod", marks=[pytest.mark.slow] if rig == "hexapod" else [])
+         for rig in ("testbench", "hexapod") for controller in CONTROLLER_NAMES]
+CASES.append(pytest.param("hexapod", "model-based", "canopen", marks=pytest.mark.slow))    # stock devices' PDOs
 # tracemalloc and the counting hook slow everything: the heartbeat supervision has its own tests
 RELAXED = {"timing": {"heartbeat_timeout_ms": 60000.0}}
 

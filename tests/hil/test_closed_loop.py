@@ -81,6 +81,7 @@ def test_the_packaged_gains_keep_every_closed_loop_mode_damped_over_the_operatin
     assert zeta >= MIN_DAMPING, where
 
 
+@pytest.mark.slow
 def test_the_gain_search_is_seeded_and_keeps_its_best_candidate():
     """Two candidates on one operating point, twice with the same seed: the same gains, and
     the best is the feasible one with the lowest score."""
@@ -93,6 +94,7 @@ def test_the_gain_search_is_seeded_and_keeps_its_best_candidate():
     assert best is (min(feasible, key=lambda c: c.score) if feasible else min(tried, key=lambda c: -c.damping))
 
 
+@pytest.mark.slow
 def test_the_test_benchs_search_scores_sines_only_where_the_steps_hold():
     """One candidate: its steps judged against 14 % and 1 s, its sines scored only if they hold
     (in process, `hil.design.simulate`), the packaged bench gains among them."""

@@ -226,6 +226,7 @@ def test_a_toggling_reading_is_at_rest_on_its_boundary():
     assert np.allclose(out * 1e6, [0.0, 5.0 / 3.0, 2.5, 2.5, 3.75, 6.25, 25.0 / 3.0, 10.0])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("start_cycles", [0, 2])          # the ends of the 0-2 cycle shifts that moved it
 def test_presliding_fits_the_seal_from_the_quantised_record_whatever_cycle_it_starts(start_cycles):
     """The presliding flake, in process. The force loop fed on raw pressures jittered the

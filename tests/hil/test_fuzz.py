@@ -11,6 +11,7 @@ FRAMES = 1_000_000
 SEED = 20161
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("target", fuzz.TARGETS)
 def test_a_million_random_frames_raise_nothing_and_are_all_counted(target):
     report = fuzz.run([target], FRAMES, SEED)[0]

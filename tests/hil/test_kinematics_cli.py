@@ -40,6 +40,7 @@ def test_workspace_prints_extents_and_writes_plots(tmp_path):
             assert f.read(8) == b"\x89PNG\r\n\x1a\n"
 
 
+@pytest.mark.slow
 def test_validate_dynamics_json_is_within_the_thesis_error_off_the_singular_surface(tmp_path):
     report = json.loads(run("kinematics", "validate-dynamics", "--json", "--plot", str(tmp_path)).stdout)
     rows = report["trajectories"]

@@ -159,6 +159,7 @@ async def _until(pilot, condition, timeout_s: float, what: str) -> None:
 
 
 @pytest.mark.process
+@pytest.mark.slow
 def test_live_monitor_decodes_every_frame_its_estop_disables_the_valves_and_the_log_replays(tmp_path):
     """Emulator + controller + monitor on one bus: the monitor sees the controller READY, a
     fault injected into the plant (FORCE_LIMIT), and its own E-stop reaching the controller
