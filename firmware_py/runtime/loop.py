@@ -200,8 +200,8 @@ class ControllerLoop:
         # the bus's periodic SYNC, or None: the loop sends it
         self.bus_sync = BusSync(bus, self.period_s, self._overflow) \
             if bus_sends_sync(self.cfg.timing.sync_source, pacing, bus) else None
-        self._sync_id = CODECS["SYNC"].frame_id
-        self._pending_sync = None                    # a SYNC received outside the wait for it
+        self._bus_sync_id = self.bus_sync.frame_id if self.bus_sync is not None else -1
+        self._pending_sync = None                    # the newest bus SYNC not yet taken
         self.compute_s = np.zeros(HISTORY)
         self.period_error_s = np.zeros(HISTORY)
         self.phase_s = np.zeros((HISTORY, len(PHASES)))
@@ -223,7 +223,7 @@ class ControllerLoop:
     def can_filters(self) -> list[dict]:
         """The acceptance filter: the devices' frames, the host's (and EMU_TRUTH), the nodes' SDO
         answers, and the bus's SYNC when the bus sends it."""
-        sync = [{"can_id": self._sync_id, "can_mask": STANDARD_ID_MASK, "extended": False}] \
+        sync = [{"can_id": self._bus_sync_id, "can_mask": STANDARD_ID_MASK, "extended": False}] \
             if self.bus_sync is not None else []
         return self.hardware.filters() + self.decoder.can_filters() + sync + [
             {"can_id": SDO_RESPONSE_BASE + node, "can_mask": STANDARD_ID_MASK, "extended": False}
@@ -233,9 +233,9 @@ class ControllerLoop:
     def dispatch(self, msg) -> None:
         """One received frame: decoded, and recorded for the next read or queued for the host link."""
         frame_id = msg.arbitration_id
-        if frame_id == self._sync_id and self.bus_sync is not None:
-            self.stats.frames_sent += 1              # the bus's SYNC is the loop's frame
-            self._pending_sync = msg                 # the newest: the wait for the next SYNC takes it
+        if frame_id == self._bus_sync_id:            # the bus's SYNC is the loop's frame
+            self.stats.frames_sent += 1
+            self._pending_sync = msg                 # the wait for the next SYNC takes it
             return
         job = self._reidentification
         if job is not None and SDO_RESPONSE_BASE < frame_id < SDO_RESPONSE_BASE + 0x80:
@@ -587,19 +587,16 @@ class ControllerLoop:
         self._overrun = False
         while True:
             msg, self._pending_sync = self._pending_sync, None
-            if msg is None:
+            if msg is None:                              # wait: `dispatch` keeps the SYNC when it comes
                 remaining = give_up - self.clock()
                 if remaining <= 0.0:
                     self._stalled = True
                     self.stats.syncs_missing += 1
                     return self.clock()
-                msg = self.bus.recv(timeout=remaining)
-                if msg is None:
-                    continue
-                self.dispatch(msg)
-                msg, self._pending_sync = self._pending_sync, None
-                if msg is None:
-                    continue
+                received = self.bus.recv(timeout=remaining)
+                if received is not None:
+                    self.dispatch(received)
+                continue
             age = max(time.time() - msg.timestamp, 0.0) if msg.timestamp > 0.0 else 0.0
             if age > window:                             # taken too late to collect its samples
                 self._overrun = True

@@ -10,16 +10,15 @@ from __future__ import annotations
 import can
 
 from program.errors import UserInputError
-from protocol.enums import SYNC_SOURCES
+from protocol.codec import CODECS
 from protocol.outbox import Outbox
 
 
 def check_sync_source(source: str, pacing: str, socketcan: bool) -> None:
-    """A source this pacing and bus can use (UserInputError naming the key otherwise). The bus's
+    """A source (one of SYNC_SOURCES: the config's check) this pacing and bus can use
+    (UserInputError naming the key otherwise). The bus's
     SYNC needs SocketCAN: python-can's other buses send periodic frames from a thread of the
     same bus, which does not receive its own frames, so the loop would never see its SYNC."""
-    if source not in SYNC_SOURCES:
-        raise UserInputError(f"[timing].sync_source = {source!r}: must be one of {', '.join(SYNC_SOURCES)}")
     if source == "bus" and pacing != "realtime":
         raise UserInputError(f"[timing].sync_source = \"bus\" needs --pacing realtime, not {pacing} (lockstep's "
                              "SYNC follows the emulator's frames)")
@@ -59,12 +58,8 @@ class BusSync:
 
     def __init__(self, bus, period_s: float, overflow: int):
         self.bus, self.period_s, self.overflow = bus, period_s, overflow
-        self.frame_id = sync_sequence(1)[0].arbitration_id
+        self.frame_id = CODECS["SYNC"].frame_id
         self._task = None
-
-    @property
-    def running(self) -> bool:
-        return self._task is not None
 
     def start(self) -> None:
         if self._task is None:
