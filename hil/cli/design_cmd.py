@@ -294,7 +294,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=_schedule)
 
     p = design_sub.add_parser("adaptive-steps", help="the adaptive law's 10 mm steps per Ki scale on Table A.3's "
-                                                     "plants and the emulated bench (chapter 7.6.1's < 14 %)")
+                                                     "plants and the emulated bench (chapter 7.6.1's < 14 %%)")
     p.add_argument("--ki-scales", type=_ki_scales, default=(0.2, 0.1), metavar="S,S",
                    help="scales on Table 7.2's Ki (default 0.2,0.1; the controller's [adaptive] ki_scale is 0.2)")
     p.add_argument("--plot", metavar="DIR", default=None, help="write adaptive_steps.png here")
