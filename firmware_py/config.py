@@ -242,6 +242,7 @@ class ComputedTorque(Section):
     force_bandwidth_rest_hz: float = key("force_bandwidth_rest_hz", 0.0, 100.0)
     force_rate_floor: float = key("force_rate_floor_n_s_pct", 1.0, 1e6, si=100.0)   # N/s per unit spool
     velocity_filter_hz: float = key("velocity_filter_hz", 0.5, 200.0)
+    stiff_integral_per_s2: float = key("stiff_integral_per_s2", 0.0, 1000.0)
     yaw_bandwidth_hz: float = key("yaw_bandwidth_hz", 0.1, 50.0)
     yaw_damping: float = key("yaw_damping", 0.1, 5.0)
     yaw_blend_s: float = key("yaw_blend_s", 0.01, 100.0)
@@ -252,6 +253,11 @@ class ComputedTorque(Section):
     testbench_velocity_gain_per_s: float = key("testbench_velocity_gain_per_s", 0.0, 1000.0)
     testbench_force_bandwidth_hz: float = key("testbench_force_bandwidth_hz", 0.0, 100.0)
     testbench_velocity_filter_hz: float = key("testbench_velocity_filter_hz", 0.5, 200.0)
+
+    def validate(self, where, error) -> None:
+        if self.stiff_integral_per_s2 > 0.0 and self.velocity_gain_per_s <= 0.0:
+            raise error(f"{where}.stiff_integral_per_s2 = {self.stiff_integral_per_s2} needs velocity_gain_per_s > 0 "
+                        "(it acts through the legs' velocity loop)")
 
     @cached_property
     def hexapod(self) -> ComputedTorqueGains:

@@ -445,8 +445,9 @@ class Controller:
             sup.fault(Fault.SINGULARITY)
         # estimation and control: every kind estimates with the joint pipeline; the thesis's
         # kinds also run its law, as does a controlled stop
-        if joint.mode != sup.controller:
-            joint.set_mode(sup.controller)
+        if joint.mode != sup.controller:              # a selection: the joint integral carries over
+            joint.set_mode(sup.controller)              # (bumpless); the new law starts from rest, not
+            law.reset()                                 # from its state when last deselected
         following = sup.state in ACTIVE            # (a fault above may have ended `active`)
         joint.update(meas.position_m, meas.fresh, meas.force_n, ref.yr, ref.ar, rig.gravity_axial, rig.tau_n,
                      (following and law.runs_joint_law) or stopping)

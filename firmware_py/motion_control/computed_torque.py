@@ -17,7 +17,10 @@ pose, and the legs are driven through the inverse of their dynamics, in three st
    F_r' / K of the oil column (F_r the forces along the reference, differenced):
        x = map(F_cmd, v_r + lambda e_leg + F_r' / K) + k_F (F_cmd - F_load cell)
    lambda keeps the light directions stiff (the valve is a velocity source there), k_F closes
-   a force loop on the load cells around the map's error and the seals' friction;
+   a force loop on the load cells around the map's error and the seals' friction. In those
+   light directions (z, roll, pitch) the PID's force barely moves the legs, so its integral
+   cannot take out their lag there: it also joins their commanded velocity,
+   v_r + lambda e_leg + J_s K_s int(e_s);
 3. the spool to volts, saturated; the integral stops while a valve saturates.
 Allocation-free; every array is made here.
 """
@@ -164,6 +167,22 @@ def first_order_into(raw, alpha, state) -> None:
         state[i] += alpha * (raw[i] - state[i])
 
 
+STIFF_FIRST, STIFF_COUNT = 2, 3       # z, roll, pitch: the pose error's stiff directions (twist order)
+
+
+@njit(cache=True)
+def stiff_velocity_into(jacobian, integral, gain, velocity_gain, joint_error, out) -> None:
+    """out = e_leg + J_s K_s int(e_s) / lambda: the PID's integral in the stiff directions (z,
+    roll, pitch; m s and rad s) as the legs' equivalent position error, which the velocity
+    loop turns into J_s K_s int(e_s) of commanded velocity."""
+    scale = gain / velocity_gain
+    for i in range(out.shape[0]):
+        extra = 0.0
+        for k in range(STIFF_FIRST, STIFF_FIRST + STIFF_COUNT):
+            extra += jacobian[i, k] * integral[k]
+        out[i] = joint_error[i] + scale * extra
+
+
 @njit(cache=True)
 def integrate_into(integral, error, period_s) -> None:
     for k in range(integral.shape[0]):
@@ -258,6 +277,8 @@ class ComputedTorque(_Gains):
         self.force_cmd = self.dynamics.force_n
         self.force_ref_prev = np.zeros(N_LEGS)
         self.spool_cmd = np.zeros(N_LEGS)
+        self.stiff_gain = cfg.computed_torque.stiff_integral_per_s2
+        self.velocity_error = np.zeros(N_LEGS)        # the legs' error with the stiff integral's share
         self._lu = np.empty((6, 6))
         self._fresh = True                    # no previous reference force yet
 
@@ -293,8 +314,10 @@ class ComputedTorque(_Gains):
                                self.ki, self.accel_cmd)
         if not self.dynamics.forces(pose[0:3], pose[3:7], self.twist, self.accel_cmd):
             return False
+        stiff_velocity_into(platform.jacobian, self.integral, self.stiff_gain, self.velocity_gain, joint_error,
+                            self.velocity_error)
         saturated = self.spool_commands(self.force_cmd, self.force_cmd, platform.force_n, self.force_ref_prev,
-                                        force_measured, velocity_ref, joint_error, strokes_ref)
+                                        force_measured, velocity_ref, self.velocity_error, strokes_ref)
         self.force_ref_prev[:] = platform.force_n
         if not saturated:                     # conditional integration (anti-windup)
             integrate_into(self.integral, self.error, self.period_s)

@@ -10,6 +10,8 @@
                                     [--seed S] [--min-damping Z] [--workers N] [--bandwidth-hz] [--damping]
                                     [--integral-fraction] [--velocity-gain] [--testbench-velocity-gain]
                                     [--force-bandwidth-hz] [--velocity-filter-hz] [--json]
+    hydrapod design sweep --key KEY --values V,V [--points nominal|envelope] [--movements M,M] [--seeds S,S]
+                          [--workers N] [--json]
 
 SRC: `table-a3` (the thesis's plants), `emulator` (the emulator's linearisation) or the
 metrics.json of a `hil run sha-identification`.
@@ -65,6 +67,53 @@ def _ki_scales(text: str) -> tuple[float, ...]:
     if not scales or not all(0.0 < v <= 1.0 for v in scales):
         raise argparse.ArgumentTypeError(f"{text!r}: each scale in (0, 1]")
     return scales
+
+
+def _numbers(text: str) -> tuple[float, ...]:
+    """argparse `type=`: comma-separated finite numbers."""
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: comma-separated numbers (e.g. 0,40)") from None
+    if not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r}: finite numbers")
+    return values
+
+
+def _seeds(text: str) -> tuple[int, ...]:
+    """argparse `type=`: comma-separated seeds >= 0."""
+    try:
+        seeds = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: comma-separated integers (e.g. 1,2,3)") from None
+    if any(s < 0 for s in seeds):
+        raise argparse.ArgumentTypeError(f"{text!r}: seeds >= 0")
+    return seeds
+
+
+def _movements(text: str) -> tuple[str, ...]:
+    """argparse `type=`: a comma-separated subset of circle, diagonal."""
+    from hil.design.sweep import MOVEMENTS
+    names = tuple(m.strip() for m in text.split(",") if m.strip())
+    if not names or any(m not in MOVEMENTS for m in names):
+        raise argparse.ArgumentTypeError(f"{text!r}: movements are {', '.join(MOVEMENTS)}")
+    return names
+
+
+def _computed_torque_key(text: str) -> str:
+    """argparse `type=`: a [computed_torque] key of the controller's config."""
+    from firmware_py.config import ComputedTorque
+    keys = ComputedTorque.keys()
+    if text not in keys:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a [computed_torque] key ({', '.join(sorted(keys))})")
+    return text
+
+
+def _sweep(args) -> int:
+    from hil.design.sweep import POINTS, format_sweep, sweep
+    runs = sweep(args.key, args.values, POINTS[args.points], args.movements, args.seeds, args.workers)
+    print(json.dumps([r.as_dict() for r in runs], indent=1) if args.json else format_sweep(args.key, runs))
+    return 0
 
 
 def _robustness(args) -> int:
@@ -352,6 +401,20 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="low-pass of the measured twist")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_computed_torque)
+
+    p = design_sub.add_parser("sweep", help="one [computed_torque] key over values: the thesis's movements in "
+                                            "process per envelope point and noise seed, IAE and largest error")
+    p.add_argument("--key", type=_computed_torque_key, required=True, help="a [computed_torque] key, thesis units")
+    p.add_argument("--values", type=_numbers, required=True, metavar="V,V", help="its values, e.g. 0,40")
+    p.add_argument("--points", choices=("nominal", "envelope"), default="nominal",
+                   help="nominal: 0 kg at 25 bar; envelope: 0 kg at 20 and 40 bar, 1.5 kg at 25, 3, 4.5 and 6 kg "
+                        "at 40 (default nominal)")
+    p.add_argument("--movements", type=_movements, default=("circle", "diagonal"), metavar="M,M",
+                   help="circle, diagonal (default both)")
+    p.add_argument("--seeds", type=_seeds, default=(1, 2, 3), metavar="S,S", help="sensor-noise seeds (default 1,2,3)")
+    p.add_argument("--workers", type=number_in_range(int, 1, 64), default=2, help="processes")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_sweep)
 
     p = design_sub.add_parser("capacity", help="what the legs can give against what the thesis's movements ask: "
                                                "the utilisation and lag at a time scale, and the fastest "

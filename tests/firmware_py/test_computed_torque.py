@@ -9,10 +9,12 @@ import pytest
 from scipy.interpolate import RegularGridInterpolator
 from scipy.spatial.transform import Rotation
 
-from firmware_py.config import load_config
+from firmware_py.config import ConfigError, load_config
 from firmware_py.controller import Controller
 from firmware_py.mechanics.geometry import default_geometry
 from firmware_py.motion_control.computed_torque import (
+    STIFF_COUNT,
+    STIFF_FIRST,
     ComputedTorque,
     LegComputedTorque,
     pose_error_into,
@@ -135,12 +137,88 @@ def test_at_rest_on_the_reference_the_valves_get_the_maps_holding_spool(cfg):
     np.testing.assert_allclose(ct.force_cmd, platform.force_n, rtol=1e-6, atol=1e-6)      # a_cmd = 0 at rest
 
 
+def _held_off(cfg, offset_m, cycles: int):
+    """The hexapod's law holding home while the platform stands `offset_m` (base frame) from it,
+    the load cells reading the model's forces: its law after `cycles` updates."""
+    rig = HexapodModel(cfg, PERIOD_S)
+    platform, ct, home, zeros = rig.platform, rig.computed_torque, rig.home_strokes, np.zeros(6)
+    platform.reset_reference(home)
+    assert platform.reference_forces(home, zeros)
+    platform.update_measured_kinematics(platform.dk.home[0:3] + np.asarray(offset_m), platform.dk.home[3:7])
+    strokes = platform.lengths - rig.geometry.leg_min_m
+    platform.estimate(strokes)
+    for _ in range(cycles):
+        assert ct.update(platform, home, zeros, home - strokes, zeros, zeros, platform.force_n)
+    return ct, platform, home - strokes
+
+
+def test_a_height_error_integrates_into_every_legs_commanded_velocity(cfg):
+    """The PID's integral in the stiff directions also drives the legs' velocity: the platform
+    held 1 mm low for 100 cycles integrates 0.2 mm s in z (nothing in roll or pitch), and each
+    leg's equivalent error carries J_s K_s int(e_s) / lambda (the integral up to the cycle
+    before) beside its own."""
+    ct, platform, joint_error = _held_off(cfg, (0.0, 0.0, -1e-3), 100)
+    stiff = slice(STIFF_FIRST, STIFF_FIRST + STIFF_COUNT)
+    assert ct.integral[STIFF_FIRST] == pytest.approx(100 * PERIOD_S * 1e-3, rel=1e-3)
+    np.testing.assert_allclose(ct.integral[STIFF_FIRST + 1:STIFF_FIRST + STIFF_COUNT], 0.0, atol=1e-9)
+    gain = cfg.computed_torque.stiff_integral_per_s2 / cfg.computed_torque.velocity_gain_per_s
+    used = ct.integral[stiff] - PERIOD_S * ct.error[stiff]          # before this cycle's step
+    stiff = platform.jacobian[:, stiff] @ used
+    np.testing.assert_allclose(ct.velocity_error, joint_error + gain * stiff, rtol=1e-9, atol=1e-12)
+    assert np.all(ct.velocity_error > joint_error)          # every leg asked up, more than its error alone
+
+
+def test_a_sideways_error_is_not_a_stiff_one_and_reset_clears_it(cfg):
+    """x is not a stiff direction (the PID's force moves it): its integral grows, the legs'
+    velocity gets none of it; a height error's share is gone after `reset`."""
+    ct, _, joint_error = _held_off(cfg, (1e-3, 0.0, 0.0), 100)
+    assert ct.integral[0] == pytest.approx(-100 * PERIOD_S * 1e-3, rel=1e-3)     # reference - measured
+    np.testing.assert_allclose(ct.integral[STIFF_FIRST:STIFF_FIRST + STIFF_COUNT], 0.0, atol=1e-9)
+    np.testing.assert_allclose(ct.velocity_error, joint_error, atol=1e-9)
+    ct, _, _ = _held_off(cfg, (0.0, 0.0, -1e-3), 10)
+    ct.reset()
+    assert not np.any(ct.integral)
+
+
+def test_the_integral_stops_while_a_valve_saturates(cfg):
+    """Conditional integration: load cells 2 kN off drive every valve to its limit, and the
+    integral, the stiff directions' velocity share with it, holds."""
+    ct, platform, joint_error = _held_off(cfg, (0.0, 0.0, -1e-3), 10)
+    held = ct.integral.copy()
+    zeros, home = np.zeros(6), platform.ref_lengths - platform.leg_min_m
+    assert ct.update(platform, home, zeros, joint_error, zeros, zeros, platform.force_n - 2000.0)
+    assert np.max(np.abs(ct.spool_cmd)) == pytest.approx(cfg.limits.spool_max)
+    np.testing.assert_array_equal(ct.integral, held)
+
+
+def test_a_stiff_integral_without_the_velocity_loop_is_refused(cfg):
+    with pytest.raises(ConfigError, match="stiff_integral_per_s2"):
+        load_config(overrides={"computed_torque": {"velocity_gain_per_s": 0.0}})
+
+
 @pytest.mark.parametrize("rig", ["testbench", "hexapod"])
 def test_computed_torque_is_selectable_on_both_rigs(cfg, rig):
     ctl = Controller(cfg, rig, PERIOD_S, CONTROLLER_NAMES["pi"])
     ctl.activated(False)
     assert command(ctl, Command.SELECT_CONTROLLER, COMPUTED_TORQUE) is Ack.ACCEPTED
     assert ctl.status.kind == COMPUTED_TORQUE
+
+
+def test_a_law_selected_again_starts_from_rest_not_from_its_last_session(cfg):
+    """Computed torque, deselected with its integral wound up and selected again minutes
+    later: its integral starts from zero (a stale integral would push the stiff directions'
+    velocity from the first cycle)."""
+    from hil.in_process import InProcessLoop
+    from plant_emulator.params import load_config as load_emulator_config
+    loop = InProcessLoop(cfg, load_emulator_config(), "computed-torque")
+    loop.activate(50)
+    ct = loop.ctl.rig.computed_torque
+    ct.integral[:] = 0.01                                  # as after a long lag
+    assert loop.command(Command.SELECT_CONTROLLER, CONTROLLER_NAMES["pi"]) is Ack.ACCEPTED
+    loop.cycles(5)
+    np.testing.assert_array_equal(ct.integral, 0.01)       # not its turn: untouched
+    assert loop.command(Command.SELECT_CONTROLLER, COMPUTED_TORQUE) is Ack.ACCEPTED
+    assert np.max(np.abs(ct.integral)) < 1e-5              # one cycle's error at most
 
 
 def bench_spool(cfg, load_n: float, below_m: float = 0.0, cycles: int = 5) -> tuple[float, LegComputedTorque]:

@@ -46,6 +46,10 @@ BAD_TEXT = {
     "spec": ("/nonexistent/campaign.toml", "/nonexistent/campaign.toml"),
     "--scheduler": ("tcp//nohost", "tcp//nohost"),
     "--time-scale": ("fast", "fast"),
+    "--key": ("bogus_key", "bogus_key"),
+    "--values": ("0,abc", "0,abc"),
+    "--movements": ("circle,square", "circle,square"),
+    "--seeds": ("1,x", "1,x"),
 }
 OUTPUT_DIRS = ("--out", "--plot")          # given a path below a regular file: cannot be created
 # what a command needs before the option under test is reached
