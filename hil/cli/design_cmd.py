@@ -59,36 +59,23 @@ def _nominal(text: str) -> tuple[float, float]:
     return position, load
 
 
-def _ki_scales(text: str) -> tuple[float, ...]:
-    try:
-        scales = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: comma-separated numbers (e.g. 0.2,0.1)") from None
-    if not scales or not all(0.0 < v <= 1.0 for v in scales):
-        raise argparse.ArgumentTypeError(f"{text!r}: each scale in (0, 1]")
-    return scales
+def _comma_list(kind: type, example: str, valid, rule: str):
+    """argparse `type=`: comma-separated `kind` values, each `valid` (else `rule` is said)."""
+    def parse(text: str) -> tuple:
+        try:
+            values = tuple(kind(v) for v in text.split(","))
+        except ValueError:
+            noun = "integers" if kind is int else "numbers"
+            raise argparse.ArgumentTypeError(f"{text!r}: comma-separated {noun} (e.g. {example})") from None
+        if not all(valid(v) for v in values):
+            raise argparse.ArgumentTypeError(f"{text!r}: {rule}")
+        return values
+    return parse
 
 
-def _numbers(text: str) -> tuple[float, ...]:
-    """argparse `type=`: comma-separated finite numbers."""
-    try:
-        values = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: comma-separated numbers (e.g. 0,40)") from None
-    if not all(math.isfinite(v) for v in values):
-        raise argparse.ArgumentTypeError(f"{text!r}: finite numbers")
-    return values
-
-
-def _seeds(text: str) -> tuple[int, ...]:
-    """argparse `type=`: comma-separated seeds >= 0."""
-    try:
-        seeds = tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: comma-separated integers (e.g. 1,2,3)") from None
-    if any(s < 0 for s in seeds):
-        raise argparse.ArgumentTypeError(f"{text!r}: seeds >= 0")
-    return seeds
+_ki_scales = _comma_list(float, "0.2,0.1", lambda v: 0.0 < v <= 1.0, "each scale in (0, 1]")
+_numbers = _comma_list(float, "0,40", math.isfinite, "finite numbers")
+_seeds = _comma_list(int, "1,2,3", lambda v: v >= 0, "seeds >= 0")
 
 
 def _movements(text: str) -> tuple[str, ...]:
