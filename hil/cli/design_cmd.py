@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hil.design.sweep import MOVEMENTS
 from physics.constants import BAR
 from program.cliutil import number_in_range, output_dir, output_file
 from program.errors import UserInputError
@@ -41,13 +42,17 @@ def _plants(text: str) -> str:
     raise argparse.ArgumentTypeError(f"{text!r} is neither {' nor '.join(SOURCES)} nor an existing file")
 
 
-def _rigs(text: str) -> tuple[str, ...]:
-    """argparse `type=`: a comma-separated subset of hexapod, testbench."""
-    rigs = tuple(r.strip() for r in text.split(",") if r.strip())
-    unknown = [r for r in rigs if r not in ("hexapod", "testbench")]
-    if unknown or not rigs:
-        raise argparse.ArgumentTypeError(f"{text!r}: rigs are hexapod and testbench")
-    return rigs
+def _subset(names: tuple[str, ...], noun: str):
+    """argparse `type=`: a comma-separated, non-empty subset of `names`."""
+    def parse(text: str) -> tuple[str, ...]:
+        chosen = tuple(n.strip() for n in text.split(",") if n.strip())
+        if not chosen or any(n not in names for n in chosen):
+            raise argparse.ArgumentTypeError(f"{text!r}: {noun} are {' and '.join(names)}")
+        return chosen
+    return parse
+
+
+_rigs = _subset(("hexapod", "testbench"), "rigs")
 
 
 def _nominal(text: str) -> tuple[float, float]:
@@ -76,15 +81,7 @@ def _comma_list(kind: type, example: str, valid, rule: str):
 _ki_scales = _comma_list(float, "0.2,0.1", lambda v: 0.0 < v <= 1.0, "each scale in (0, 1]")
 _numbers = _comma_list(float, "0,40", math.isfinite, "finite numbers")
 _seeds = _comma_list(int, "1,2,3", lambda v: v >= 0, "seeds >= 0")
-
-
-def _movements(text: str) -> tuple[str, ...]:
-    """argparse `type=`: a comma-separated subset of circle, diagonal."""
-    from hil.design.sweep import MOVEMENTS
-    names = tuple(m.strip() for m in text.split(",") if m.strip())
-    if not names or any(m not in MOVEMENTS for m in names):
-        raise argparse.ArgumentTypeError(f"{text!r}: movements are {', '.join(MOVEMENTS)}")
-    return names
+_movements = _subset(MOVEMENTS, "movements")
 
 
 def _computed_torque_key(text: str) -> str:
@@ -396,7 +393,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--points", choices=("nominal", "envelope"), default="nominal",
                    help="nominal: 0 kg at 25 bar; envelope: 0 kg at 20 and 40 bar, 1.5 kg at 25, 3, 4.5 and 6 kg "
                         "at 40 (default nominal)")
-    p.add_argument("--movements", type=_movements, default=("circle", "diagonal"), metavar="M,M",
+    p.add_argument("--movements", type=_movements, default=MOVEMENTS, metavar="M,M",
                    help="circle, diagonal (default both)")
     p.add_argument("--seeds", type=_seeds, default=(1, 2, 3), metavar="S,S", help="sensor-noise seeds (default 1,2,3)")
     p.add_argument("--workers", type=number_in_range(int, 1, 64), default=2, help="processes")

@@ -4,13 +4,15 @@ several sensor-noise seeds: each run's IAE against the thesis's model-based and 
 error, emulator truth. How the gains the search does not derive were chosen (the twist's
 low-pass, the stiff directions' integral); HIL runs stay the judge of record.
 
-A movement runs at the thesis's timing where the controller accepts it, else at the
-planner's (`capacity.plan`), as the envelope campaigns' `--time-scale fit` does. Each run
+A movement runs at the thesis's timing where the planner (`capacity.plan`) fits it, else at
+the plan's, as the envelope campaigns' `--time-scale fit` does; where none fits it is
+reported refused. Each run
 gets the payload and supply declared to the controller.
 """
 
 from __future__ import annotations
 
+import math
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
@@ -47,7 +49,6 @@ def _run(args) -> SweepRun:
     from hil.design.capacity import plan
     from hil.design.simulate import run_movement, thesis_motions
     from hil.experiments import MOVEMENT_OVERRIDES, THESIS_MOVEMENTS
-    from hil.in_process import HostRefused
     from plant_emulator.params import load_config as load_emulator_config
     overrides = {section: dict(values) for section, values in MOVEMENT_OVERRIDES.items()}
     overrides |= {"computed_torque": {key: value}, "hexapod": {"payload_kg": payload},
@@ -55,11 +56,11 @@ def _run(args) -> SweepRun:
     cfg = load_config(overrides=overrides)
     emulator = load_emulator_config(overrides={"actuator": {"supply_pressure_bar": supply}})
     motion = thesis_motions()[movement]
-    try:
-        scale, run = 1.0, run_movement(cfg, emulator, motion, payload_kg=payload, seed=seed)
-    except HostRefused:
-        scale = plan(cfg, motion).time_scale
-        run = run_movement(cfg, emulator, motion, payload_kg=payload, seed=seed, time_scale=scale)
+    scale = max(plan(cfg, motion).time_scale, 1.0)        # `--time-scale fit`
+    if not math.isfinite(scale):                          # no timing holds it: refused, nothing runs
+        return SweepRun(value, payload, supply, movement, seed, scale, "BEYOND_CAPACITY", (math.nan,) * 3,
+                        (math.nan,) * 3)
+    run = run_movement(cfg, emulator, motion, payload_kg=payload, seed=seed, time_scale=scale)
     thesis = THESIS_MOVEMENTS[movement]["iae_model_based"]
     iae = tuple(float(run.iae_m_s[i] / thesis[a]) for i, a in enumerate("xyz"))
     return SweepRun(value, payload, supply, movement, seed, scale, run.fault, iae,

@@ -1,7 +1,6 @@
 """The `hydrapod` command: figures on stdout, user errors as one line and exit 2 (in this
 process); the console script and `python -m hil.cli` as processes."""
 
-import argparse
 import json
 import subprocess
 import sys
@@ -10,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from hil.cli import build_parser
-from tests.support.cli import hydrapod
+from tests.support.cli import command_parsers, hydrapod
 
 CONSOLE_SCRIPT = Path(sys.executable).with_name("hydrapod")   # installed by `make test` with the package
 
@@ -78,18 +77,9 @@ def test_user_errors_are_one_line_and_exit_2(args, culprit):
     assert len(lines) == 1 and culprit in lines[0] and "Traceback" not in result.stderr
 
 
-def _parsers(parser, path=()):
-    """Every (sub)command's parser with its words."""
-    yield path, parser
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            for name, sub in action.choices.items():
-                yield from _parsers(sub, (*path, name))
-
-
 def test_every_commands_help_renders():
     """`--help` formats each command's text with %-formatting: a bare % in a help is a traceback."""
-    parsers = list(_parsers(build_parser()))
+    parsers = list(command_parsers(build_parser()))
     assert len(parsers) > 20
     for path, parser in parsers:
         assert parser.format_help(), path

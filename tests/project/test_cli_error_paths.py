@@ -17,6 +17,7 @@ import can
 import pytest
 
 from hil.cli import build_parser, main
+from tests.support.cli import command_parsers
 
 # free-text options and positionals: a bad value for each, and the text the line must name
 BAD_TEXT = {
@@ -57,13 +58,12 @@ REQUIRED = {("hil", "run"): ["sha-step"], ("hil", "analyze"): ["{tmp}/run.blf", 
             ("campaign", "run"): ["{tmp}/campaign.toml"]}
 
 
-def _walk(parser: argparse.ArgumentParser, path: tuple[str, ...] = ()):
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            for name, sub in action.choices.items():
-                yield from _walk(sub, path + (name,))
-        elif action.dest != "help":
-            yield path, action
+def _walk(parser: argparse.ArgumentParser):
+    """(words, option) of every command's own options."""
+    for path, command in command_parsers(parser):
+        for action in command._actions:
+            if not isinstance(action, argparse._SubParsersAction) and action.dest != "help":
+                yield path, action
 
 
 def _cases(tmp_dir: str):

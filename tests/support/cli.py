@@ -3,6 +3,7 @@ The entry points themselves (console script, `python -m ...`) have process tests
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import io
 import json
@@ -17,6 +18,15 @@ class Result:
     returncode: int
     stdout: str
     stderr: str
+
+
+def command_parsers(parser: argparse.ArgumentParser, path: tuple[str, ...] = ()):
+    """(words, parser) of the command and every subcommand under it, depth first."""
+    yield path, parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from command_parsers(sub, (*path, name))
 
 
 def hydrapod(*args: str) -> Result:
