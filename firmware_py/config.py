@@ -228,6 +228,7 @@ class ComputedTorqueGains:
     force_bandwidth_rad_s: float      # each leg's force loop on its load cell, scheduled on its operating point
     velocity_filter_hz: float         # low-pass of the measured twist / velocity (the D term)
     force_bandwidth_rest_rad_s: float = math.nan   # ... while the reference rests (NaN: the same)
+    velocity_filter_rest_hz: float = math.nan      # ... while the reference rests (NaN: the same)
 
 
 @frozen
@@ -242,7 +243,10 @@ class ComputedTorque(Section):
     force_bandwidth_rest_hz: float = key("force_bandwidth_rest_hz", 0.0, 100.0)
     force_rate_floor: float = key("force_rate_floor_n_s_pct", 1.0, 1e6, si=100.0)   # N/s per unit spool
     velocity_filter_hz: float = key("velocity_filter_hz", 0.5, 200.0)
+    velocity_filter_rest_hz: float = key("velocity_filter_rest_hz", 0.5, 200.0)
     stiff_integral_per_s2: float = key("stiff_integral_per_s2", 0.0, 1000.0)
+    stiff_rest_hold_s: float = key("stiff_rest_hold_s", 0.0, 100.0)
+    stiff_rest_unwind_s: float = key("stiff_rest_unwind_s", 0.0, 100.0)    # 0: never
     yaw_bandwidth_hz: float = key("yaw_bandwidth_hz", 0.1, 50.0)
     yaw_damping: float = key("yaw_damping", 0.1, 5.0)
     yaw_blend_s: float = key("yaw_blend_s", 0.01, 100.0)
@@ -263,7 +267,8 @@ class ComputedTorque(Section):
     def hexapod(self) -> ComputedTorqueGains:
         return ComputedTorqueGains(2 * math.pi * self.bandwidth_hz, self.damping, self.integral_fraction,
                                    self.velocity_gain_per_s, 2 * math.pi * self.force_bandwidth_hz,
-                                   self.velocity_filter_hz, 2 * math.pi * self.force_bandwidth_rest_hz)
+                                   self.velocity_filter_hz, 2 * math.pi * self.force_bandwidth_rest_hz,
+                                   self.velocity_filter_rest_hz)
 
     @property
     def yaw_gains(self) -> tuple[float, float]:

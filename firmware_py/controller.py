@@ -606,13 +606,15 @@ class Controller:
 
     def dynamic_state(self) -> list[np.ndarray]:
         """The controller's dynamic state as views, for a linearisation by differences: the
-        legs' Kalman filters, and the running law's own (computed torque: its integral and the
-        twist's low-pass)."""
+        legs' Kalman filters, and the running law's own (computed torque: its integral, where
+        the stiff directions' velocity share counts from, the twist's two low-passes (their
+        third column is the last input) and the legs' positions it differences)."""
         law = self.laws[self.sup.controller]
         views = [self.joint.kalman_x]
         if law is self.laws[COMPUTED_TORQUE]:
             ct = self.rig.computed_torque
-            views += [ct.integral, ct.twist_filter_state[:, :2]]    # its third column: the last input
+            views += [ct.integral, ct.stiff_origin, ct.twist_filter_state[:, :2], ct.twist_rest_filter_state[:, :2],
+                      ct.position_prev]
         return views
 
 

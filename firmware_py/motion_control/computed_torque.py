@@ -142,6 +142,13 @@ def low_pass_into(raw, state, ad, bd, wn, zeta, out) -> None:
 
 
 @njit(cache=True)
+def blend_into(a, b, weight, out) -> None:
+    """out = a + weight (b - a)."""
+    for k in range(out.shape[0]):
+        out[k] = a[k] + weight * (b[k] - a[k])
+
+
+@njit(cache=True)
 def leg_forces_into(accel_cmd, accel_ref, load_force, force_measured, velocity_ref, joint_error, velocity_gain,
                     rod_mass, friction, force_map, force_cmd, force_ref) -> None:
     """One actuator lifting a load it weighs on its load cell (the test bench): the load's
@@ -161,6 +168,18 @@ def leg_forces_into(accel_cmd, accel_ref, load_force, force_measured, velocity_r
 
 
 @njit(cache=True)
+def backward_difference_into(position, period_s, previous, rate) -> None:
+    """rate = (position - previous) / T, then previous = position. The hexapod's twist is
+    J^-1 of the legs' rates, and the horizontal directions need ~10x the legs' velocity
+    differences: the thesis's adaptive Kalman filter (eq. 7.50) lags at low speed, 2-4 % of
+    the legs' velocity at the circle's frequency, which J^-1 made ~30 mm/s of error in x and
+    y; the difference is unbiased, its counts' noise the twist's low-pass takes out."""
+    for i in range(rate.shape[0]):
+        rate[i] = (position[i] - previous[i]) / period_s
+        previous[i] = position[i]
+
+
+@njit(cache=True)
 def first_order_into(raw, alpha, state) -> None:
     """state += alpha (raw - state): a first-order low-pass (alpha: `first_order_gain`)."""
     for i in range(state.shape[0]):
@@ -171,16 +190,25 @@ STIFF_FIRST, STIFF_COUNT = 2, 3       # z, roll, pitch: the pose error's stiff d
 
 
 @njit(cache=True)
-def stiff_velocity_into(jacobian, integral, gain, velocity_gain, joint_error, out) -> None:
-    """out = e_leg + J_s K_s int(e_s) / lambda: the PID's integral in the stiff directions (z,
-    roll, pitch; m s and rad s) as the legs' equivalent position error, which the velocity
-    loop turns into J_s K_s int(e_s) of commanded velocity."""
+def stiff_velocity_into(jacobian, integral, origin, gain, velocity_gain, joint_error, out) -> None:
+    """out = e_leg + J_s K_s (int(e_s) - origin) / lambda: the PID's integral in the stiff
+    directions (z, roll, pitch; m s and rad s), counted from `origin`, as the legs' equivalent
+    position error, which the velocity loop turns into J_s K_s (int(e_s) - origin) of
+    commanded velocity."""
     scale = gain / velocity_gain
     for i in range(out.shape[0]):
         extra = 0.0
         for k in range(STIFF_FIRST, STIFF_FIRST + STIFF_COUNT):
-            extra += jacobian[i, k] * integral[k]
+            extra += jacobian[i, k] * (integral[k] - origin[k - STIFF_FIRST])
         out[i] = joint_error[i] + scale * extra
+
+
+@njit(cache=True)
+def stiff_origin_step(integral, alpha, origin) -> None:
+    """origin += alpha (int(e_s) - origin): at rest the velocity's share fades (alpha: one
+    cycle of a first-order lag)."""
+    for k in range(STIFF_COUNT):
+        origin[k] += alpha * (integral[STIFF_FIRST + k] - origin[k])
 
 
 @njit(cache=True)
@@ -197,6 +225,11 @@ FORCE_SCHEDULE_S = 0.1
 # valves' own draw makes (followed at once, holding ran away through the supply: more opening,
 # more draw, a lower supply)
 SUPPLY_FILTER_S = 0.2
+
+
+def resting(velocity_ref) -> bool:
+    """The reference rests: no leg's velocity above RESTING_M_S."""
+    return largest_abs(velocity_ref) <= RESTING_M_S
 
 
 class _Gains:
@@ -219,6 +252,7 @@ class _Gains:
         rest = gains.force_bandwidth_rest_rad_s
         self.force_bandwidth_rest = self.force_bandwidth if math.isnan(rest) else rest
         self.force_bandwidth_now = self.force_bandwidth_rest
+        self.moving = 0.0                         # the schedule: 1 moving, 0 resting, blended
         self.bandwidth_alpha = 1.0 - math.exp(-period_s / FORCE_SCHEDULE_S)
         self.rate_floor = cfg.computed_torque.force_rate_floor * flow_factor
         self.u_max = cfg.limits.spool_max
@@ -235,13 +269,17 @@ class _Gains:
         the configured supply."""
         supply_ratio_into(supply_pa, self.supply_pa, self.supply_alpha, self.supply_ratio)
 
+    def schedule(self, velocity_ref) -> None:
+        """The schedule moves toward 1 while the reference moves and toward 0 while it rests,
+        over FORCE_SCHEDULE_S; the force loops' bandwidth between the resting and the moving one."""
+        self.moving += self.bandwidth_alpha * ((0.0 if resting(velocity_ref) else 1.0) - self.moving)
+        rest = self.force_bandwidth_rest
+        self.force_bandwidth_now = rest + self.moving * (self.force_bandwidth - rest)
+
     def spool_commands(self, force_map, force_cmd, force_ref, force_ref_prev, force_measured, velocity_ref,
                        joint_error, strokes_ref) -> bool:
-        """`spool_commands_into` with this controller's map, gains and scratch: writes spool_cmd.
-        The force loops' bandwidth moves toward the moving one while the reference moves and
-        toward the resting one while it rests, over FORCE_SCHEDULE_S."""
-        target = self.force_bandwidth if largest_abs(velocity_ref) > RESTING_M_S else self.force_bandwidth_rest
-        self.force_bandwidth_now += self.bandwidth_alpha * (target - self.force_bandwidth_now)
+        """`spool_commands_into` with this controller's map, gains and scratch (the force loops'
+        bandwidth as `schedule` last set it): writes spool_cmd."""
         return spool_commands_into(force_map, force_cmd, force_ref, force_ref_prev, force_measured, velocity_ref,
                                    joint_error, strokes_ref, self.period_s, self.velocity_gain,
                                    self.force_bandwidth_now,
@@ -270,8 +308,18 @@ class ComputedTorque(_Gains):
         self.dynamics = InverseDynamics(geometry)
         self.error = np.zeros(6)              # pose error: m, rad
         self.integral = np.zeros(6)
-        self.twist_raw = np.zeros(6)          # measured, from the legs' velocity estimates
+        self.twist_raw = np.zeros(6)          # measured, from the legs' positions' backward differences
         self.twist = np.zeros(6)              # ... low-passed: the encoders' counts make it jump
+        self.twist_moving = np.zeros(6)       # ... through the moving low-pass and the resting one,
+        self.twist_resting = np.zeros(6)      # blended by the schedule (the counts buzz the valves at rest)
+        self.twist_rest_filter_state = np.zeros((6, 3))
+        gains = cfg.computed_torque.hexapod
+        rest_hz = gains.velocity_filter_rest_hz
+        rest_hz = gains.velocity_filter_hz if math.isnan(rest_hz) else rest_hz
+        self.rest_filter_wn = 2 * math.pi * rest_hz
+        self.rest_filter_ad, self.rest_filter_bd = second_order_filter(period_s, rest_hz, FILTER_ZETA)
+        self.position_prev = np.zeros(N_LEGS)     # the legs' positions the cycle before, m
+        self.position_rate = np.zeros(N_LEGS)     # ... and their backward difference, m/s
         self.twist_filter_state = np.zeros((6, 3))
         self.accel_cmd = np.zeros(6)
         self.force_cmd = self.dynamics.force_n
@@ -279,28 +327,46 @@ class ComputedTorque(_Gains):
         self.spool_cmd = np.zeros(N_LEGS)
         self.stiff_gain = cfg.computed_torque.stiff_integral_per_s2
         self.velocity_error = np.zeros(N_LEGS)        # the legs' error with the stiff integral's share
+        # where the velocity's share of the stiff integral counts from: the integral, followed
+        # once the reference has rested a while (the last move's seal lag is no guide to the next's)
+        self.stiff_origin = np.zeros(STIFF_COUNT)
+        self.rest_cycles = 0
+        self.rest_hold_cycles = round(cfg.computed_torque.stiff_rest_hold_s / period_s)
+        unwind_s = cfg.computed_torque.stiff_rest_unwind_s
+        self.stiff_rest_alpha = 1.0 - math.exp(-period_s / unwind_s) if unwind_s > 0.0 else 0.0
         self._lu = np.empty((6, 6))
         self._fresh = True                    # no previous reference force yet
 
     def reset(self) -> None:
         """Valves locked or a fault: the integral and the reference-force history start again."""
         self.integral.fill(0.0)
+        self.stiff_origin.fill(0.0)
+        self.rest_cycles = 0
         self.twist_filter_state.fill(0.0)
+        self.twist_rest_filter_state.fill(0.0)
         self._fresh = True
 
-    def update(self, platform, strokes_ref, velocity_estimate, joint_error, velocity_ref, accel_ref,
+    def update(self, platform, strokes_ref, position_m, velocity_estimate, joint_error, velocity_ref, accel_ref,
                force_measured) -> bool:
         """One cycle from the platform model (measured and reference pose, the reference's
-        twist, acceleration and forces: the legs' `accel_ref` is not used); writes spool_cmd
-        (fraction of full input). False: singular (spool_cmd held)."""
+        twist, acceleration and forces: the legs' `accel_ref` is not used) and the legs'
+        positions (`velocity_estimate`, the Kalman filters', is not used: see
+        `backward_difference_into`); writes spool_cmd (fraction of full input). False: singular
+        (spool_cmd held)."""
         if self._fresh:
             self.force_ref_prev[:] = platform.force_n
+            self.position_prev[:] = position_m
             self._fresh = False
+        self.schedule(velocity_ref)
+        backward_difference_into(position_m, self.period_s, self.position_prev, self.position_rate)
         pose, ref_pose = platform.dk.pose, platform.ref_dk.pose
-        if gauss_solve_into(platform.jacobian, velocity_estimate, self._lu, self.twist_raw, False) == 0.0:
+        if gauss_solve_into(platform.jacobian, self.position_rate, self._lu, self.twist_raw, False) == 0.0:
             return False
         low_pass_into(self.twist_raw, self.twist_filter_state, self.filter_ad, self.filter_bd, self.filter_wn,
-                      self.filter_zeta, self.twist)
+                      self.filter_zeta, self.twist_moving)
+        low_pass_into(self.twist_raw, self.twist_rest_filter_state, self.rest_filter_ad, self.rest_filter_bd,
+                      self.rest_filter_wn, self.filter_zeta, self.twist_resting)
+        blend_into(self.twist_resting, self.twist_moving, self.moving, self.twist)
         kp, kd = self.kp, self.kd
         yaw = self.yaw
         if yaw is not None and yaw.valid:     # the yaw and its rate the IMU's, its own gains
@@ -314,13 +380,19 @@ class ComputedTorque(_Gains):
                                self.ki, self.accel_cmd)
         if not self.dynamics.forces(pose[0:3], pose[3:7], self.twist, self.accel_cmd):
             return False
-        stiff_velocity_into(platform.jacobian, self.integral, self.stiff_gain, self.velocity_gain, joint_error,
-                            self.velocity_error)
+        stiff_velocity_into(platform.jacobian, self.integral, self.stiff_origin, self.stiff_gain, self.velocity_gain,
+                            joint_error, self.velocity_error)
         saturated = self.spool_commands(self.force_cmd, self.force_cmd, platform.force_n, self.force_ref_prev,
                                         force_measured, velocity_ref, self.velocity_error, strokes_ref)
         self.force_ref_prev[:] = platform.force_n
         if not saturated:                     # conditional integration (anti-windup)
             integrate_into(self.integral, self.error, self.period_s)
+        # the velocity's share fades once the reference has rested rest_hold_cycles (the legs
+        # settle onto it first); the kernel runs every cycle (alpha 0: held)
+        at_rest = resting(velocity_ref)
+        self.rest_cycles = min(self.rest_cycles + 1, self.rest_hold_cycles) if at_rest else 0
+        following = at_rest and self.rest_cycles >= self.rest_hold_cycles
+        stiff_origin_step(self.integral, self.stiff_rest_alpha if following else 0.0, self.stiff_origin)
         return True
 
 
@@ -355,10 +427,12 @@ class LegComputedTorque(_Gains):
         self._velocity_filter.fill(0.0)
         self._fresh = True
 
-    def update(self, platform, strokes_ref, velocity_estimate, joint_error, velocity_ref, accel_ref,
+    def update(self, platform, strokes_ref, position_m, velocity_estimate, joint_error, velocity_ref, accel_ref,
                force_measured) -> bool:
-        """One cycle, as `ComputedTorque.update` (no platform: `platform` is not used); writes
-        spool_cmd. Always True: the stroke has no singularity."""
+        """One cycle, as `ComputedTorque.update` (no platform: `platform` is not used; the
+        velocity the leg's Kalman filter's, `position_m` not used); writes spool_cmd. Always
+        True: the stroke has no singularity."""
+        self.schedule(velocity_ref)
         if self._fresh:                       # the load's weight and the reference force start here
             self.load_force[:] = force_measured
         first_order_into(force_measured, self.load_alpha, self.load_force)

@@ -243,6 +243,9 @@ class JointController:
         self.position_estimate = self.kalman_x[:, 0]
         self.velocity_estimate = self.kalman_x[:, 1]
         self.acceleration_estimate = self.kalman_x[:, 2]
+        # the position each leg's laws read this cycle: the encoder's, or the filter's prediction
+        # for a leg whose sample is late (the D term's previous input, written every cycle)
+        self.position_read = self.st[:, ST_DY + 1]
         self._xp = np.zeros(3)
         self._pp = np.zeros((3, 3))
         self.reset(initial_position_m)

@@ -56,7 +56,8 @@ class ComputedTorqueLaw:
         """False: singular (spool_out untouched)."""
         joint, ct = self.joint, self.ct
         ct.supply_from(supply_pa)
-        if not ct.update(self.platform, reference.yr, joint.velocity_estimate, joint.error_m, reference.vr,
+        if not ct.update(self.platform, reference.yr, joint.position_read, joint.velocity_estimate, joint.error_m,
+                         reference.vr,
                          reference.ar, force_n):
             return False
         np.copyto(spool_out, ct.spool_cmd)

@@ -28,6 +28,7 @@ from scipy.signal import cont2discrete
 from firmware_py.config import ControllerConfig, load_config
 from firmware_py.controller import Controller
 from firmware_py.mechanics.geometry import default_geometry
+from firmware_py.motion_control.computed_torque import STIFF_COUNT
 from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
 from hil.design.modes import AXES, ModalModel, blocks, modal_model
 from physics.constants import GRAVITY_M_S2
@@ -89,7 +90,8 @@ def plant_of(cfg: EmulatorConfig, model: ModalModel, rod_mass_kg: float, period_
 def _state_steps(ctl: Controller) -> np.ndarray:
     """The central differences' step of each of `Controller.dynamic_state`'s entries."""
     n = ctl.status.n_legs
-    return np.concatenate([np.tile(KALMAN_STEPS, n), np.full(6, INTEGRAL_STEP), np.tile(FILTER_STEPS, 6)])
+    return np.concatenate([np.tile(KALMAN_STEPS, n), np.full(6 + STIFF_COUNT, INTEGRAL_STEP),
+                           np.tile(FILTER_STEPS, 12), np.full(n, POSITION_STEP)])
 
 
 def _read(views) -> np.ndarray:

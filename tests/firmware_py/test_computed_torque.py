@@ -34,6 +34,13 @@ def cfg():
     return load_config()
 
 
+@pytest.fixture(scope="module")
+def held_cfg():
+    """The stiff integral's velocity share kept at rest for the tests' span (its fading at rest
+    has its own test)."""
+    return load_config(overrides={"computed_torque": {"stiff_rest_hold_s": 100.0}})
+
+
 def test_the_valve_map_interpolates_as_scipy_does_and_holds_its_edges(cfg):
     f, v, spool = cfg.valve_map.force_n, cfg.valve_map.velocity_m_s, cfg.valve_map.spool
     oracle = RegularGridInterpolator((f, v), spool)
@@ -128,7 +135,7 @@ def test_at_rest_on_the_reference_the_valves_get_the_maps_holding_spool(cfg):
     assert platform.reference_forces(home, zeros)
     force = platform.force_n.copy()
     for _ in range(3):
-        assert ct.update(platform, home, zeros, zeros, zeros, zeros, force)
+        assert ct.update(platform, home, home, zeros, zeros, zeros, zeros, force)
         force[:] = ct.force_cmd
     np.testing.assert_allclose(ct.error, 0.0, atol=1e-9)
     expected = [valve_map_eval(cfg.valve_map.force_n, cfg.valve_map.velocity_m_s, cfg.valve_map.spool, f, 0.0)
@@ -137,9 +144,10 @@ def test_at_rest_on_the_reference_the_valves_get_the_maps_holding_spool(cfg):
     np.testing.assert_allclose(ct.force_cmd, platform.force_n, rtol=1e-6, atol=1e-6)      # a_cmd = 0 at rest
 
 
-def _held_off(cfg, offset_m, cycles: int):
+def _holding_off(cfg, offset_m, cycles: int):
     """The hexapod's law holding home while the platform stands `offset_m` (base frame) from it,
-    the load cells reading the model's forces: its law after `cycles` updates."""
+    the load cells reading the model's forces: (its law, the platform model, the legs' errors,
+    updates so far) after each update."""
     rig = HexapodModel(cfg, PERIOD_S)
     platform, ct, home, zeros = rig.platform, rig.computed_torque, rig.home_strokes, np.zeros(6)
     platform.reset_reference(home)
@@ -147,48 +155,92 @@ def _held_off(cfg, offset_m, cycles: int):
     platform.update_measured_kinematics(platform.dk.home[0:3] + np.asarray(offset_m), platform.dk.home[3:7])
     strokes = platform.lengths - rig.geometry.leg_min_m
     platform.estimate(strokes)
-    for _ in range(cycles):
-        assert ct.update(platform, home, zeros, home - strokes, zeros, zeros, platform.force_n)
-    return ct, platform, home - strokes
+    for k in range(1, cycles + 1):
+        assert ct.update(platform, home, strokes, zeros, home - strokes, zeros, zeros, platform.force_n)
+        yield ct, platform, home - strokes, k
 
 
-def test_a_height_error_integrates_into_every_legs_commanded_velocity(cfg):
+def _held_off(cfg, offset_m, cycles: int):
+    """As `_holding_off`, after `cycles` updates: (its law, the platform model, the legs' errors)."""
+    *held, _ = list(_holding_off(cfg, offset_m, cycles))[-1]
+    return held
+
+
+def test_a_height_error_integrates_into_every_legs_commanded_velocity(held_cfg):
     """The PID's integral in the stiff directions also drives the legs' velocity: the platform
     held 1 mm low for 100 cycles integrates 0.2 mm s in z (nothing in roll or pitch), and each
     leg's equivalent error carries J_s K_s int(e_s) / lambda (the integral up to the cycle
     before) beside its own."""
-    ct, platform, joint_error = _held_off(cfg, (0.0, 0.0, -1e-3), 100)
+    ct, platform, joint_error = _held_off(held_cfg, (0.0, 0.0, -1e-3), 100)
     stiff = slice(STIFF_FIRST, STIFF_FIRST + STIFF_COUNT)
     assert ct.integral[STIFF_FIRST] == pytest.approx(100 * PERIOD_S * 1e-3, rel=1e-3)
     np.testing.assert_allclose(ct.integral[STIFF_FIRST + 1:STIFF_FIRST + STIFF_COUNT], 0.0, atol=1e-9)
-    gain = cfg.computed_torque.stiff_integral_per_s2 / cfg.computed_torque.velocity_gain_per_s
+    gain = held_cfg.computed_torque.stiff_integral_per_s2 / held_cfg.computed_torque.velocity_gain_per_s
     used = ct.integral[stiff] - PERIOD_S * ct.error[stiff]          # before this cycle's step
     stiff = platform.jacobian[:, stiff] @ used
     np.testing.assert_allclose(ct.velocity_error, joint_error + gain * stiff, rtol=1e-9, atol=1e-12)
     assert np.all(ct.velocity_error > joint_error)          # every leg asked up, more than its error alone
 
 
-def test_a_sideways_error_is_not_a_stiff_one_and_reset_clears_it(cfg):
+def test_a_sideways_error_is_not_a_stiff_one_and_reset_clears_it(held_cfg):
     """x is not a stiff direction (the PID's force moves it): its integral grows, the legs'
     velocity gets none of it; a height error's share is gone after `reset`."""
-    ct, _, joint_error = _held_off(cfg, (1e-3, 0.0, 0.0), 100)
+    ct, _, joint_error = _held_off(held_cfg, (1e-3, 0.0, 0.0), 100)
     assert ct.integral[0] == pytest.approx(-100 * PERIOD_S * 1e-3, rel=1e-3)     # reference - measured
     np.testing.assert_allclose(ct.integral[STIFF_FIRST:STIFF_FIRST + STIFF_COUNT], 0.0, atol=1e-9)
     np.testing.assert_allclose(ct.velocity_error, joint_error, atol=1e-9)
-    ct, _, _ = _held_off(cfg, (0.0, 0.0, -1e-3), 10)
+    ct, _, _ = _held_off(held_cfg, (0.0, 0.0, -1e-3), 10)
     ct.reset()
     assert not np.any(ct.integral)
 
 
-def test_the_integral_stops_while_a_valve_saturates(cfg):
+def test_the_integral_stops_while_a_valve_saturates(held_cfg):
     """Conditional integration: load cells 2 kN off drive every valve to its limit, and the
     integral, the stiff directions' velocity share with it, holds."""
-    ct, platform, joint_error = _held_off(cfg, (0.0, 0.0, -1e-3), 10)
+    ct, platform, joint_error = _held_off(held_cfg, (0.0, 0.0, -1e-3), 10)
     held = ct.integral.copy()
     zeros, home = np.zeros(6), platform.ref_lengths - platform.leg_min_m
-    assert ct.update(platform, home, zeros, joint_error, zeros, zeros, platform.force_n - 2000.0)
-    assert np.max(np.abs(ct.spool_cmd)) == pytest.approx(cfg.limits.spool_max)
+    assert ct.update(platform, home, home - joint_error, zeros, joint_error, zeros, zeros, platform.force_n - 2000.0)
+    assert np.max(np.abs(ct.spool_cmd)) == pytest.approx(held_cfg.limits.spool_max)
     np.testing.assert_array_equal(ct.integral, held)
+
+
+def test_at_rest_the_velocity_share_fades_and_the_integral_stays(cfg):
+    """Held 1 mm low with the reference at rest: for stiff_rest_hold_s the velocity's share is
+    the whole integral; then its origin follows the integral (a first-order lag of time
+    constant tau = stiff_rest_unwind_s), so the share settles at tau x the error, while the
+    integral, the force's share, keeps growing."""
+    gains = cfg.computed_torque
+    hold = round(gains.stiff_rest_hold_s / PERIOD_S)
+    alpha = 1.0 - np.exp(-PERIOD_S / gains.stiff_rest_unwind_s)
+    origin, cycles = 0.0, 0
+    for ct, _, _, cycles in _holding_off(cfg, (0.0, 0.0, -1e-3), hold + 400):
+        if cycles < hold:
+            assert ct.stiff_origin[0] == 0.0
+        else:
+            origin += alpha * (ct.integral[STIFF_FIRST] - origin)
+            assert ct.stiff_origin[0] == pytest.approx(origin, rel=1e-9)
+    assert ct.integral[STIFF_FIRST] == pytest.approx(cycles * PERIOD_S * 1e-3, rel=1e-3)
+    share = ct.integral[STIFF_FIRST] - ct.stiff_origin[0]
+    assert share == pytest.approx(gains.stiff_rest_unwind_s * 1e-3, rel=0.05)
+
+
+def test_the_twist_comes_from_the_legs_positions_backward_difference(cfg):
+    """The hexapod's twist is J^-1 of the legs' position differences over one period (the
+    Kalman filters' velocity passed beside it is not used): a 1 mm/s climb of every leg, the
+    platform at home, gives J^-1 of it, as numpy solves it."""
+    rig = HexapodModel(cfg, PERIOD_S)
+    platform, ct, home, zeros = rig.platform, rig.computed_torque, rig.home_strokes, np.zeros(6)
+    platform.estimate(home)
+    platform.reset_reference(home)
+    assert platform.reference_forces(home, zeros)
+    assert ct.update(platform, home, home, np.full(6, 9.0), zeros, zeros, zeros, platform.force_n)
+    np.testing.assert_array_equal(ct.twist_raw, 0.0)          # the first cycle: no difference yet
+    climbed = home + 1e-3 * PERIOD_S
+    assert ct.update(platform, home, climbed, np.full(6, 9.0), zeros, zeros, zeros, platform.force_n)
+    np.testing.assert_allclose(ct.position_rate, 1e-3, rtol=1e-9)
+    np.testing.assert_allclose(ct.twist_raw, np.linalg.solve(platform.jacobian, np.full(6, 1e-3)), rtol=1e-9,
+                               atol=1e-15)
 
 
 def test_a_stiff_integral_without_the_velocity_loop_is_refused(cfg):
@@ -227,7 +279,7 @@ def bench_spool(cfg, load_n: float, below_m: float = 0.0, cycles: int = 5) -> tu
     ct = LegComputedTorque(cfg, 1, PERIOD_S)
     home, zero = np.full(1, cfg.testbench.home_m), np.zeros(1)
     for _ in range(cycles):
-        assert ct.update(None, home, zero, np.full(1, below_m), zero, zero, np.full(1, load_n))
+        assert ct.update(None, home, home - below_m, zero, np.full(1, below_m), zero, zero, np.full(1, load_n))
     return float(ct.spool_cmd[0]), ct
 
 
