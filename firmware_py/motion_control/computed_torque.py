@@ -169,11 +169,9 @@ def leg_forces_into(accel_cmd, accel_ref, load_force, force_measured, velocity_r
 
 @njit(cache=True)
 def backward_difference_into(position, period_s, previous, rate) -> None:
-    """rate = (position - previous) / T, then previous = position. The hexapod's twist is
-    J^-1 of the legs' rates, and the horizontal directions need ~10x the legs' velocity
-    differences: the thesis's adaptive Kalman filter (eq. 7.50) lags at low speed, 2-4 % of
-    the legs' velocity at the circle's frequency, which J^-1 made ~30 mm/s of error in x and
-    y; the difference is unbiased, its counts' noise the twist's low-pass takes out."""
+    """rate = (position - previous) / T, then previous = position: unbiased, where the
+    adaptive Kalman filter's lag at low speed is ~10x larger in x and y through J^-1
+    (docs/EQUATIONS.md "Computed torque"); the twist's low-pass takes out the counts."""
     for i in range(rate.shape[0]):
         rate[i] = (position[i] - previous[i]) / period_s
         previous[i] = position[i]
@@ -253,6 +251,7 @@ class _Gains:
         self.force_bandwidth_rest = self.force_bandwidth if math.isnan(rest) else rest
         self.force_bandwidth_now = self.force_bandwidth_rest
         self.moving = 0.0                         # the schedule: 1 moving, 0 resting, blended
+        self.at_rest = True                       # the reference rested at the last `schedule`
         self.bandwidth_alpha = 1.0 - math.exp(-period_s / FORCE_SCHEDULE_S)
         self.rate_floor = cfg.computed_torque.force_rate_floor * flow_factor
         self.u_max = cfg.limits.spool_max
@@ -270,9 +269,11 @@ class _Gains:
         supply_ratio_into(supply_pa, self.supply_pa, self.supply_alpha, self.supply_ratio)
 
     def schedule(self, velocity_ref) -> None:
-        """The schedule moves toward 1 while the reference moves and toward 0 while it rests,
-        over FORCE_SCHEDULE_S; the force loops' bandwidth between the resting and the moving one."""
-        self.moving += self.bandwidth_alpha * ((0.0 if resting(velocity_ref) else 1.0) - self.moving)
+        """The schedule moves toward 1 while the reference moves and toward 0 while it rests
+        (`at_rest`), over FORCE_SCHEDULE_S; the force loops' bandwidth between the resting and
+        the moving one."""
+        self.at_rest = resting(velocity_ref)
+        self.moving += self.bandwidth_alpha * ((0.0 if self.at_rest else 1.0) - self.moving)
         rest = self.force_bandwidth_rest
         self.force_bandwidth_now = rest + self.moving * (self.force_bandwidth - rest)
 
@@ -389,9 +390,8 @@ class ComputedTorque(_Gains):
             integrate_into(self.integral, self.error, self.period_s)
         # the velocity's share fades once the reference has rested rest_hold_cycles (the legs
         # settle onto it first); the kernel runs every cycle (alpha 0: held)
-        at_rest = resting(velocity_ref)
-        self.rest_cycles = min(self.rest_cycles + 1, self.rest_hold_cycles) if at_rest else 0
-        following = at_rest and self.rest_cycles >= self.rest_hold_cycles
+        self.rest_cycles = min(self.rest_cycles + 1, self.rest_hold_cycles) if self.at_rest else 0
+        following = self.at_rest and self.rest_cycles >= self.rest_hold_cycles
         stiff_origin_step(self.integral, self.stiff_rest_alpha if following else 0.0, self.stiff_origin)
         return True
 
