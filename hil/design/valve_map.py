@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from firmware_py.supervision.capacity import VELOCITY_GRID_M_S
 from physics import hydraulics as hy
 from physics.constants import BAR, MM
 from plant_emulator.params import EmulatorConfig
@@ -24,10 +25,13 @@ from plant_emulator.params import EmulatorConfig
 MAP_FORCES_N = np.concatenate([np.arange(-250.0, -49.0, 20.0), np.arange(-40.0, 41.0, 4.0),
                                np.arange(50.0, 251.0, 20.0)])
 # 2.5 mm/s apart near rest, where retracting pressurises the chambers (the flow gain changes
-# 3x between 0 and -15 mm/s); 10 mm/s, then 50 mm/s apart beyond
-MAP_VELOCITIES_M_S = np.concatenate([np.arange(-600.0, -99.0, 50.0), np.arange(-80.0, -19.0, 10.0),
-                                     np.arange(-15.0, 15.1, 2.5), np.arange(20.0, 81.0, 10.0),
-                                     np.arange(100.0, 601.0, 50.0)]) * MM
+# 3x between 0 and -15 mm/s); 10 mm/s, then 50 mm/s apart to 600, then wider out to the
+# capacity's reach: the map held at a nearer edge would cap the velocity loop's authority (a
+# leg 20 mm behind at 0.5 m/s asked for no more spool)
+_FAST_MM_S = np.append([700.0, 800.0, 1000.0, 1250.0, 1500.0, 2000.0, 2500.0], VELOCITY_GRID_M_S[-1] / MM)
+MAP_VELOCITIES_M_S = np.concatenate([-_FAST_MM_S[::-1], np.arange(-600.0, -99.0, 50.0),
+                                     np.arange(-80.0, -19.0, 10.0), np.arange(-15.0, 15.1, 2.5),
+                                     np.arange(20.0, 81.0, 10.0), np.arange(100.0, 601.0, 50.0), _FAST_MM_S]) * MM
 MAP_STROKE_M = 0.15                  # any: the steady state does not depend on it
 # solver starts (PA, PB as fractions of the supply, spool): the steady state is unique where
 # it exists, but from one start alone the solver misses it near the valve's null and the

@@ -25,7 +25,7 @@ def run(args):
     ("[adaptive]\ntable_load_kg = [0.0, 6.0, 3.0]\n", "table_load_kg must hold 3 increasing"),
     ("[actuator]\nrod_radius_mm = 7.0\n", "rod_radius_mm = 7.0 must be smaller than bore_radius_mm"),
     ("[timing\n", "not valid TOML"),
-    ("[valve_map]\nspool_pct = [[1.0, 2.0]]\n", "[valve_map].spool_pct is 1x2, force_n x velocity_mm_s is 43x49"),
+    ("[valve_map]\nspool_pct = [[1.0, 2.0]]\n", "[valve_map].spool_pct is 1x2, force_n x velocity_mm_s is 43x65"),
     ("[valve_map]\npressure_a_bar = [[1.0, 2.0]]\n", "[valve_map].pressure_a_bar is 1x2"),
     ("[valve_map]\nforce_n = [1.0, 0.5]\n", "[valve_map].force_n must hold >= 2 strictly increasing"),
     ("[valve_map]\nspool_pct = 3\n", "[valve_map].spool_pct must be a non-empty list of rows"),
