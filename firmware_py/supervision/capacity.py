@@ -16,8 +16,11 @@ The judgement is the lag a force shortfall leaves: where a leg needs more than i
 the missing force over its joint-space inertia accelerates the leg behind its reference;
 where it has spare force, that spare brings the lag's rate back to zero. A brief peak (the
 SLS's 50 ms acceleration) leaves a fraction of a millimetre; a sustained one (a payload's
-weight at speed) grows without bound. A reference whose largest lag stays within the
-configured bound is within capacity. Events only (commits, design): these allocate.
+weight at speed) grows without bound. The lag runs on past the reference's end (a
+deceleration's shortfall overshoots the waypoint) and into a motion that starts as it ends
+(turning back at a corner takes the same force direction). A reference whose largest lag
+stays within the configured bound is within capacity. Events only (commits, design): these
+allocate.
 """
 
 from __future__ import annotations
@@ -41,6 +44,8 @@ from physics import power_unit as pu
 VELOCITY_GRID_M_S = np.linspace(-3.0, 3.0, 241)     # 25 mm/s apart; the valve's no-load speed is ~3.4 m/s
 SCALE_RANGE = (0.25, 16.0)                         # the time scales a search spans
 LOAD_SAMPLES_PER_STAGE = 8                         # a staged load computation: ~0.1 ms a stage here
+LAG_STATE_ROWS, LAG_DIRECTION = 3, 2               # a lag state: rows rate, lag, direction (per leg)
+TAIL_SAMPLES_MAX = 2000                            # a shortfall's overshoot after the last sample, at most
 
 
 @functools.lru_cache(maxsize=16)
@@ -159,39 +164,74 @@ class Judgement:
     deficit_m3: float = 0.0          # the oil drawn beyond the pump's share (0: an ideal supply) ...
     reserve_m3: float = math.inf     # ... and what the accumulator and line give for it ...
     end_deficit_m3: float = 0.0      # ... and what is still drawn at the end
+    end_lag: np.ndarray | None = None  # the lag state at the last sample (`lag_of`: the next chain's start)
 
 
-def shortfall_lag(capacity: LegCapacity, loads: Loads, scale: float, share: float) -> tuple[float, int, int]:
-    """(largest error [m], sample, leg) the legs' shortfalls leave at `scale`, each leg with
-    `share` of its capacity (`lag_of`: the platform's position error where there is one).
-    inf where a leg cannot give that force at all."""
+def lag_state(legs: int) -> np.ndarray:
+    """No lag: (rate, lag, direction) per leg, the legs on their reference."""
+    state = np.zeros((LAG_STATE_ROWS, legs))
+    state[LAG_DIRECTION] = 1.0
+    return state
+
+
+def shortfall_lag(capacity: LegCapacity, loads: Loads, scale: float, share: float,
+                  initial_lag: np.ndarray | None = None) -> tuple[float, int, int, np.ndarray]:
+    """(largest error [m], sample, leg, the lag state at the last sample) the legs' shortfalls
+    leave at `scale`, each leg with `share` of its capacity (`lag_of`: the platform's position
+    error where there is one), from `initial_lag` (a chain before it still behind; None: on
+    the reference). inf where a leg cannot give that force at all."""
+    state = lag_state(loads.static_n.shape[1]) if initial_lag is None else np.array(initial_lag, dtype=float)
     force, velocity = loads.at_scale(scale)
     push, pull = capacity.limits(velocity)
     push, pull = push * share, pull * share
     if not (np.isfinite(push).all() and np.isfinite(pull).all()):
         k, leg = np.unravel_index(int(np.argmax(~(np.isfinite(push) & np.isfinite(pull)))), push.shape)
-        return math.inf, int(k), int(leg)
+        return math.inf, int(k), int(leg), state
     # the force beyond the leg's range (> 0 behind in its direction), or the spare (< 0)
     excess = np.where(force >= 0.0, force - push, pull - force)
-    return lag_of(excess, force, loads.inertia_kg, loads.dt_s * scale, loads.to_platform, loads.angle_weight)
+    # after the last sample the reference rests: its static force against the capacity at rest
+    push_rest, pull_rest = capacity.limits(np.zeros(1))
+    static = loads.static_n[-1]
+    rest = np.where(static >= 0.0, static - push_rest[0] * share, pull_rest[0] * share - static)
+    worst, at, leg = lag_of(excess, force, loads.inertia_kg, loads.dt_s * scale, loads.to_platform,
+                            loads.angle_weight, rest, state)
+    return worst, at, leg, state
 
 
 @njit(cache=True)
-def lag_of(excess_n, force_n, inertia_kg, dt_s, to_platform, angle_weight):
+def lag_of(excess_n, force_n, inertia_kg, dt_s, to_platform, angle_weight, rest_excess_n, state):
     """(largest error, sample, leg): per leg, the lag's rate grows by the excess over the
     inertia and never below zero, the lag by the rate and back to zero with it (the position
-    loop takes what is left), behind in the direction of the force it lacked. The error is
-    the platform's position error these lags make (`to_platform[k]` (3, legs): the position
+    loop takes what is left), behind in the direction of the force it lacked. `state` (rows
+    rate, lag, direction) is where it starts, and is left where the last sample ends (the next
+    chain's start); after it the reference rests (`rest_excess_n`) and the lag runs on until
+    every rate is back to zero (a deceleration's shortfall overshoots the waypoint). The error
+    is the platform's position error these lags make (`to_platform[k]` (3, legs): the position
     rows of Jx^-1; the rotation's, weighted by `angle_weight` m/rad, as well: the larger of
     the two), or the largest lag where there is no platform (`to_platform` empty)."""
     n, legs = excess_n.shape
-    rate, lag, direction = np.zeros(legs), np.zeros(legs), np.ones(legs)
+    if n == 0:
+        return 0.0, 0, 0
+    rate, lag, direction = state[0].copy(), state[1].copy(), state[2].copy()
     worst, at, leg_at = 0.0, 0, 0
-    for k in range(n):
+    tail = 0
+    k = 0
+    while k < n or tail < TAIL_SAMPLES_MAX:
+        if k == n:
+            state[0, :], state[1, :], state[2, :] = rate, lag, direction
+        sample = min(k, n - 1)
+        if k >= n:
+            moving = False
+            for leg in range(legs):
+                moving |= rate[leg] > 0.0
+            if not moving:
+                break
+            tail += 1
         for leg in range(legs):
-            if rate[leg] == 0.0 and excess_n[k, leg] > 0.0:      # a shortfall begins: behind which way
-                direction[leg] = 1.0 if force_n[k, leg] >= 0.0 else -1.0
-            rate[leg] = max(rate[leg] + excess_n[k, leg] / inertia_kg[k, leg] * dt_s, 0.0)
+            excess = excess_n[k, leg] if k < n else rest_excess_n[leg]
+            if rate[leg] == 0.0 and excess > 0.0:                # a shortfall begins: behind which way
+                direction[leg] = 1.0 if force_n[sample, leg] >= 0.0 else -1.0
+            rate[leg] = max(rate[leg] + excess / inertia_kg[sample, leg] * dt_s, 0.0)
             lag[leg] = lag[leg] + rate[leg] * dt_s if rate[leg] > 0.0 else 0.0
         error, largest = 0.0, 0
         for leg in range(legs):
@@ -204,14 +244,15 @@ def lag_of(excess_n, force_n, inertia_kg, dt_s, to_platform, angle_weight):
             for axis in range(6):
                 component = 0.0
                 for leg in range(legs):
-                    component += to_platform[k, axis, leg] * direction[leg] * lag[leg]
+                    component += to_platform[sample, axis, leg] * direction[leg] * lag[leg]
                 if axis < 3:
                     position += component * component
                 else:
                     angle += component * component
             error = max(math.sqrt(position), angle_weight * math.sqrt(angle))
         if error > worst:
-            worst, at, leg_at = error, k, largest
+            worst, at, leg_at = error, sample, largest
+        k += 1
     return worst, at, leg_at
 
 
@@ -228,55 +269,57 @@ def supply_deficit(capacity: LegCapacity, loads: Loads, scale: float, share: flo
 
 
 def fits(capacity: LegCapacity, loads: Loads, scale: float, share: float, lag_max_m: float,
-         initial_m3: float = 0.0) -> bool:
+         initial_m3: float = 0.0, initial_lag: np.ndarray | None = None) -> bool:
     """Within capacity at `scale`: the lag within its bound and the supply within its reserve."""
     deficit, reserve, _ = supply_deficit(capacity, loads, scale, share, initial_m3)
-    return deficit <= reserve and shortfall_lag(capacity, loads, scale, share)[0] <= lag_max_m
+    return deficit <= reserve and shortfall_lag(capacity, loads, scale, share, initial_lag)[0] <= lag_max_m
 
 
 def judge(capacity: LegCapacity, loads: Loads, scale: float, share: float, lag_max_m: float,
-          initial_m3: float = 0.0) -> Judgement:
-    return at_once(judge_stages(capacity, loads, scale, share, lag_max_m, initial_m3))
+          initial_m3: float = 0.0, initial_lag: np.ndarray | None = None) -> Judgement:
+    return at_once(judge_stages(capacity, loads, scale, share, lag_max_m, initial_m3, initial_lag))
 
 
 def judge_stages(capacity: LegCapacity, loads: Loads, scale: float, share: float, lag_max_m: float,
-                 initial_m3: float = 0.0) -> Stages[Judgement]:
+                 initial_m3: float = 0.0, initial_lag: np.ndarray | None = None) -> Stages[Judgement]:
     """`judge` in three stages: the lag, the supply, the utilisation."""
-    lag, k, leg = shortfall_lag(capacity, loads, scale, share)
+    lag, k, leg, end_lag = shortfall_lag(capacity, loads, scale, share, initial_lag)
     yield
     deficit, reserve, end = supply_deficit(capacity, loads, scale, share, initial_m3)
     yield
     force, velocity = loads.at_scale(scale)
     ratio = capacity.utilisation(force, velocity)
     return Judgement(lag <= lag_max_m and deficit <= reserve, lag, float(np.max(ratio)), k, leg, deficit, reserve,
-                     end)
+                     end, end_lag)
 
 
 def needed_scale(capacity: LegCapacity, loads: Loads, share: float, lag_max_m: float,
-                 tolerance: float = 0.005, beyond: float | None = None, initial_m3: float = 0.0) -> float:
+                 tolerance: float = 0.005, beyond: float | None = None, initial_m3: float = 0.0,
+                 initial_lag: np.ndarray | None = None) -> float:
     """The smallest time scale (within SCALE_RANGE) that `fits`; NaN when even the slowest
     does not (a static load the legs cannot hold, or a supply already drawn below its share).
     `beyond`: a scale known not to fit, the search's floor (near the bound `fits` is not
     monotonic: a refusal at 1 must not name 0.99)."""
-    return at_once(needed_scale_stages(capacity, loads, share, lag_max_m, tolerance, beyond, initial_m3))
+    return at_once(needed_scale_stages(capacity, loads, share, lag_max_m, tolerance, beyond, initial_m3,
+                                       initial_lag))
 
 
 def needed_scale_stages(capacity: LegCapacity, loads: Loads, share: float, lag_max_m: float,
                         tolerance: float = 0.005, beyond: float | None = None,
-                        initial_m3: float = 0.0) -> Stages[float]:
+                        initial_m3: float = 0.0, initial_lag: np.ndarray | None = None) -> Stages[float]:
     """`needed_scale`, a stage per time scale tried."""
     low, high = SCALE_RANGE
-    if not fits(capacity, loads, high, share, lag_max_m, initial_m3):
+    if not fits(capacity, loads, high, share, lag_max_m, initial_m3, initial_lag):
         return math.nan
     yield
     if beyond is not None:
         low = beyond
-    elif fits(capacity, loads, low, share, lag_max_m, initial_m3):
+    elif fits(capacity, loads, low, share, lag_max_m, initial_m3, initial_lag):
         return low
     while high - low > tolerance * low:
         yield
         middle = math.sqrt(low * high)
-        if fits(capacity, loads, middle, share, lag_max_m, initial_m3):
+        if fits(capacity, loads, middle, share, lag_max_m, initial_m3, initial_lag):
             high = middle
         else:
             low = middle

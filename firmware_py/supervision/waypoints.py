@@ -41,11 +41,12 @@ class Waypoint:
     pose: tuple                  # (x, y, z, roll, pitch, yaw) as sent, SI
     start: np.ndarray            # the joint position its segment starts from [m]
     drawn_after_m3: float = 0.0  # the oil its segment leaves drawn from the supply (the next one's start)
+    lag_after: np.ndarray | None = None   # the lag its segment leaves (`capacity.lag_of`'s state; None: none)
 
 
 def refused(result: Ack) -> tuple:
-    """A check's refusal: (result, no strokes, no time scale, no oil drawn)."""
-    return result, None, math.nan, math.nan
+    """A check's refusal: (result, no strokes, no time scale, no oil drawn, no lag)."""
+    return result, None, math.nan, math.nan, None
 
 
 class TestbenchCheck:
@@ -73,11 +74,12 @@ class TestbenchCheck:
         if not peak_velocity_ok(self.waypoints, chain, strokes, step):
             return refused(Ack.TOO_FAST)
         if step:
-            return Ack.ACCEPTED, strokes, math.nan, chain.drawn_m3
+            return Ack.ACCEPTED, strokes, math.nan, chain.drawn_m3, None
         trajectory, t0 = chain.trajectory(strokes)
         loads = leg_loads(trajectory, t0, trajectory.duration_s, chain.sample_dt_s(),
                           self.moving_mass_kg + load_kg, GRAVITY_M_S2)
-        return at_once(capacity_verdict_stages(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3))
+        return at_once(capacity_verdict_stages(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3,
+                                               chain.lag))
 
 
 class HexapodCheck:
@@ -129,7 +131,7 @@ class HexapodCheck:
         if singular:
             return refused(Ack.SINGULAR)
         if step:
-            return Ack.ACCEPTED, strokes, math.nan, chain.drawn_m3
+            return Ack.ACCEPTED, strokes, math.nan, chain.drawn_m3, None
         yield
         trajectory, t0 = chain.trajectory(strokes)
         yield
@@ -138,21 +140,24 @@ class HexapodCheck:
         except ValueError:                 # a pose between the checked ones: DK lost or singular
             return refused(Ack.SINGULAR)
         yield
-        return (yield from capacity_verdict_stages(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3))
+        return (yield from capacity_verdict_stages(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3,
+                                                   chain.lag))
 
 
 def capacity_verdict_stages(waypoints: Waypoints, capacity: LegCapacity, loads, strokes,
-                            drawn_m3: float = 0.0) -> Stages[tuple]:
-    """(ACCEPTED, strokes, NaN, the oil drawn at the segment's end), or (BEYOND_CAPACITY, None,
-    the smallest time scale that fits (inf: none), NaN); `drawn_m3`: the oil the supply misses
-    when the segment starts (the motions before it)."""
+                            drawn_m3: float = 0.0, lag: np.ndarray | None = None) -> Stages[tuple]:
+    """(ACCEPTED, strokes, NaN, the oil drawn at the segment's end, the lag it leaves), or
+    (BEYOND_CAPACITY, None, the smallest time scale that fits (inf: none), NaN, None);
+    `drawn_m3` and `lag`: the oil the supply misses and the legs' lag when the segment starts
+    (the motions before it)."""
     share, lag_max = waypoints.capacity_share, waypoints.lag_max_m
-    verdict = yield from judge_stages(capacity, loads, 1.0, share, lag_max, drawn_m3)
+    verdict = yield from judge_stages(capacity, loads, 1.0, share, lag_max, drawn_m3, lag)
     if verdict.within:
-        return Ack.ACCEPTED, strokes, math.nan, verdict.end_deficit_m3
+        return Ack.ACCEPTED, strokes, math.nan, verdict.end_deficit_m3, verdict.end_lag
     yield
-    scale = yield from needed_scale_stages(capacity, loads, share, lag_max, beyond=1.0, initial_m3=drawn_m3)
-    return Ack.BEYOND_CAPACITY, None, math.inf if math.isnan(scale) else scale, math.nan
+    scale = yield from needed_scale_stages(capacity, loads, share, lag_max, beyond=1.0, initial_m3=drawn_m3,
+                                           initial_lag=lag)
+    return Ack.BEYOND_CAPACITY, None, math.inf if math.isnan(scale) else scale, math.nan, None
 
 
 @dataclass
@@ -164,6 +169,7 @@ class Chain:
     accel_times: list
     segment_times: list
     drawn_m3: float = 0.0          # the oil the supply misses when this segment starts
+    lag: np.ndarray | None = None  # the legs' lag when the chain starts (a chain before it still behind)
 
     @property
     def start(self) -> np.ndarray:
@@ -195,6 +201,7 @@ class WaypointQueue:
         self._staged_rot: dict[int, tuple] = {}
         self.time_scale_needed = math.nan          # the last refusal's, for CTRL_ACK (NaN: none)
         self.taken_drawn_m3 = 0.0                  # the oil the last trajectory taken leaves drawn at its end
+        self.taken_lag: np.ndarray | None = None   # ... and the lag it leaves there
         self.generation = 0                        # +1 whenever waypoints leave the queue (taken, cleared)
 
     def stage_position(self, tag: int, x: float, y: float, z: float) -> None:
@@ -212,17 +219,18 @@ class WaypointQueue:
         self.generation += 1
 
     def commit(self, tag: int, seq: int, segment_time: float, accel_time: float, flags: int, state: State,
-               previous, load_kg: float, drawn_m3: float = 0.0) -> Ack:
+               previous, load_kg: float, drawn_m3: float = 0.0, lag: np.ndarray | None = None) -> Ack:
         """Check the staged pose with this TAG and queue it, or say why not; `previous` is the
-        joint position the segment starts from, `drawn_m3` the oil the supply misses then when
-        nothing is queued before it (queued, the one before it leaves its own). At once."""
+        joint position the segment starts from, `drawn_m3` and `lag` the oil the supply misses
+        and the legs' lag (`capacity.lag_of`'s state, None: none) then when nothing is queued
+        before it (queued, the one before it leaves its own). At once."""
         return at_once(self.commit_stages(tag, seq, segment_time, accel_time, flags,
-                                          lambda: (state, previous, load_kg, drawn_m3)))
+                                          lambda: (state, previous, load_kg, drawn_m3, lag)))
 
     def commit_stages(self, tag: int, seq: int, segment_time: float, accel_time: float, flags: int,
                       context) -> Stages[Ack]:
-        """`commit` in stages; `context()` gives (state, previous, load_kg, drawn_m3) as the
-        controller sees them at that moment. Where waypoints leave the queue during the check
+        """`commit` in stages; `context()` gives (state, previous, load_kg, drawn_m3, lag) as
+        the controller sees them at that moment. Where waypoints leave the queue during the check
         (the running motion takes them, or a clear), the check starts again from what is then
         queued; a state that no longer admits commits at its end refuses it."""
         tag &= 0x0F
@@ -232,7 +240,7 @@ class WaypointQueue:
         if pos is None or rot is None or (seq & 0x0F) != tag:
             return Ack.INCOMPLETE
         while True:
-            state, previous, load_kg, drawn_m3 = context()
+            state, previous, load_kg, drawn_m3, lag = context()
             if self.expected_seq is not None and seq != self.expected_seq:
                 return Ack.SEQUENCE_GAP
             if state not in COMMIT_STATES:
@@ -251,16 +259,17 @@ class WaypointQueue:
             generation = self.generation
             chain = self.chain(previous, segment_time, accel_time)
             chain.drawn_m3 = self.queue[-1].drawn_after_m3 if self.queue else drawn_m3
+            chain.lag = self.lag_before_chain(len(chain.points) - 1, known, lag)       # points: its start, then queued
             verdict = yield from self.check.stages(chain, pos, rot, step, load_kg)
             if self.generation == generation:
                 break
         if context()[0] not in COMMIT_STATES:
             return Ack.BAD_STATE
-        result, strokes, self.time_scale_needed, drawn_after = verdict
+        result, strokes, self.time_scale_needed, drawn_after, lag_after = verdict
         if result is not Ack.ACCEPTED:
             return result
         self.queue.append(Waypoint(seq, strokes, segment_time, accel_time, known, pos + rot, chain.start,
-                                   drawn_after))
+                                   drawn_after, lag_after))
         self.expected_seq = (seq + 1) % 256
         return Ack.ACCEPTED
 
@@ -278,6 +287,16 @@ class WaypointQueue:
                      [w.accel_time_s for w in chained] + [accel_time],
                      [w.segment_time_s for w in chained] + [segment_time])
 
+    def lag_before_chain(self, queued: int, flags: WaypointFlag, running_lag):
+        """The lag a chain starts with, `queued` of its waypoints in the queue and the one being
+        committed with `flags`: what the chain queued before it leaves, else `running_lag` (the
+        running motion's), when it starts as that one ends (START); None (no lag) otherwise."""
+        first = self.queue[len(self.queue) - queued].flags if queued else flags
+        if not first & WaypointFlag.START:
+            return None
+        before = len(self.queue) - queued - 1
+        return self.queue[before].lag_after if before >= 0 else running_lag
+
     def head_starts_now(self) -> bool:
         """The queue's first waypoint asks to start as soon as the running motion ends."""
         return bool(self.queue) and bool(self.queue[0].flags & WaypointFlag.START)
@@ -291,6 +310,7 @@ class WaypointQueue:
         chosen, self.queue = self.queue[:take], self.queue[take:]
         self.generation += 1
         self.taken_drawn_m3 = chosen[-1].drawn_after_m3
+        self.taken_lag = chosen[-1].lag_after
         if chosen[0].flags & WaypointFlag.STEP:           # a step reference (chapters 5.4, 7.6.1)
             return hold_at(chosen[0].strokes, chosen[0].segment_time_s), [chosen[0].seq]
         points = np.array([start] + [w.strokes for w in chosen])
