@@ -21,7 +21,11 @@ pose, and the legs are driven through the inverse of their dynamics, in three st
    light directions (z, roll, pitch) the PID's force barely moves the legs, so its integral
    cannot take out their lag there: it also joins their commanded velocity,
    v_r + lambda e_leg + J_s K_s int(e_s);
-3. the spool to volts, saturated; the integral stops while a valve saturates.
+3. the spool to volts, saturated; the integral stops while a valve saturates. Where valves
+   are at their limit, the others' forces are chosen again (`reallocate_into`): the limited
+   legs give what their load cells read, and the free ones keep the platform's acceleration
+   error least, its rotations first, instead of the uneven shortfall turning it (the yaw's
+   light inertia swung 4 deg in 50 ms of a corner's saturation).
 Allocation-free; every array is made here.
 """
 
@@ -115,6 +119,43 @@ def spool_commands_into(force_map, force_cmd, force_ref, force_ref_prev, force_m
             x = u_max if x > 0.0 else -u_max
         out[i] = x
     return saturated
+
+
+@njit(cache=True)
+def reallocate_into(jacobian, force, measured, spool, u_max, weights, pin, wrench, normal, rhs, lu, out) -> bool:
+    """With valves at their limit (|spool| >= u_max): the legs' forces whose wrench J^T f
+    comes nearest the wanted one's (J^T `force`) in the `weights`' norm, the limited legs'
+    pinned (`pin` relative) at what their load cells read: the free legs keep the directions
+    weighted most. False (out untouched) when none is limited or fewer than two are free."""
+    n = force.shape[0]
+    limited = 0
+    for i in range(n):
+        if abs(spool[i]) >= u_max:
+            limited += 1
+    if limited == 0 or n - limited < 2:
+        return False
+    for k in range(6):
+        total = 0.0
+        for i in range(n):
+            total += jacobian[i, k] * force[i]
+        wrench[k] = total
+    largest = 0.0
+    for i in range(n):
+        total = 0.0
+        for k in range(6):
+            total += jacobian[i, k] * weights[k] * wrench[k]
+        rhs[i] = total
+        for j in range(n):
+            total = 0.0
+            for k in range(6):
+                total += jacobian[i, k] * weights[k] * jacobian[j, k]
+            normal[i, j] = total
+        largest = max(largest, normal[i, i])
+    for i in range(n):
+        if abs(spool[i]) >= u_max:
+            normal[i, i] += pin * largest
+            rhs[i] += pin * largest * measured[i]
+    return gauss_solve_into(normal, rhs, lu, out, False) > 0.0
 
 
 @njit(cache=True)
@@ -291,6 +332,19 @@ class _Gains:
 
 
 YAW = 5                               # the twist's and pose error's rotation about the base's vertical
+# valves at their limit: the others' forces are chosen for the platform's acceleration error,
+# a rotation's counted as a translation's at this lever (the rotations are what the legs
+# barely see and what the platform's light inertia lets swing), the limited legs' pinned
+ROTATION_LEVER_M = 1.0
+PIN = 1e6                             # the limited legs' pin, relative to the largest normal-equation term
+
+
+@njit(cache=True)
+def keep_limited_into(limited, u_max, out) -> None:
+    """The valves that were at their limit stay there."""
+    for i in range(out.shape[0]):
+        if abs(limited[i]) >= u_max:
+            out[i] = limited[i]
 
 
 class ComputedTorque(_Gains):
@@ -337,6 +391,18 @@ class ComputedTorque(_Gains):
         self.stiff_rest_alpha = 1.0 - math.exp(-period_s / unwind_s) if unwind_s > 0.0 else 0.0
         self._lu = np.empty((6, 6))
         self._fresh = True                    # no previous reference force yet
+        # the allocation's weights: the platform's inertia at home (the declared payload), per direction
+        self.dynamics.task_space_terms(np.asarray(geometry.home_position_m, float), np.array([1.0, 0.0, 0.0, 0.0]),
+                                       np.zeros(6))
+        lever = np.array([1.0, 1.0, 1.0, ROTATION_LEVER_M, ROTATION_LEVER_M, ROTATION_LEVER_M])
+        self.allocation_weights = (lever / np.diag(self.dynamics.mass_matrix)) ** 2
+        self.force_alloc = np.zeros(N_LEGS)
+        self.spool_limited = np.zeros(N_LEGS)
+        self._wrench, self._rhs, self._normal = np.zeros(6), np.zeros(N_LEGS), np.zeros((N_LEGS, N_LEGS))
+        # load the allocation's kernels now (configure), not in the first saturated cycle
+        reallocate_into(self.dynamics.jacobian, self.force_alloc, self.force_alloc, self.spool_limited, self.u_max,
+                        self.allocation_weights, PIN, self._wrench, self._normal, self._rhs, self._lu, self.force_alloc)
+        keep_limited_into(self.spool_limited, self.u_max, self.spool_limited)
 
     def reset(self) -> None:
         """Valves locked or a fault: the integral and the reference-force history start again."""
@@ -385,6 +451,15 @@ class ComputedTorque(_Gains):
                             joint_error, self.velocity_error)
         saturated = self.spool_commands(self.force_cmd, self.force_cmd, platform.force_n, self.force_ref_prev,
                                         force_measured, velocity_ref, self.velocity_error, strokes_ref)
+        if saturated and reallocate_into(platform.jacobian, self.force_cmd, force_measured, self.spool_cmd, self.u_max,
+                                         self.allocation_weights, PIN, self._wrench, self._normal, self._rhs, self._lu,
+                                         self.force_alloc):
+            # the free legs take over what the limited ones cannot: the rotations first
+            self.spool_limited[:] = self.spool_cmd
+            self.force_cmd[:] = self.force_alloc
+            self.spool_commands(self.force_cmd, self.force_cmd, platform.force_n, self.force_ref_prev,
+                                force_measured, velocity_ref, self.velocity_error, strokes_ref)
+            keep_limited_into(self.spool_limited, self.u_max, self.spool_cmd)
         self.force_ref_prev[:] = platform.force_n
         if not saturated:                     # conditional integration (anti-windup)
             integrate_into(self.integral, self.error, self.period_s)
