@@ -10,6 +10,7 @@
                                     [--seed S] [--min-damping Z] [--workers N] [--bandwidth-hz] [--damping]
                                     [--integral-fraction] [--velocity-gain] [--testbench-velocity-gain]
                                     [--force-bandwidth-hz] [--velocity-filter-hz] [--json]
+    hydrapod design edge-moves [--moves N] [--seed S] [--workers W] [--json]
     hydrapod design sweep --key KEY --values V,V [--points nominal|envelope] [--movements M,M] [--seeds S,S]
                           [--workers N] [--json]
 
@@ -91,6 +92,13 @@ def _computed_torque_key(text: str) -> str:
     if text not in keys:
         raise argparse.ArgumentTypeError(f"{text!r} is not a [computed_torque] key ({', '.join(sorted(keys))})")
     return text
+
+
+def _edge_moves(args) -> int:
+    from hil.design.edge_moves import edge_moves, format_edge_moves
+    runs = edge_moves(args.moves, args.seed, args.workers)
+    print(json.dumps([r.as_dict() for r in runs], indent=1) if args.json else format_edge_moves(runs))
+    return 0
 
 
 def _sweep(args) -> int:
@@ -385,6 +393,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="low-pass of the measured twist")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_computed_torque)
+
+    p = design_sub.add_parser("edge-moves", help="random single moves at the capacity check's own edge (and 1.1, "
+                                                 "1.2 x it), in process: faults, largest error and yaw")
+    p.add_argument("--moves", type=number_in_range(int, 1, 1000), default=40, help="random moves (default 40)")
+    p.add_argument("--seed", type=number_in_range(int, 0, 2**31 - 1), default=1, help="the moves' seed")
+    p.add_argument("--workers", type=number_in_range(int, 1, 64), default=2, help="processes")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_edge_moves)
 
     p = design_sub.add_parser("sweep", help="one [computed_torque] key over values: the thesis's movements in "
                                             "process per envelope point and noise seed, IAE and largest error")
