@@ -16,10 +16,10 @@ The judgement is the lag a force shortfall leaves: where a leg needs more than i
 the missing force over its joint-space inertia accelerates the leg behind its reference;
 where it has spare force, that spare brings the lag's rate back to zero. A brief peak (the
 SLS's 50 ms acceleration) leaves a fraction of a millimetre; a sustained one (a payload's
-weight at speed) grows without bound. The lag runs on past the reference's end (a
-deceleration's shortfall overshoots the waypoint) and into a motion that starts as it ends
-(turning back at a corner takes the same force direction). A reference whose largest lag
-stays within the configured bound is within capacity. Events only (commits, design): these
+weight at speed) grows without bound. What is left at a chain's end is where a chain that
+starts as it ends starts from (turning back at a corner asks the same force direction on
+both sides of the waypoint). A reference whose largest lag stays within the configured
+bound is within capacity. Events only (commits, design): these
 allocate.
 """
 
@@ -45,7 +45,6 @@ VELOCITY_GRID_M_S = np.linspace(-3.0, 3.0, 241)     # 25 mm/s apart; the valve's
 SCALE_RANGE = (0.25, 16.0)                         # the time scales a search spans
 LOAD_SAMPLES_PER_STAGE = 8                         # a staged load computation: ~0.1 ms a stage here
 LAG_STATE_ROWS, LAG_DIRECTION = 3, 2               # a lag state: rows rate, lag, direction (per leg)
-TAIL_SAMPLES_MAX = 2000                            # a shortfall's overshoot after the last sample, at most
 
 
 @functools.lru_cache(maxsize=16)
@@ -189,49 +188,29 @@ def shortfall_lag(capacity: LegCapacity, loads: Loads, scale: float, share: floa
         return math.inf, int(k), int(leg), state
     # the force beyond the leg's range (> 0 behind in its direction), or the spare (< 0)
     excess = np.where(force >= 0.0, force - push, pull - force)
-    # after the last sample the reference rests: its static force against the capacity at rest
-    push_rest, pull_rest = capacity.limits(np.zeros(1))
-    static = loads.static_n[-1]
-    rest = np.where(static >= 0.0, static - push_rest[0] * share, pull_rest[0] * share - static)
     worst, at, leg = lag_of(excess, force, loads.inertia_kg, loads.dt_s * scale, loads.to_platform,
-                            loads.angle_weight, rest, state)
+                            loads.angle_weight, state)
     return worst, at, leg, state
 
 
 @njit(cache=True)
-def lag_of(excess_n, force_n, inertia_kg, dt_s, to_platform, angle_weight, rest_excess_n, state):
+def lag_of(excess_n, force_n, inertia_kg, dt_s, to_platform, angle_weight, state):
     """(largest error, sample, leg): per leg, the lag's rate grows by the excess over the
     inertia and never below zero, the lag by the rate and back to zero with it (the position
     loop takes what is left), behind in the direction of the force it lacked. `state` (rows
-    rate, lag, direction) is where it starts, and is left where the last sample ends (the next
-    chain's start); after it the reference rests (`rest_excess_n`) and the lag runs on until
-    every rate is back to zero (a deceleration's shortfall overshoots the waypoint). The error
-    is the platform's position error these lags make (`to_platform[k]` (3, legs): the position
-    rows of Jx^-1; the rotation's, weighted by `angle_weight` m/rad, as well: the larger of
-    the two), or the largest lag where there is no platform (`to_platform` empty)."""
+    rate, lag, direction) is where it starts and is left where the last sample ends: a chain
+    that starts as this one ends starts from it. The error is the platform's position error
+    these lags make (`to_platform[k]` (3, legs): the position rows of Jx^-1; the rotation's,
+    weighted by `angle_weight` m/rad, as well: the larger of the two), or the largest lag
+    where there is no platform (`to_platform` empty)."""
     n, legs = excess_n.shape
-    if n == 0:
-        return 0.0, 0, 0
     rate, lag, direction = state[0].copy(), state[1].copy(), state[2].copy()
     worst, at, leg_at = 0.0, 0, 0
-    tail = 0
-    k = 0
-    while k < n or tail < TAIL_SAMPLES_MAX:
-        if k == n:
-            state[0, :], state[1, :], state[2, :] = rate, lag, direction
-        sample = min(k, n - 1)
-        if k >= n:
-            moving = False
-            for leg in range(legs):
-                moving |= rate[leg] > 0.0
-            if not moving:
-                break
-            tail += 1
+    for k in range(n):
         for leg in range(legs):
-            excess = excess_n[k, leg] if k < n else rest_excess_n[leg]
-            if rate[leg] == 0.0 and excess > 0.0:                # a shortfall begins: behind which way
-                direction[leg] = 1.0 if force_n[sample, leg] >= 0.0 else -1.0
-            rate[leg] = max(rate[leg] + excess / inertia_kg[sample, leg] * dt_s, 0.0)
+            if rate[leg] == 0.0 and excess_n[k, leg] > 0.0:      # a shortfall begins: behind which way
+                direction[leg] = 1.0 if force_n[k, leg] >= 0.0 else -1.0
+            rate[leg] = max(rate[leg] + excess_n[k, leg] / inertia_kg[k, leg] * dt_s, 0.0)
             lag[leg] = lag[leg] + rate[leg] * dt_s if rate[leg] > 0.0 else 0.0
         error, largest = 0.0, 0
         for leg in range(legs):
@@ -244,15 +223,15 @@ def lag_of(excess_n, force_n, inertia_kg, dt_s, to_platform, angle_weight, rest_
             for axis in range(6):
                 component = 0.0
                 for leg in range(legs):
-                    component += to_platform[sample, axis, leg] * direction[leg] * lag[leg]
+                    component += to_platform[k, axis, leg] * direction[leg] * lag[leg]
                 if axis < 3:
                     position += component * component
                 else:
                     angle += component * component
             error = max(math.sqrt(position), angle_weight * math.sqrt(angle))
         if error > worst:
-            worst, at, leg_at = error, sample, largest
-        k += 1
+            worst, at, leg_at = error, k, largest
+    state[0, :], state[1, :], state[2, :] = rate, lag, direction
     return worst, at, leg_at
 
 

@@ -29,6 +29,7 @@ COMMIT_STATES = (State.IDLE, State.READY, State.RUNNING)
 KNOWN_FLAGS = int(sum(WaypointFlag))         # other FLAGS bits are reserved and ignored
 SAMPLES_PER_ACCEL = 8                        # the capacity check's samples per SLS acceleration time
 PATH_POSES_PER_STAGE = 3                     # a staged commit checks this many poses of the path a stage
+TURN_BACK_COS = -0.5                         # a chain turns back from the one before it: beyond 120 deg
 
 
 @dataclass
@@ -79,7 +80,7 @@ class TestbenchCheck:
         loads = leg_loads(trajectory, t0, trajectory.duration_s, chain.sample_dt_s(),
                           self.moving_mass_kg + load_kg, GRAVITY_M_S2)
         return at_once(capacity_verdict_stages(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3,
-                                               chain.lag))
+                                               chain.carried_lag(strokes)))
 
 
 class HexapodCheck:
@@ -141,7 +142,7 @@ class HexapodCheck:
             return refused(Ack.SINGULAR)
         yield
         return (yield from capacity_verdict_stages(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3,
-                                                   chain.lag))
+                                                   chain.carried_lag(strokes)))
 
 
 def capacity_verdict_stages(waypoints: Waypoints, capacity: LegCapacity, loads, strokes,
@@ -169,7 +170,19 @@ class Chain:
     accel_times: list
     segment_times: list
     drawn_m3: float = 0.0          # the oil the supply misses when this segment starts
-    lag: np.ndarray | None = None  # the legs' lag when the chain starts (a chain before it still behind)
+    lag: np.ndarray | None = None  # the legs' lag when the chain starts (a chain before it still behind) ...
+    lag_direction: np.ndarray | None = None   # ... and the joint-space direction that chain ended in
+
+    def carried_lag(self, strokes) -> np.ndarray | None:
+        """The lag this chain starts with: the one before it leaves, where this chain turns back
+        (its first segment more than 120 deg from that one's last, in joint space: the same
+        force on both sides of the waypoint); None otherwise (the position loop takes what is
+        left while the legs turn)."""
+        if self.lag is None or self.lag_direction is None:
+            return None
+        first = (self.points[1] if len(self.points) > 1 else np.asarray(strokes)) - self.points[0]
+        scale = float(np.linalg.norm(first) * np.linalg.norm(self.lag_direction))
+        return self.lag if scale > 0.0 and float(np.dot(first, self.lag_direction)) < TURN_BACK_COS * scale else None
 
     @property
     def start(self) -> np.ndarray:
@@ -201,7 +214,7 @@ class WaypointQueue:
         self._staged_rot: dict[int, tuple] = {}
         self.time_scale_needed = math.nan          # the last refusal's, for CTRL_ACK (NaN: none)
         self.taken_drawn_m3 = 0.0                  # the oil the last trajectory taken leaves drawn at its end
-        self.taken_lag: np.ndarray | None = None   # ... and the lag it leaves there
+        self.taken_lag: tuple | None = None        # ... and the lag it leaves there, with its last direction
         self.generation = 0                        # +1 whenever waypoints leave the queue (taken, cleared)
 
     def stage_position(self, tag: int, x: float, y: float, z: float) -> None:
@@ -222,8 +235,9 @@ class WaypointQueue:
                previous, load_kg: float, drawn_m3: float = 0.0, lag: np.ndarray | None = None) -> Ack:
         """Check the staged pose with this TAG and queue it, or say why not; `previous` is the
         joint position the segment starts from, `drawn_m3` and `lag` the oil the supply misses
-        and the legs' lag (`capacity.lag_of`'s state, None: none) then when nothing is queued
-        before it (queued, the one before it leaves its own). At once."""
+        and the legs' lag ((`capacity.lag_of`'s state, the joint direction it ended in), None:
+        none) then when nothing is queued before it (queued, the one before it leaves its
+        own). At once."""
         return at_once(self.commit_stages(tag, seq, segment_time, accel_time, flags,
                                           lambda: (state, previous, load_kg, drawn_m3, lag)))
 
@@ -259,7 +273,7 @@ class WaypointQueue:
             generation = self.generation
             chain = self.chain(previous, segment_time, accel_time)
             chain.drawn_m3 = self.queue[-1].drawn_after_m3 if self.queue else drawn_m3
-            chain.lag = self.lag_before_chain(len(chain.points) - 1, known, lag)       # points: its start, then queued
+            chain.lag, chain.lag_direction = self.lag_before_chain(len(chain.points) - 1, known, lag)
             verdict = yield from self.check.stages(chain, pos, rot, step, load_kg)
             if self.generation == generation:
                 break
@@ -287,15 +301,19 @@ class WaypointQueue:
                      [w.accel_time_s for w in chained] + [accel_time],
                      [w.segment_time_s for w in chained] + [segment_time])
 
-    def lag_before_chain(self, queued: int, flags: WaypointFlag, running_lag):
-        """The lag a chain starts with, `queued` of its waypoints in the queue and the one being
-        committed with `flags`: what the chain queued before it leaves, else `running_lag` (the
-        running motion's), when it starts as that one ends (START); None (no lag) otherwise."""
+    def lag_before_chain(self, queued: int, flags: WaypointFlag, running_lag) -> tuple:
+        """(the lag a chain starts with, the direction the chain before it ended in), `queued`
+        of its waypoints in the queue and the one being committed with `flags`: what the chain
+        queued before it leaves, else `running_lag` (the running motion's: (lag, direction)),
+        when it starts as that one ends (START); (None, None) otherwise."""
         first = self.queue[len(self.queue) - queued].flags if queued else flags
-        if not first & WaypointFlag.START:
-            return None
         before = len(self.queue) - queued - 1
-        return self.queue[before].lag_after if before >= 0 else running_lag
+        if not first & WaypointFlag.START:
+            return None, None
+        if before < 0:
+            return running_lag if running_lag is not None else (None, None)
+        w = self.queue[before]
+        return w.lag_after, w.strokes - w.start
 
     def head_starts_now(self) -> bool:
         """The queue's first waypoint asks to start as soon as the running motion ends."""
@@ -310,7 +328,7 @@ class WaypointQueue:
         chosen, self.queue = self.queue[:take], self.queue[take:]
         self.generation += 1
         self.taken_drawn_m3 = chosen[-1].drawn_after_m3
-        self.taken_lag = chosen[-1].lag_after
+        self.taken_lag = (chosen[-1].lag_after, chosen[-1].strokes - chosen[-1].start)
         if chosen[0].flags & WaypointFlag.STEP:           # a step reference (chapters 5.4, 7.6.1)
             return hold_at(chosen[0].strokes, chosen[0].segment_time_s), [chosen[0].seq]
         points = np.array([start] + [w.strokes for w in chosen])

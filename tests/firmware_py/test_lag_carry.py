@@ -1,15 +1,16 @@
-"""The capacity check's lag runs past a segment's end and into the next one
-(supervision/capacity.py `lag_of`, waypoints.py): a deceleration's shortfall overshoots the
-waypoint after the reference has stopped, and a motion that starts as it ends (START) needs
-the same force direction to turn back, so its own shortfall adds to what is left. Judged
-apart, the thesis's diagonal with 4.5 kg at 40 bar was accepted at 0.96 x its timing down to
-its low corner and back, and ran 11-13 mm off with the yaw at its 5 deg bound."""
+"""The capacity check's lag carries into a chain that turns back (supervision/capacity.py
+`lag_of`, waypoints.py `Chain.carried_lag`): at a corner, the deceleration into the waypoint
+and the acceleration out of it back the way it came ask the same force direction, so a
+motion that starts as the one before it ends (START) adds its shortfall to what that one
+left. Judged apart, the thesis's diagonal with 4.5 kg at 40 bar was accepted at 0.96 x its
+timing down to its low corner and back, and ran 11-13 mm off with the yaw at its 5 deg bound."""
 
 import numpy as np
 
 from firmware_py.config import load_config
 from firmware_py.mechanics.geometry import default_geometry
 from firmware_py.supervision.capacity import Loads, lag_state, leg_capacity, shortfall_lag
+from firmware_py.supervision.waypoints import Chain
 from hil.experiments import MOTIONS, MOVEMENT_OVERRIDES, movement_waypoints
 from hil.in_process import PERIOD_S, InProcessLoop
 from plant_emulator.params import load_config as load_emulator_config
@@ -29,19 +30,28 @@ def _leg(push_factor: float, n: int, at: slice) -> Loads:
     return Loads(0.002, zero, force, zero, np.full((n, 1), 200.0), NO_PLATFORM)
 
 
-def test_a_shortfall_at_the_end_runs_on_after_it_and_into_the_next():
+def test_a_chain_starts_from_the_lag_the_one_before_it_leaves():
     capacity = leg_capacity(load_config())
     ending = _leg(2.0, 100, slice(88, 100))                  # twice the push for the last 24 ms
-    worst, _, _, left = shortfall_lag(capacity, ending, 1.0, 1.0)
-    assert left[0, 0] > 0.0                                  # still falling behind at the last sample
-    at_end = float(left[1, 0])
-    assert worst > 1.5 * at_end                              # the overshoot after it counts
+    _, _, _, left = shortfall_lag(capacity, ending, 1.0, 1.0)
+    assert left[0, 0] > 0.0 and left[1, 0] > 0.0            # still falling behind at the last sample
     starting = _leg(2.0, 100, slice(0, 12))                  # the turn back: the same force at once
     alone = shortfall_lag(capacity, starting, 1.0, 1.0)[0]
     after = shortfall_lag(capacity, starting, 1.0, 1.0, left)[0]
-    assert after > alone + at_end
+    assert after > alone + float(left[1, 0])
     assert np.array_equal(shortfall_lag(capacity, starting, 1.0, 1.0, lag_state(1))[3],
                           shortfall_lag(capacity, starting, 1.0, 1.0)[3])
+
+
+def test_only_a_chain_that_turns_back_carries_the_lag():
+    lag = lag_state(6)
+    lag[1] = 1e-3
+    back = Chain([np.zeros(6)], [0.05], [0.4], lag=lag, lag_direction=np.ones(6))
+    assert back.carried_lag(-np.ones(6)) is lag                              # straight back: 180 deg
+    assert back.carried_lag(np.array([-1.0, -1.0, -1.0, -1.0, 0.2, 0.2])) is lag
+    assert back.carried_lag(np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0])) is None   # across: 90 deg
+    assert back.carried_lag(np.ones(6)) is None                             # on: the position loop's
+    assert Chain([np.zeros(6)], [0.05], [0.4]).carried_lag(-np.ones(6)) is None
 
 
 def _diagonal(scale: float):
