@@ -190,11 +190,12 @@ class HexapodModel:
     def pose_error_exceeds(self, joint_error_m) -> bool:
         """The platform's pose error, from the legs' by the Jacobian at the measured pose (its
         yaw the fused one's while the IMU's is valid: the legs see 1 deg as about one encoder
-        count), beyond [limits] platform_error_max_mm or platform_angle_max_deg."""
+        count; its IMU sample, not the estimate the held rate carries on), beyond [limits]
+        platform_error_max_mm or platform_angle_max_deg."""
         if gauss_solve_into(self.platform.jacobian, joint_error_m, self._lu, self.pose_error, False) == 0.0:
             return False                     # singular: the singularity check's
-        if self.yaw.valid:
-            self.pose_error[YAW] = wrapped(quat_yaw(self._ref_quat) - self.yaw.yaw_rad)
+        if self.yaw.valid:                   # the IMU's sample: past a turn the held rate overshoots
+            self.pose_error[YAW] = wrapped(quat_yaw(self._ref_quat) - self.yaw.sampled_yaw_rad)
         return pose_beyond(self.pose_error, self.platform_error_max_m, self.platform_angle_max_rad)
 
     def initialise(self, position_m) -> None:

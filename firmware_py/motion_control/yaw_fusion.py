@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 
 # state's slots
-S_YAW, S_OFFSET, S_RATE, S_AGE = range(4)
+S_YAW, S_OFFSET, S_RATE, S_AGE, S_SAMPLE = range(5)
 
 
 @njit(cache=True)
@@ -58,6 +58,7 @@ def yaw_fusion_step(state, legs_yaw, attitude_rpy, attitude_fresh, rate_body, ra
         if math.isnan(state[S_YAW]):                     # the first sample: start on the legs
             state[S_OFFSET] = wrapped(legs_yaw - attitude_rpy[2])
         state[S_YAW] = attitude_rpy[2]
+        state[S_SAMPLE] = attitude_rpy[2]
         state[S_AGE] = 0.0
     elif not math.isnan(state[S_YAW]):
         state[S_YAW] = wrapped(state[S_YAW] + state[S_RATE] * period_s)
@@ -79,18 +80,19 @@ def with_yaw_into(pose, yaw, out) -> None:
 
 
 class YawFusion:
-    """The filter's state; `update` each cycle, then `valid`, `yaw_rad` and `rate_rad_s`."""
+    """The filter's state; `update` each cycle, then `valid`, `yaw_rad`, `sampled_yaw_rad`
+    and `rate_rad_s`."""
 
     def __init__(self, period_s: float, blend_s: float, max_age_s: float):
         self.period_s, self.max_age_s = period_s, max_age_s
         self.alpha = period_s / blend_s
-        self.state = np.zeros(4)
+        self.state = np.zeros(5)
         self.valid = False
         self.reset()
 
     def reset(self) -> None:
         """No sample yet (a new activation, or the IMU rebooted)."""
-        self.state[:] = (math.nan, 0.0, 0.0, math.inf)
+        self.state[:] = (math.nan, 0.0, 0.0, math.inf, math.nan)
         self.valid = False
 
     def warm_up(self) -> None:
@@ -109,6 +111,12 @@ class YawFusion:
     @property
     def yaw_rad(self) -> float:
         return wrapped(self.state[S_YAW] + self.state[S_OFFSET])
+
+    @property
+    def sampled_yaw_rad(self) -> float:
+        """The IMU's last sample with the offset, not carried on by the held rate: what a fault
+        is judged on (past a turn the held rate carries the estimate beyond the platform)."""
+        return wrapped(self.state[S_SAMPLE] + self.state[S_OFFSET])
 
     @property
     def rate_rad_s(self) -> float:

@@ -6,6 +6,7 @@ left. Judged apart, the thesis's diagonal with 4.5 kg at 40 bar was accepted at 
 timing down to its low corner and back, and ran 11-13 mm off with the yaw at its 5 deg bound."""
 
 import numpy as np
+import pytest
 
 from firmware_py.config import load_config
 from firmware_py.mechanics.geometry import default_geometry
@@ -80,6 +81,7 @@ def test_the_turn_at_a_corner_is_judged_with_the_lag_the_descent_leaves():
         assert commit(waiting, model, seq, (*point, 0.0, 0.0, 0.0), segment_s, accel_s, flags) is Ack.ACCEPTED
 
 
+@pytest.mark.slow                       # in process, a few seconds of emulated rig
 def test_what_the_controller_accepts_of_the_diagonal_it_follows():
     """4.5 kg at 40 bar, not declared: the host sends the thesis's timing, the controller
     (its payload found on the load cells) accepts what it can follow and refuses the rest."""

@@ -65,3 +65,20 @@ def test_the_controller_faults_when_the_platform_strays_sideways():
     loop.cycles(1)
     assert loop.status.state is State.FAULT and loop.status.fault is Fault.TRACKING_ERROR
     assert np.max(np.abs(ctl.joint.error_m)) < load_config().limits.tracking_error_max_m
+
+
+def test_the_yaw_is_judged_on_the_imus_sample_not_on_the_held_rate():
+    """Between IMU samples (every 32 ms) the estimate carries on with the sample's rate: past a
+    turn it runs beyond the platform. The fault is judged on the sample: 4 deg turning back at
+    60 deg/s stays 4 deg for the check while the estimate runs past 5."""
+    cfg = load_config()
+    model = HexapodModel(cfg, 0.002)
+    still = np.zeros(6)
+    model.yaw.update(0.0, np.zeros(3), True, np.zeros(3), True)            # the first sample: on the legs
+    turning = np.array([0.0, 0.0, math.radians(60.0)])
+    model.yaw.update(0.0, np.array([0.0, 0.0, math.radians(4.0)]), True, turning, True)
+    for _ in range(15):                                                     # 30 ms without a sample
+        model.yaw.update(0.0, np.zeros(3), False, turning, False)
+    assert math.degrees(model.yaw.yaw_rad) > 5.5                            # the estimate, carried on
+    assert not model.pose_error_exceeds(still)
+    assert model.pose_error[5] == pytest.approx(-math.radians(4.0), abs=math.radians(0.3))   # the legs blend in

@@ -7,6 +7,7 @@ swung the yaw past its 5 deg bound completes."""
 import math
 
 import numpy as np
+import pytest
 
 from firmware_py.config import load_config
 from firmware_py.mechanics.geometry import default_geometry
@@ -71,6 +72,7 @@ def _near_the_floor() -> tuple[InProcessLoop, float]:
     return loop, segment_s * scale
 
 
+@pytest.mark.slow                       # in process, a few seconds of emulated rig
 def test_an_uneven_saturation_near_the_floor_does_not_swing_the_yaw():
     """Three valves saturate there, two one way and one the other."""
     loop, duration = _near_the_floor()
@@ -83,6 +85,7 @@ def test_an_uneven_saturation_near_the_floor_does_not_swing_the_yaw():
     assert yaw < 3.0
 
 
+@pytest.mark.slow                       # in process, a few seconds of emulated rig
 def test_a_saturated_cycle_makes_no_numpy_buffer():
     """The law's update while valves saturate and the allocation runs: no NumPy buffer made
     (the counting hook around each update alone, the emulator left out)."""

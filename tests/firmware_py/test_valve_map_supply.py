@@ -58,6 +58,7 @@ def test_the_map_reaches_as_far_as_the_capacity_the_check_allows():
     assert np.all(np.diff(light) > 0.02)                     # more speed, more spool, far beyond 0.6 m/s
 
 
+@pytest.mark.slow                       # in process, a few seconds of emulated rig
 def test_a_fast_rise_at_20_bar_is_not_capped_by_the_map():
     """A 0.13 m rise and sideways move in 0.29 s at 20 bar (within the legs' force, 0.85 of
     it): the legs must extend at ~0.55 m/s, beyond the old map's 0.54 m/s edge there. Held

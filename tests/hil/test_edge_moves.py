@@ -7,6 +7,7 @@ import json
 import math
 
 import numpy as np
+import pytest
 
 from hil.cli import main
 from hil.design.edge_moves import edge_moves, random_move
@@ -22,6 +23,7 @@ def test_the_moves_stay_in_the_workspace_and_are_repeatable():
         assert segment >= 2.2 * accel
 
 
+@pytest.mark.slow                       # in process, a few seconds of emulated rig
 def test_a_move_at_the_checks_edge_completes_within_10_mm(capsys):
     assert main(["design", "edge-moves", "--moves", "1", "--seed", "3", "--workers", "1", "--json"]) == 0
     runs = json.loads(capsys.readouterr().out)
@@ -29,6 +31,7 @@ def test_a_move_at_the_checks_edge_completes_within_10_mm(capsys):
     assert all(r["max_error_mm"] < 10.0 for r in runs)
 
 
+@pytest.mark.slow                       # in process, a few seconds of emulated rig
 def test_a_refused_move_is_sent_at_the_named_scale_and_slower():
     runs = edge_moves(1, seed=8, workers=1, factors=(1.0, 1.2))
     assert [r.factor for r in runs] == [1.0, 1.2]                   # refused as sent: at the edge, then slower
