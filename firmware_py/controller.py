@@ -270,14 +270,14 @@ class Controller:
 
     def _commit_context(self) -> tuple:
         """What a waypoint's check starts from now: (state, the joint position its segment
-        starts from, the load, the oil the supply misses then, the lag the running motion leaves
-        at its end; at rest none: its overshoot was judged with it)."""
+        starts from, the load, the oil the supply misses then, the running motion's last
+        waypoint (the lag it leaves; at rest None))."""
         ref = self.reference
         previous = ref.target() if ref.moving else ref.yr.copy()
         refilled = self._pump_m3_s * (self.time_s - self._ended_s)
         drawn = self.waypoints.taken_drawn_m3 if ref.moving else max(self._drawn_at_end_m3 - refilled, 0.0)
-        lag = self.waypoints.taken_lag if ref.moving else None
-        return self.state, previous, float(self.joint.mass_kg[0]), drawn, lag
+        running = self.waypoints.taken_last if ref.moving else None
+        return self.state, previous, float(self.joint.mass_kg[0]), drawn, running
 
     def waypoint_commit_stages(self, tag: int, seq: int, segment_time: float, accel_time: float,
                                flags: int) -> Stages[Ack]:

@@ -19,8 +19,7 @@ SLS's 50 ms acceleration) leaves a fraction of a millimetre; a sustained one (a 
 weight at speed) grows without bound. What is left at a chain's end is where a chain that
 starts as it ends starts from (turning back at a corner asks the same force direction on
 both sides of the waypoint). A reference whose largest lag stays within the configured
-bound is within capacity. Events only (commits, design): these
-allocate.
+bound is within capacity. Events only (commits, design): these allocate.
 """
 
 from __future__ import annotations

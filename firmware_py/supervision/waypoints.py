@@ -170,19 +170,19 @@ class Chain:
     accel_times: list
     segment_times: list
     drawn_m3: float = 0.0          # the oil the supply misses when this segment starts
-    lag: np.ndarray | None = None  # the legs' lag when the chain starts (a chain before it still behind) ...
-    lag_direction: np.ndarray | None = None   # ... and the joint-space direction that chain ended in
+    after: Waypoint | None = None  # the last waypoint of the chain this one starts as it ends (START)
 
     def carried_lag(self, strokes) -> np.ndarray | None:
-        """The lag this chain starts with: the one before it leaves, where this chain turns back
-        (its first segment more than 120 deg from that one's last, in joint space: the same
-        force on both sides of the waypoint); None otherwise (the position loop takes what is
-        left while the legs turn)."""
-        if self.lag is None or self.lag_direction is None:
+        """The lag this chain starts with: what `after`'s segment leaves, where this chain turns
+        back (its first segment more than 120 deg from that one, in joint space: the same force
+        on both sides of the waypoint); None otherwise (the position loop takes what is left
+        while the legs turn)."""
+        if self.after is None or self.after.lag_after is None:
             return None
+        before = self.after.strokes - self.after.start
         first = (self.points[1] if len(self.points) > 1 else np.asarray(strokes)) - self.points[0]
-        scale = float(np.linalg.norm(first) * np.linalg.norm(self.lag_direction))
-        return self.lag if scale > 0.0 and float(np.dot(first, self.lag_direction)) < TURN_BACK_COS * scale else None
+        scale = float(np.linalg.norm(first) * np.linalg.norm(before))
+        return self.after.lag_after if scale > 0.0 and float(np.dot(first, before)) < TURN_BACK_COS * scale else None
 
     @property
     def start(self) -> np.ndarray:
@@ -214,7 +214,7 @@ class WaypointQueue:
         self._staged_rot: dict[int, tuple] = {}
         self.time_scale_needed = math.nan          # the last refusal's, for CTRL_ACK (NaN: none)
         self.taken_drawn_m3 = 0.0                  # the oil the last trajectory taken leaves drawn at its end
-        self.taken_lag: tuple | None = None        # ... and the lag it leaves there, with its last direction
+        self.taken_last: Waypoint | None = None    # ... and its last waypoint (the lag its segment leaves)
         self.generation = 0                        # +1 whenever waypoints leave the queue (taken, cleared)
 
     def stage_position(self, tag: int, x: float, y: float, z: float) -> None:
@@ -232,19 +232,18 @@ class WaypointQueue:
         self.generation += 1
 
     def commit(self, tag: int, seq: int, segment_time: float, accel_time: float, flags: int, state: State,
-               previous, load_kg: float, drawn_m3: float = 0.0, lag: np.ndarray | None = None) -> Ack:
+               previous, load_kg: float, drawn_m3: float = 0.0, running: Waypoint | None = None) -> Ack:
         """Check the staged pose with this TAG and queue it, or say why not; `previous` is the
-        joint position the segment starts from, `drawn_m3` and `lag` the oil the supply misses
-        and the legs' lag ((`capacity.lag_of`'s state, the joint direction it ended in), None:
-        none) then when nothing is queued before it (queued, the one before it leaves its
-        own). At once."""
+        joint position the segment starts from, `drawn_m3` the oil the supply misses then and
+        `running` the running motion's last waypoint (None: at rest), when nothing is queued
+        before it (queued, the one before it leaves its own). At once."""
         return at_once(self.commit_stages(tag, seq, segment_time, accel_time, flags,
-                                          lambda: (state, previous, load_kg, drawn_m3, lag)))
+                                          lambda: (state, previous, load_kg, drawn_m3, running)))
 
     def commit_stages(self, tag: int, seq: int, segment_time: float, accel_time: float, flags: int,
                       context) -> Stages[Ack]:
-        """`commit` in stages; `context()` gives (state, previous, load_kg, drawn_m3, lag) as
-        the controller sees them at that moment. Where waypoints leave the queue during the check
+        """`commit` in stages; `context()` gives (state, previous, load_kg, drawn_m3, running)
+        as the controller sees them at that moment. Where waypoints leave the queue during the check
         (the running motion takes them, or a clear), the check starts again from what is then
         queued; a state that no longer admits commits at its end refuses it."""
         tag &= 0x0F
@@ -254,7 +253,7 @@ class WaypointQueue:
         if pos is None or rot is None or (seq & 0x0F) != tag:
             return Ack.INCOMPLETE
         while True:
-            state, previous, load_kg, drawn_m3, lag = context()
+            state, previous, load_kg, drawn_m3, running = context()
             if self.expected_seq is not None and seq != self.expected_seq:
                 return Ack.SEQUENCE_GAP
             if state not in COMMIT_STATES:
@@ -273,7 +272,7 @@ class WaypointQueue:
             generation = self.generation
             chain = self.chain(previous, segment_time, accel_time)
             chain.drawn_m3 = self.queue[-1].drawn_after_m3 if self.queue else drawn_m3
-            chain.lag, chain.lag_direction = self.lag_before_chain(len(chain.points) - 1, known, lag)
+            chain.after = self.chain_after(len(chain.points) - 1, known, running)
             verdict = yield from self.check.stages(chain, pos, rot, step, load_kg)
             if self.generation == generation:
                 break
@@ -301,19 +300,15 @@ class WaypointQueue:
                      [w.accel_time_s for w in chained] + [accel_time],
                      [w.segment_time_s for w in chained] + [segment_time])
 
-    def lag_before_chain(self, queued: int, flags: WaypointFlag, running_lag) -> tuple:
-        """(the lag a chain starts with, the direction the chain before it ended in), `queued`
-        of its waypoints in the queue and the one being committed with `flags`: what the chain
-        queued before it leaves, else `running_lag` (the running motion's: (lag, direction)),
-        when it starts as that one ends (START); (None, None) otherwise."""
+    def chain_after(self, queued: int, flags: WaypointFlag, running: Waypoint | None) -> Waypoint | None:
+        """The waypoint a chain starts after, `queued` of its waypoints in the queue and the one
+        being committed with `flags`: the last of the chain queued before it, else `running`'s,
+        when it starts as that one ends (START); None otherwise."""
         first = self.queue[len(self.queue) - queued].flags if queued else flags
-        before = len(self.queue) - queued - 1
         if not first & WaypointFlag.START:
-            return None, None
-        if before < 0:
-            return running_lag if running_lag is not None else (None, None)
-        w = self.queue[before]
-        return w.lag_after, w.strokes - w.start
+            return None
+        before = len(self.queue) - queued - 1
+        return self.queue[before] if before >= 0 else running
 
     def head_starts_now(self) -> bool:
         """The queue's first waypoint asks to start as soon as the running motion ends."""
@@ -328,7 +323,7 @@ class WaypointQueue:
         chosen, self.queue = self.queue[:take], self.queue[take:]
         self.generation += 1
         self.taken_drawn_m3 = chosen[-1].drawn_after_m3
-        self.taken_lag = (chosen[-1].lag_after, chosen[-1].strokes - chosen[-1].start)
+        self.taken_last = chosen[-1]
         if chosen[0].flags & WaypointFlag.STEP:           # a step reference (chapters 5.4, 7.6.1)
             return hold_at(chosen[0].strokes, chosen[0].segment_time_s), [chosen[0].seq]
         points = np.array([start] + [w.strokes for w in chosen])

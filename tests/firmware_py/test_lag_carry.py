@@ -11,7 +11,7 @@ import pytest
 from firmware_py.config import load_config
 from firmware_py.mechanics.geometry import default_geometry
 from firmware_py.supervision.capacity import Loads, lag_state, leg_capacity, shortfall_lag
-from firmware_py.supervision.waypoints import Chain
+from firmware_py.supervision.waypoints import Chain, Waypoint
 from hil.experiments import MOTIONS, MOVEMENT_OVERRIDES, movement_waypoints
 from hil.in_process import PERIOD_S, InProcessLoop
 from plant_emulator.params import load_config as load_emulator_config
@@ -47,7 +47,8 @@ def test_a_chain_starts_from_the_lag_the_one_before_it_leaves():
 def test_only_a_chain_that_turns_back_carries_the_lag():
     lag = lag_state(6)
     lag[1] = 1e-3
-    back = Chain([np.zeros(6)], [0.05], [0.4], lag=lag, lag_direction=np.ones(6))
+    before = Waypoint(0, np.ones(6), 0.4, 0.05, WaypointFlag.LAST, (0.0,) * 6, np.zeros(6), lag_after=lag)
+    back = Chain([np.zeros(6)], [0.05], [0.4], after=before)
     assert back.carried_lag(-np.ones(6)) is lag                              # straight back: 180 deg
     assert back.carried_lag(np.array([-1.0, -1.0, -1.0, -1.0, 0.2, 0.2])) is lag
     assert back.carried_lag(np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0])) is None   # across: 90 deg
