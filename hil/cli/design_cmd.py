@@ -11,6 +11,8 @@
                                     [--integral-fraction] [--velocity-gain] [--testbench-velocity-gain]
                                     [--force-bandwidth-hz] [--velocity-filter-hz] [--json]
     hydrapod design edge-moves [--moves N] [--seed S] [--workers W] [--json]
+    hydrapod design tightness [--movements M ...] [--payload-kg M ...] [--supply-bar P ...] [--seed S]
+                              [--workers N] [--json]
     hydrapod design sweep --key KEY --values V,V [--points nominal|envelope] [--movements M,M] [--seeds S,S]
                           [--workers N] [--json]
 
@@ -98,6 +100,16 @@ def _edge_moves(args) -> int:
     from hil.design.edge_moves import edge_moves, format_edge_moves
     runs = edge_moves(args.moves, args.seed, args.workers)
     print(json.dumps([r.as_dict() for r in runs], indent=1) if args.json else format_edge_moves(runs))
+    return 0
+
+
+def _tightness(args) -> int:
+    from hil.design.tightness import configs, format_tightness, sweep_tightness
+    for payload in args.payload_kg:         # a value the configs refuse: one line, before any run
+        for supply in args.supply_bar:
+            configs(payload, supply)
+    rows = sweep_tightness(args.movements, args.payload_kg, args.supply_bar, args.seed, args.workers)
+    print(json.dumps([r.as_dict() for r in rows], indent=1) if args.json else format_tightness(rows))
     return 0
 
 
@@ -401,6 +413,19 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=number_in_range(int, 1, 64), default=2, help="processes")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_edge_moves)
+
+    p = design_sub.add_parser("tightness", help="is the capacity check tight? per envelope point, in process: the "
+                                                "plan, 15 %% faster (refused? saturating?), and the fastest timing "
+                                                "that completes within 10 mm, the check opened")
+    p.add_argument("--movements", nargs="+", choices=("circle", "diagonal"), default=["circle", "diagonal"])
+    p.add_argument("--payload-kg", nargs="+", type=number_in_range(float, 0.0, 50.0),
+                   default=[0.0, 1.5, 3.0, 4.5, 6.0], help="payloads (default 0 1.5 3 4.5 6)")
+    p.add_argument("--supply-bar", nargs="+", type=number_in_range(float, 1.0, 400.0), default=[20.0, 25.0, 40.0],
+                   help="power unit pressures (default 20 25 40)")
+    p.add_argument("--seed", type=number_in_range(int, 0, 2**31 - 1), default=7, help="the sensors' noise seed")
+    p.add_argument("--workers", type=number_in_range(int, 1, 64), default=2, help="processes")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_tightness)
 
     p = design_sub.add_parser("sweep", help="one [computed_torque] key over values: the thesis's movements in "
                                             "process per envelope point and noise seed, IAE and largest error")

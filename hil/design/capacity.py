@@ -81,6 +81,23 @@ def movement_floor(cfg: ControllerConfig, motion: Motion) -> float:
     return needed_scale(leg_capacity(cfg), loads, cfg.waypoints.capacity_share, cfg.waypoints.lag_max_m)
 
 
+def commit_all(cfg: ControllerConfig, motion: Motion, rig: HexapodModel | None = None
+               ) -> tuple[Ack, int, np.ndarray, float]:
+    """`motion`'s waypoints committed in turn to the controller's own queue and check (`cfg`
+    as declared): (ACCEPTED or the first refusal, its waypoint's index, position, and the
+    time scale the refusal names (NaN: none))."""
+    rig = HexapodModel(cfg, PERIOD_S) if rig is None else rig
+    queue = WaypointQueue(replace(cfg.waypoints, queue=255), rig.check)
+    for seq, w in enumerate(movement_waypoints(motion)):
+        queue.stage_position(seq, *w.position_m)
+        queue.stage_rotation(seq, 0.0, 0.0, 0.0)
+        result = queue.commit(seq, seq, w.segment_time_s, w.accel_time_s, w.flags, State.READY,
+                              rig.home_strokes, 0.0)
+        if result is not Ack.ACCEPTED:
+            return result, seq, w.position_m, queue.time_scale_needed
+    return Ack.ACCEPTED, -1, np.zeros(3), math.nan
+
+
 def plan(cfg: ControllerConfig, motion: Motion) -> Plan:
     """The smallest time scale on `motion`'s ta and tm (its approach from home included)
     whose waypoints the controller's queue accepts, all of them, with `cfg` as declared, at
@@ -92,18 +109,10 @@ def plan(cfg: ControllerConfig, motion: Motion) -> Plan:
     if math.isfinite(floor) and floor > low:
         scale = math.ceil(floor * 100.0) / 100.0
     for rounds in range(PLAN_ROUNDS):
-        queue = WaypointQueue(replace(cfg.waypoints, queue=255), rig.check)
-        for seq, w in enumerate(movement_waypoints(motion.scaled(scale / PLAN_MARGIN))):
-            queue.stage_position(seq, *w.position_m)
-            queue.stage_rotation(seq, 0.0, 0.0, 0.0)
-            result = queue.commit(seq, seq, w.segment_time_s, w.accel_time_s, w.flags, State.READY,
-                                  rig.home_strokes, 0.0)
-            if result is not Ack.ACCEPTED:
-                break
-        else:
+        result, seq, position_m, needed = commit_all(cfg, motion.scaled(scale / PLAN_MARGIN), rig)
+        if result is Ack.ACCEPTED:
             return Plan(scale, rounds, "")
-        needed = queue.time_scale_needed
-        reason = (f"waypoint {seq + 1} ({np.round(w.position_m * 1e3, 1).tolist()} mm) {result.name}"
+        reason = (f"waypoint {seq + 1} ({np.round(position_m * 1e3, 1).tolist()} mm) {result.name}"
                   + (f", time scale x{needed:.3f}" if result is Ack.BEYOND_CAPACITY else ""))
         if result is not Ack.BEYOND_CAPACITY or not math.isfinite(needed) or scale * needed > high:
             return Plan(math.nan, rounds + 1, reason)

@@ -1,0 +1,162 @@
+"""`hydrapod design tightness`: is the capacity check tight, not padded? At each point of the
+envelope (a thesis movement, payload and supply declared), in process, emulator truth:
+
+- the plan's time scale P (`capacity.plan`: what the controller accepts);
+- P / TIGHT_FACTOR (15 % faster): does the controller refuse it, and, run with the check
+  opened, how long does a valve sit at its limit;
+- the fastest time scale at which the movement still completes within ERROR_BOUND_MM, the
+  check opened: swept from P down (or up, where P itself misses) in STEP steps.
+
+Tight: P/TIGHT_FACTOR is refused or saturates, and P is within TIGHT_FACTOR of the fastest
+that completes (P <= TIGHT_FACTOR x fastest). A P faster than the fastest that completes is
+the check's optimism; a P more than TIGHT_FACTOR slower, its padding. "The check opened":
+the controller's own waypoint check with legs of unbounded force and an ideal supply (the
+workspace, singularity and speed checks stay); the online time scaling stays on.
+"""
+
+from __future__ import annotations
+
+import math
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+TIGHT_FACTOR = 1.15
+ERROR_BOUND_MM = 10.0
+STEP = 0.05                          # the sweep's step, a fraction of P
+SWEEP_RANGE = (0.4, 2.0)             # x P: where the sweep gives up
+SATURATED = 0.999                    # |valve command| at or above this share of its limit
+
+
+@dataclass
+class Tightness:
+    movement: str
+    payload_kg: float
+    supply_bar: float
+    planned_scale: float             # NaN: no timing fits
+    faster_refused: bool             # the controller refuses P / TIGHT_FACTOR
+    faster_saturated_ms: float       # ... run anyway: how long a valve sat at its limit
+    faster_error_mm: float           # ... and its largest error
+    planned_error_mm: float          # the run at P, the check opened (as accepted)
+    fastest_scale: float             # the fastest that completes within the bound (NaN: none in range)
+    fastest_error_mm: float
+
+    @property
+    def ratio(self) -> float:
+        """P over the fastest that completes: < 1 the check is optimistic, > TIGHT_FACTOR padded."""
+        return self.planned_scale / self.fastest_scale
+
+    @property
+    def tight(self) -> bool:
+        exceeds = self.faster_refused or self.faster_saturated_ms > 0.0
+        return exceeds and 1.0 <= self.ratio <= TIGHT_FACTOR
+
+    def as_dict(self) -> dict:
+        out = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in self.__dict__.items()}
+        ratio = self.ratio
+        return out | {"ratio": ratio if math.isfinite(ratio) else None, "tight": self.tight}
+
+
+def configs(payload_kg: float, supply_bar: float, config_path=None):
+    """The controller's (as `hil run pm-*` configures it, payload and supply declared) and the
+    emulator's configuration at a point."""
+    from firmware_py.config import load_config
+    from hil.experiments import MOVEMENT_OVERRIDES
+    from plant_emulator.params import load_config as load_emulator_config
+    overrides = {section: dict(values) for section, values in MOVEMENT_OVERRIDES.items()}
+    overrides |= {"hexapod": {"payload_kg": payload_kg}, "hydraulic_model": {"supply_pressure_bar": supply_bar}}
+    return (load_config(config_path, overrides=overrides),
+            load_emulator_config(overrides={"actuator": {"supply_pressure_bar": supply_bar}}))
+
+
+def opened_run(controller_cfg, emulator_cfg, motion, payload_kg: float, scale: float, seed: int = 7):
+    """The movement at `scale` through the controller with its capacity check opened
+    (`simulate.Movement`)."""
+    from firmware_py.supervision.capacity import VELOCITY_GRID_M_S, LegCapacity
+    from hil.design.simulate import movement
+    from hil.in_process import InProcessLoop
+    loop = InProcessLoop(controller_cfg, emulator_cfg, "computed-torque", payload_kg, seed)
+    unbounded = np.full(VELOCITY_GRID_M_S.shape, 1e9)
+    loop.ctl.rig.check.capacity = LegCapacity(VELOCITY_GRID_M_S, unbounded, -unbounded)
+    loop.activate()
+    return movement(loop, motion.scaled(scale))
+
+
+def _passes(run) -> bool:
+    return run.completed and float(np.max(run.max_error_m)) * 1e3 <= ERROR_BOUND_MM
+
+
+def tightness(movement: str, payload_kg: float, supply_bar: float, seed: int = 7) -> Tightness:
+    from hil.design.capacity import PERIOD_S, commit_all, plan
+    from hil.design.simulate import thesis_motions
+    from protocol.enums import Ack
+    cfg, emulator = configs(payload_kg, supply_bar)
+    motion = thesis_motions()[movement]
+    planned = plan(cfg, motion).time_scale
+    if not math.isfinite(planned):
+        nan = math.nan
+        return Tightness(movement, payload_kg, supply_bar, nan, True, nan, nan, nan, nan, nan)
+
+    def run(scale):
+        return opened_run(cfg, emulator, motion, payload_kg, scale, seed)
+
+    def largest_mm(r) -> float:
+        return float(np.max(r.max_error_m)) * 1e3
+
+    faster = planned / TIGHT_FACTOR
+    refused = commit_all(cfg, motion.scaled(faster))[0] is not Ack.ACCEPTED
+    fast_run = run(faster)
+    at_limit = np.any(np.abs(fast_run.spool) >= SATURATED * cfg.limits.spool_max, axis=1)
+    saturated_ms = float(np.sum(at_limit)) * PERIOD_S * 1e3
+    at_plan = run(planned)
+    fastest, fastest_mm = math.nan, math.nan
+    if _passes(at_plan):                               # down from P while it completes within the bound
+        fastest, fastest_mm = planned, largest_mm(at_plan)
+        k = 1
+        while planned * (1.0 - k * STEP) >= SWEEP_RANGE[0] * planned:
+            scale = planned * (1.0 - k * STEP)
+            r = run(scale)
+            if not _passes(r):
+                break
+            fastest, fastest_mm = scale, largest_mm(r)
+            k += 1
+    else:                                              # up from P to the first that completes
+        k = 1
+        while planned * (1.0 + k * STEP) <= SWEEP_RANGE[1] * planned:
+            r = run(planned * (1.0 + k * STEP))
+            if _passes(r):
+                fastest, fastest_mm = planned * (1.0 + k * STEP), largest_mm(r)
+                break
+            k += 1
+    return Tightness(movement, payload_kg, supply_bar, planned, refused, saturated_ms, largest_mm(fast_run),
+                     largest_mm(at_plan), fastest, fastest_mm)
+
+
+def _job(args) -> Tightness:
+    return tightness(*args)
+
+
+def sweep_tightness(movements, payloads_kg, supplies_bar, seed: int = 7, workers: int = 2) -> list[Tightness]:
+    jobs = [(m, p, s, seed) for m in movements for p in payloads_kg for s in supplies_bar]
+    if workers <= 1:
+        return [_job(j) for j in jobs]
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        return list(pool.map(_job, jobs))
+
+
+def format_tightness(rows: list[Tightness]) -> str:
+    lines = [f"movement  kg   bar  plan   x{TIGHT_FACTOR:.2f} faster: refused  saturated ms  error mm   "
+             f"at plan mm  fastest <= {ERROR_BOUND_MM:g} mm (error)  plan/fastest  tight"]
+    for r in rows:
+        if not math.isfinite(r.planned_scale):
+            lines.append(f"{r.movement:<9} {r.payload_kg:<4g} {r.supply_bar:<4g} no timing fits")
+            continue
+        fastest = f"{r.fastest_scale:.2f} ({r.fastest_error_mm:.1f})" if math.isfinite(r.fastest_scale) else "none"
+        lines.append(f"{r.movement:<9} {r.payload_kg:<4g} {r.supply_bar:<4g} {r.planned_scale:4.2f}   "
+                     f"{'yes' if r.faster_refused else 'no':>21}  {r.faster_saturated_ms:12.0f}  "
+                     f"{r.faster_error_mm:8.1f}   {r.planned_error_mm:10.1f}  {fastest:>22}  "
+                     f"{r.ratio:12.2f}  {'yes' if r.tight else 'no'}")
+    tight = sum(r.tight for r in rows)
+    lines.append(f"tight at {tight} of {len(rows)} points")
+    return "\n".join(lines)

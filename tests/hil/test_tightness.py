@@ -1,0 +1,35 @@
+"""`hydrapod design tightness`: whether the capacity check is tight at a point of the envelope
+(15 % faster than the plan is refused or saturates; the plan within 15 % of the fastest timing
+that completes within 10 mm, the check opened). The whole envelope's table is
+docs/MEASUREMENTS.md's; bad arguments: tests/project/test_cli_error_paths.py."""
+
+import json
+import math
+
+import pytest
+
+from hil.cli import main
+from hil.design.tightness import TIGHT_FACTOR, Tightness
+
+
+def _row(planned, fastest, refused=True, saturated_ms=0.0):
+    return Tightness("circle", 0.0, 25.0, planned, refused, saturated_ms, 12.0, 4.0, fastest, 9.0)
+
+
+def test_tight_needs_the_faster_timing_to_exceed_and_the_plan_near_the_fastest():
+    assert _row(1.0, 0.9).tight
+    assert _row(1.0, 0.9, refused=False, saturated_ms=4.0).tight        # accepted, but a valve at its limit
+    assert not _row(1.0, 0.9, refused=False).tight                      # 15 % faster neither refused nor limited
+    assert not _row(1.0, 1.0 / (TIGHT_FACTOR + 0.01)).tight              # padded
+    assert not _row(1.0, 1.05).tight                                    # optimistic: the plan misses the bound
+    assert math.isnan(_row(math.nan, math.nan).ratio)
+
+
+@pytest.mark.slow                       # in process: the plan, then a handful of emulated movements
+def test_the_circle_at_40_bar_is_planned_tight(capsys):
+    assert main(["design", "tightness", "--movements", "circle", "--payload-kg", "0", "--supply-bar", "40",
+                 "--workers", "1", "--json"]) == 0
+    (row,) = json.loads(capsys.readouterr().out)
+    assert row["faster_refused"]
+    assert row["planned_error_mm"] <= 10.0
+    assert 1.0 <= row["ratio"] <= TIGHT_FACTOR and row["tight"]
