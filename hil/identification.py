@@ -11,7 +11,10 @@ Per transient window (150 ms after each change of the PRMS reference, chapter 5.
 3. the open-loop model by eq. 5.5, Gol = (1/K) n0 / (s^3 + a2 s^2 + a1 s + a0 - n0): its
    complex pair gives b0 = |p|^2, b1 = -2 Re p, and k01 = n0 / (K b0);
 4. m, sigma, Fe by least squares on A PL = m y'' + sigma y' + Fe (eq. 5.6-5.7), with y' and
-   y'' from a zero-phase low-pass of the encoder and the same filter on PL.
+   y'' from a zero-phase low-pass of the encoder and the same filter on PL;
+5. the sensibility constants Kx, Kd, Kp of PL' = Kx xv - Kd y' + Kp PL (eq. 4.50) from G(s),
+   m and sigma (eq. 5.8-5.10), and back from them the complete model of eq. 5.11 with the
+   load's path.
 Fit index eq. 5.12: F = 1 - |y - ys| / |y - mean(y)|.
 """
 
@@ -104,3 +107,30 @@ def motion_parameters(y_m: np.ndarray, pl_pa: np.ndarray, area_m2: float, period
     a = np.column_stack([accel, velocity, np.ones_like(yf)])
     (m, sigma, fe), *_ = np.linalg.lstsq(a, force, rcond=None)             # eq. 5.7
     return {"m": float(m), "sigma": float(sigma), "fe": float(fe)}
+
+
+def sensibilities(b0: float, b1: float, k01: float, mass_kg: float, sigma_ns_m: float,
+                  area_m2: float) -> tuple[float, float, float]:
+    """Eq. 5.8-5.10: (Kx [Pa/s per V], Kd [Pa/m], Kp [1/s]) from G(s) (b0 [1/s^2], b1 [1/s],
+    k01 [(m/s)/V]) and the motion parameters m [kg], sigma [N s/m] on a piston of `area_m2`."""
+    kp = sigma_ns_m / mass_kg - b1                               # eq. 5.8
+    kd = (mass_kg * b0 + sigma_ns_m * kp) / area_m2              # eq. 5.9
+    kx = mass_kg * b0 * k01 / area_m2                            # eq. 5.10
+    return kx, kd, kp
+
+
+def complete_model(kx: float, kd: float, kp: float, mass_kg: float, sigma_ns_m: float, area_m2: float) -> dict:
+    """Eq. 5.11 from the sensibilities: Y = k01 b0 / (s (s^2 + b1 s + b0)) Xv - k02 b0 (s + z0) /
+    (s (s^2 + b1 s + b0)) Fe, Fe a force against the piston (A PL = m y'' + sigma y' + Fe with
+    eq. 4.50): b1 = sigma/m - Kp, b0 = (A Kd - sigma Kp)/m, k01 = A Kx / (m b0), k02 = 1 / (m b0)
+    [m/N], z0 = -Kp [1/s]."""
+    b1 = sigma_ns_m / mass_kg - kp
+    b0 = (area_m2 * kd - sigma_ns_m * kp) / mass_kg
+    return {"b0": b0, "b1": b1, "k01": area_m2 * kx / (mass_kg * b0), "k02": 1.0 / (mass_kg * b0), "z0": -kp}
+
+
+def quadratic_fit(positions_m: np.ndarray, values: np.ndarray) -> np.ndarray | None:
+    """Chapter 5.2.3's second-order polynomial in the position (coefficients, highest first);
+    None below three positions."""
+    ok = np.isfinite(values)
+    return np.polyfit(positions_m[ok], values[ok], 2) if ok.sum() >= 3 else None

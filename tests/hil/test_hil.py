@@ -204,9 +204,12 @@ SCENARIO_RUNS = {
                        == {(6.0, 8.0, True), (6.0, 20.0, False)}),
     # Appendix D: a fall at 0 and at 6 kg, eq. D.4's Fc and sigma_v against the emulator's guide
     "guide-free-fall": (["--short"], lambda m: [r["load_kg"] for r in m["loads"]] == [0.0, 6.0] and m["falls"] == 2),
+    # every point's Kx, Kd, Kp (eq. 5.8-5.10) and load path (eq. 5.11) beside the linearisation's
     "sha-identification": (["--short"], lambda m: (
         {(r["set_point_mm"], r["load_kg"], tuple(r["gains_v_mm"])) for r in m["points"]}
-        == {(p, load, (0.25, 0.3)) for p in (60.0, 210.0) for load in (0.0, 6.0)})),
+        == {(p, load, (0.25, 0.3)) for p in (60.0, 210.0) for load in (0.0, 6.0)}
+        and all(r["sensibilities"]["kx"] > 0 and r["sensibilities"]["kd"] > 0 and r["sensibilities"]["kp"] < 0
+                and r["emulator"]["kx"] > 0 for r in m["points"]))),
 }
 
 

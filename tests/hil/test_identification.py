@@ -52,3 +52,36 @@ def test_motion_parameters_from_eq_5_7():
     assert result["m"] == pytest.approx(m, rel=0.05)
     assert result["sigma"] == pytest.approx(sigma, rel=0.05)
     assert result["fe"] == pytest.approx(fe, rel=0.02)
+
+
+def test_table_a2_is_eq_5_8_to_5_10_on_tables_a1_and_a3():
+    """The thesis's sensibilities follow from its G(s) and motion parameters within 1 % at all
+    33 points (sigma in N s/m, the piston area the tables imply): the oracle for the units."""
+    from hil.design.thesis import thesis_data
+    from plant_emulator.linear_rig import table_a3
+    data = thesis_data("chapter5")
+    a1, a2, a3 = (np.asarray(t, float) for t in (data["table_A1"]["rows"], data["table_A2"]["rows"], table_a3()))
+    area = data["table_A2"]["piston_area_mm2"] * 1e-6
+    for row1, row2, row3 in zip(a1, a2, a3):
+        for j in range(3):
+            m, sigma = row1[1 + 3 * j], row1[2 + 3 * j]
+            b0, b1, k01 = row3[1 + 3 * j], row3[2 + 3 * j], row3[3 + 3 * j] * 1e-3
+            kx, kd, kp = ident.sensibilities(b0, b1, k01, m, sigma, area)
+            assert kx / 1e3 == pytest.approx(row2[1 + 3 * j], rel=0.01)          # kPa/(s V)
+            assert kd / 1e6 == pytest.approx(row2[2 + 3 * j], rel=0.01)          # kPa/mm
+            assert kp == pytest.approx(row2[3 + 3 * j], rel=0.01)
+
+
+def test_the_complete_model_inverts_the_sensibilities():
+    m, sigma, area = 7.3, 23.4, 1.13e-4
+    kx, kd, kp = ident.sensibilities(PLANT["b0"], PLANT["b1"], PLANT["k01"], m, sigma, area)
+    model = ident.complete_model(kx, kd, kp, m, sigma, area)
+    assert [model[k] for k in ("b0", "b1", "k01")] == pytest.approx([PLANT[k] for k in ("b0", "b1", "k01")])
+    assert model["k02"] == pytest.approx(1.0 / (m * PLANT["b0"])) and model["z0"] == pytest.approx(-kp)
+
+
+def test_the_motion_parameters_quadratic_in_the_position():
+    y = np.linspace(0.01, 0.29, 11)
+    values = 2.0 - 3.0 * y + 10.0 * y ** 2
+    assert ident.quadratic_fit(y, values) == pytest.approx([10.0, -3.0, 2.0])
+    assert ident.quadratic_fit(y[:2], values[:2]) is None
