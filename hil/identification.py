@@ -14,7 +14,8 @@ Per transient window (150 ms after each change of the PRMS reference, chapter 5.
    y'' from a zero-phase low-pass of the encoder and the same filter on PL;
 5. the sensibility constants Kx, Kd, Kp of PL' = Kx xv - Kd y' + Kp PL (eq. 4.50) from G(s),
    m and sigma (eq. 5.8-5.10), and back from them the complete model of eq. 5.11 with the
-   load's path.
+   load's path; and, beside them, Kx, Kd, Kp by least squares on eq. 4.50 itself from the
+   logged chamber pressures (`load_pressure_fit`).
 Fit index eq. 5.12: F = 1 - |y - ys| / |y - mean(y)|.
 """
 
@@ -134,3 +135,27 @@ def quadratic_fit(positions_m: np.ndarray, values: np.ndarray) -> np.ndarray | N
     None below three positions."""
     ok = np.isfinite(values)
     return np.polyfit(positions_m[ok], values[ok], 2) if ok.sum() >= 3 else None
+
+
+def load_pressure_signals(u_v: np.ndarray, y_m: np.ndarray, pl_pa: np.ndarray, period_s: float,
+                          cutoff_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One window's (xv, y', PL, PL') through the zero-phase low-pass (the valve input already
+    aligned with the cycle it acts in)."""
+    rate = 1.0 / period_s
+    xv, y, pl = (low_pass(x, cutoff_hz, rate) for x in (u_v, y_m, pl_pa))
+    return xv, np.gradient(y, period_s), pl, np.gradient(pl, period_s)
+
+
+def load_pressure_fit(windows: list[tuple]) -> tuple[float, float, float]:
+    """(Kx [Pa/s per V], Kd [Pa/m], Kp [1/s]) of PL' = Kx xv - Kd y' + Kp PL + c_w (eq. 4.50, each
+    window w its own operating point c_w) by least squares over `windows` of
+    `load_pressure_signals`."""
+    rows = sum(len(w[0]) for w in windows)
+    a, b, start = np.zeros((rows, 3 + len(windows))), np.zeros(rows), 0
+    for j, (xv, velocity, pl, rate) in enumerate(windows):
+        part = slice(start, start + len(xv))
+        a[part, 0], a[part, 1], a[part, 2], a[part, 3 + j] = xv, -velocity, pl, 1.0
+        b[part] = rate
+        start += len(xv)
+    (kx, kd, kp, *_), *_ = np.linalg.lstsq(a, b, rcond=None)
+    return float(kx), float(kd), float(kp)

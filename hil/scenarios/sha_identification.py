@@ -123,6 +123,8 @@ class ShaIdentification(Scenario):
         u = log.get("VALVE_CMD_1").per_cycle(log.n_cycles, "SPOOL_SETPOINT") * VALVE_FULL_SCALE_V
         pressure = log.get("LEG_PRESSURE_1")
         pl = pressure.per_cycle(log.n_cycles, "PA") - ccfg.actuator.area_ratio * pressure.per_cycle(log.n_cycles, "PB")
+        u_applied = np.roll(u, DELAY_PERIODS)          # the input each cycle acts under
+        u_applied[:DELAY_PERIODS] = np.nan
         n, pre = int(round(WINDOW_S / period)), int(round(PRE_S / period))
         sequence, previous_step, set_point_mm, out = -1, False, float("nan"), []
         for motion in ref.motions:
@@ -150,9 +152,15 @@ class ShaIdentification(Scenario):
             plant = ident.open_loop_from_closed(gcl, k)
             motion_fit = ident.motion_parameters(y[k0 - pre:k0 + n + 1], pl[k0 - pre:k0 + n + 1],
                                                  ccfg.actuator.piston_area_m2, period, FILTER_HZ)
+            around = slice(k0 - pre, k0 + n + 1)
+            pressure_signals = None
+            if np.all(np.isfinite(pl[around])) and np.all(np.isfinite(u_applied[around])):
+                pressure_signals = ident.load_pressure_signals(u_applied[around], y[around], pl[around], period,
+                                                               FILTER_HZ)
             out.append({"sequence": sequence, "cycle": k0, "before_m": float(before), "step_m": float(step),
                         "load_kg": load_at(log, k0), "k_v_m": k, "gcl": gcl, "plant": plant,
-                        "motion": motion_fit, "t": t, "dy": y[cycles] - y0, "set_point_mm": set_point_mm})
+                        "motion": motion_fit, "t": t, "dy": y[cycles] - y0, "set_point_mm": set_point_mm,
+                        "pressure_signals": pressure_signals})
         return out
 
     def analyze(self, log: LogData, out: Path | None, rate_hz: float = 500.0) -> Analysis:
@@ -207,6 +215,10 @@ class ShaIdentification(Scenario):
                 complete = ident.complete_model(kx, kd, kp, mass, sigma, area)
                 row["sensibilities"] = {"kx": kx, "kd": kd, "kp": kp, "k02_mm_n": complete["k02"] / MM,
                                         "z0": complete["z0"]}
+            signals = [w["pressure_signals"] for w in mine if w["pressure_signals"] is not None]
+            if signals:
+                kx, kd, kp = ident.load_pressure_fit(signals)
+                row["load_pressure"] = {"kx": kx, "kd": kd, "kp": kp}
             rows.append(row)
         checks = self._checks(rows)
         metrics = {"points": rows, "windows": len(windows), "motion_fits": motion_fits(rows)}
@@ -243,14 +255,17 @@ class ShaIdentification(Scenario):
                 checks.append(Check(f"{key} identified (up and down steps) / {name}", bool(ratios) and all(
                     0.8 <= x <= 1.25 for x in ratios), f"{min(ratios):.2f}-{max(ratios):.2f}" if ratios else "-",
                     "0.8-1.25", required=False))
-        with_k = [r for r in rows if "sensibilities" in r]
-        references = (("emulator", "the emulator's linearisation", ("kx", "kd", "kp", "k02_mm_n", "z0")),
-                      ("table_a2", "Table A.2", ("kx", "kd", "kp")))
-        for reference, name, keys in references:
-            versus = [r for r in with_k if r[reference]]
+        linearisation = "the emulator's linearisation"
+        references = (("sensibilities", "emulator", linearisation, ("kx", "kd", "kp", "k02_mm_n", "z0")),
+                      ("sensibilities", "table_a2", "Table A.2", ("kx", "kd", "kp")),
+                      ("load_pressure", "emulator", linearisation, ("kx", "kd", "kp")))
+        labels = {"sensibilities": "eq. 5.8-5.11 on the identified G(s), m, sigma",
+                  "load_pressure": "least squares on eq. 4.50, the chamber pressures"}
+        for source, reference, name, keys in references:
+            versus = [r for r in rows if source in r and r[reference]]
             for key in keys:
-                ratios = [r["sensibilities"][key] / r[reference][key] for r in versus]
-                checks.append(Check(f"{key} (eq. 5.8-5.11 on the identified G(s), m, sigma) / {name}",
+                ratios = [r[source][key] / r[reference][key] for r in versus]
+                checks.append(Check(f"{key} ({labels[source]}) / {name}",
                                     bool(ratios) and all(0.8 <= x <= 1.2 for x in ratios),
                                     f"{min(ratios):.2f}-{max(ratios):.2f}" if ratios else "-", "0.8-1.2",
                                     required=False))
@@ -284,13 +299,15 @@ class ShaIdentification(Scenario):
 
     @staticmethod
     def _sensibility_table(rows: list[dict]) -> str:
-        lines = ["| Po mm | load kg | Kx kPa/(s V) id / emu / A.2 | Kd kPa/mm id / emu / A.2 | "
-                 "Kp 1/s id / emu / A.2 | k02 mm/N id / emu | z0 1/s id / emu |", "|" + "---|" * 7]
+        lines = ["| Po mm | load kg | Kx kPa/(s V) id / eq. 4.50 / emu / A.2 | "
+                 "Kd kPa/mm id / eq. 4.50 / emu / A.2 | Kp 1/s id / eq. 4.50 / emu / A.2 | k02 mm/N id / emu | "
+                 "z0 1/s id / emu |", "|" + "---|" * 7]
         for r in rows:
-            k, e, t = r.get("sensibilities"), r["emulator"], r["table_a2"] or {}
+            k, q, e, t = r.get("sensibilities"), r.get("load_pressure"), r["emulator"], r["table_a2"] or {}
 
-            def cells(key, unit, fmt, k=k, e=e, t=t, table=True):
-                values = ((k or {}).get(key), e[key]) + ((t.get(key),) if table else ())
+            def cells(key, unit, fmt, k=k, q=q, e=e, t=t, table=True):
+                values = (((k or {}).get(key), (q or {}).get(key), e[key], t.get(key)) if table
+                          else ((k or {}).get(key), e[key]))
                 return " / ".join("-" if v is None else format(v / unit, fmt) for v in values)
             lines.append(f"| {r['set_point_mm']:.0f} | {r['load_kg']:g} | {cells('kx', KPA, '.0f')} | "
                          f"{cells('kd', KPA / MM, '.0f')} | {cells('kp', 1.0, '.0f')} | "

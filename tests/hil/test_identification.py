@@ -85,3 +85,21 @@ def test_the_motion_parameters_quadratic_in_the_position():
     values = 2.0 - 3.0 * y + 10.0 * y ** 2
     assert ident.quadratic_fit(y, values) == pytest.approx([10.0, -3.0, 2.0])
     assert ident.quadratic_fit(y[:2], values[:2]) is None
+
+
+def test_eq_4_50_by_least_squares_recovers_the_constants():
+    """PL' = Kx xv - Kd y' + Kp PL + c per window, from windows of a simulated load-pressure
+    equation with its own operating points."""
+    kx, kd, kp = 6.0e7, 2.5e8, -40.0
+    rng = np.random.default_rng(3)
+    windows = []
+    for offset in (2e5, -1e5, 4e5):
+        n = 90
+        xv, velocity = rng.normal(0, 1.0, n), rng.normal(0, 0.05, n)
+        pl = np.empty(n)
+        pl[0] = 1e6
+        for i in range(1, n):                    # integrate the equation itself
+            pl[i] = pl[i - 1] + PERIOD_S * (kx * xv[i - 1] - kd * velocity[i - 1] + kp * pl[i - 1] + offset)
+        rate = np.diff(pl) / PERIOD_S
+        windows.append((xv[:-1], velocity[:-1], pl[:-1], rate))
+    assert ident.load_pressure_fit(windows) == pytest.approx((kx, kd, kp), rel=1e-6)
