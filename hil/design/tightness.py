@@ -5,7 +5,8 @@ envelope (a thesis movement, payload and supply declared), in process, emulator 
 - P / TIGHT_FACTOR (15 % faster): does the controller refuse it, and, run with the check
   opened, how long does a valve sit at its limit;
 - the fastest time scale at which the movement still completes within ERROR_BOUND_MM, the
-  check opened: swept from P down (or up, where P itself misses) in STEP steps.
+  check opened: swept from P down (or up, where P itself misses) in STEP steps, and the
+  waypoint the controller refuses there (what pads the plan).
 
 Tight: P/TIGHT_FACTOR is refused or saturates, and P is within TIGHT_FACTOR of the fastest
 that completes (P <= TIGHT_FACTOR x fastest). A P faster than the fastest that completes is
@@ -41,6 +42,7 @@ class Tightness:
     planned_error_mm: float          # the run at P, the check opened (as accepted)
     fastest_scale: float             # the fastest that completes within the bound (NaN: none in range)
     fastest_error_mm: float
+    refused_at: str = ""             # the waypoint the controller refuses at the fastest ("": accepts it)
 
     @property
     def ratio(self) -> float:
@@ -129,8 +131,13 @@ def tightness(movement: str, payload_kg: float, supply_bar: float, seed: int = 7
                 fastest, fastest_mm = planned * (1.0 + k * STEP), largest_mm(r)
                 break
             k += 1
+    refused_at = ""
+    if math.isfinite(fastest):
+        result, seq, position_m, _ = commit_all(cfg, motion.scaled(fastest))
+        if result is not Ack.ACCEPTED:
+            refused_at = f"{seq + 1} ({', '.join(f'{v:.0f}' for v in position_m * 1e3)})"
     return Tightness(movement, payload_kg, supply_bar, planned, refused, saturated_ms, largest_mm(fast_run),
-                     largest_mm(at_plan), fastest, fastest_mm)
+                     largest_mm(at_plan), fastest, fastest_mm, refused_at)
 
 
 def _job(args) -> Tightness:
@@ -147,7 +154,7 @@ def sweep_tightness(movements, payloads_kg, supplies_bar, seed: int = 7, workers
 
 def format_tightness(rows: list[Tightness]) -> str:
     lines = [f"movement  kg   bar  plan   x{TIGHT_FACTOR:.2f} faster: refused  saturated ms  error mm   "
-             f"at plan mm  fastest <= {ERROR_BOUND_MM:g} mm (error)  plan/fastest  tight"]
+             f"at plan mm  fastest <= {ERROR_BOUND_MM:g} mm (error)  plan/fastest  tight  refused there: waypoint (mm)"]
     for r in rows:
         if not math.isfinite(r.planned_scale):
             lines.append(f"{r.movement:<9} {r.payload_kg:<4g} {r.supply_bar:<4g} no timing fits")
@@ -156,7 +163,7 @@ def format_tightness(rows: list[Tightness]) -> str:
         lines.append(f"{r.movement:<9} {r.payload_kg:<4g} {r.supply_bar:<4g} {r.planned_scale:4.2f}   "
                      f"{'yes' if r.faster_refused else 'no':>21}  {r.faster_saturated_ms:12.0f}  "
                      f"{r.faster_error_mm:8.1f}   {r.planned_error_mm:10.1f}  {fastest:>22}  "
-                     f"{r.ratio:12.2f}  {'yes' if r.tight else 'no'}")
+                     f"{r.ratio:12.2f}  {'yes' if r.tight else 'no ':<5}  {r.refused_at or '-'}")
     tight = sum(r.tight for r in rows)
     lines.append(f"tight at {tight} of {len(rows)} points")
     return "\n".join(lines)
