@@ -1,10 +1,7 @@
 """Real SocketCAN: the kernel here has no CAN support, so a VM (virtme-ng with the Debian
 kernel, qemu in software emulation) creates vcan0 and runs a short lockstep sha-step over
-`socketcan:vcan0` on the stock CANopen devices (`--devices canopen`: SDO configuration, NMT,
-PDOs, heartbeats over the kernel's interface) with the emulator, the controller and the host
-all inside it, then the kernel's SYNC as the controller starts it on SocketCAN (`hydrapod
-protocol sync-check`). The transport under test is the same for the project's own profile,
-whose codecs and E2E run over the other buses in the suite.
+`socketcan:vcan0` with the emulator, the controller and the host all inside it, then the
+kernel's SYNC as the controller starts it on SocketCAN (`hydrapod protocol sync-check`).
 
 `make test` installs qemu, the kernel and busybox (apt) and virtme-ng (the test extra);
 nothing here skips when they are missing: it fails and says what to install.
@@ -35,7 +32,7 @@ BIN = Path(sys.executable).parent
 # one controller, one load, one position 10 mm from the start (the shortest move there): the bus
 # path is what is under test, and emulated, it is ~20x slower
 SCENARIO = ["hil", "run", "sha-step", "--short", "--controllers", "pi", "--loads", "0", "--positions", "140",
-            "--devices", "canopen", "--no-plots"]
+            "--no-plots"]
 VM_TIMEOUT_S = 900                # ~3x the slowest run seen inside `make test`
 SYNC_S = 2.0                      # the kernel's SYNC listened to for this long
 
