@@ -104,10 +104,11 @@ def _edge_moves(args) -> int:
 
 
 def _tightness(args) -> int:
-    from hil.design.tightness import configs, format_tightness, sweep_tightness
+    from hil.design.simulate import point_configs
+    from hil.design.tightness import format_tightness, sweep_tightness
     for payload in args.payload_kg:         # a value the configs refuse: one line, before any run
         for supply in args.supply_bar:
-            configs(payload, supply)
+            point_configs(payload, supply)
     rows = sweep_tightness(args.movements, args.payload_kg, args.supply_bar, args.seed, args.workers)
     print(json.dumps([r.as_dict() for r in rows], indent=1) if args.json else format_tightness(rows))
     return 0
@@ -310,6 +311,23 @@ def _capacity(args) -> int:
     return 0
 
 
+def _envelope_points(p: argparse.ArgumentParser, payloads_kg, payload_help: str, supplies_bar,
+                     supply_help: str) -> None:
+    """The thesis's movements at payloads x supplies (`design capacity`, `design tightness`)."""
+    p.add_argument("--movements", nargs="+", choices=("circle", "diagonal"), default=["circle", "diagonal"])
+    p.add_argument("--payload-kg", nargs="+", type=number_in_range(float, 0.0, 50.0), default=payloads_kg,
+                   help=payload_help)
+    p.add_argument("--supply-bar", nargs="+", type=number_in_range(float, 1.0, 400.0), default=supplies_bar,
+                   help=supply_help)
+
+
+def _workers_and_json(p: argparse.ArgumentParser, handler) -> None:
+    """The in-process tools' processes, their JSON output and the handler."""
+    p.add_argument("--workers", type=number_in_range(int, 1, 64), default=2, help="processes")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=handler)
+
+
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     design = sub.add_parser("design", help="design tools: robustness of the PI, gain schedule (chapter 7), "
                                            "the hexapod's modes")
@@ -410,22 +428,15 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                                                  "1.2 x it), in process: faults, largest error and yaw")
     p.add_argument("--moves", type=number_in_range(int, 1, 1000), default=40, help="random moves (default 40)")
     p.add_argument("--seed", type=number_in_range(int, 0, 2**31 - 1), default=1, help="the moves' seed")
-    p.add_argument("--workers", type=number_in_range(int, 1, 64), default=2, help="processes")
-    p.add_argument("--json", action="store_true")
-    p.set_defaults(handler=_edge_moves)
+    _workers_and_json(p, _edge_moves)
 
     p = design_sub.add_parser("tightness", help="is the capacity check tight? per envelope point, in process: the "
                                                 "plan, 15 %% faster (refused? saturating?), and the fastest timing "
                                                 "that completes within 10 mm, the check opened")
-    p.add_argument("--movements", nargs="+", choices=("circle", "diagonal"), default=["circle", "diagonal"])
-    p.add_argument("--payload-kg", nargs="+", type=number_in_range(float, 0.0, 50.0),
-                   default=[0.0, 1.5, 3.0, 4.5, 6.0], help="payloads (default 0 1.5 3 4.5 6)")
-    p.add_argument("--supply-bar", nargs="+", type=number_in_range(float, 1.0, 400.0), default=[20.0, 25.0, 40.0],
-                   help="power unit pressures (default 20 25 40)")
+    _envelope_points(p, [0.0, 1.5, 3.0, 4.5, 6.0], "payloads (default 0 1.5 3 4.5 6)", [20.0, 25.0, 40.0],
+                     "power unit pressures (default 20 25 40)")
     p.add_argument("--seed", type=number_in_range(int, 0, 2**31 - 1), default=7, help="the sensors' noise seed")
-    p.add_argument("--workers", type=number_in_range(int, 1, 64), default=2, help="processes")
-    p.add_argument("--json", action="store_true")
-    p.set_defaults(handler=_tightness)
+    _workers_and_json(p, _tightness)
 
     p = design_sub.add_parser("sweep", help="one [computed_torque] key over values: the thesis's movements in "
                                             "process per envelope point and noise seed, IAE and largest error")
@@ -437,18 +448,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--movements", type=_movements, default=MOVEMENTS, metavar="M,M",
                    help="circle, diagonal (default both)")
     p.add_argument("--seeds", type=_seeds, default=(1, 2, 3), metavar="S,S", help="sensor-noise seeds (default 1,2,3)")
-    p.add_argument("--workers", type=number_in_range(int, 1, 64), default=2, help="processes")
-    p.add_argument("--json", action="store_true")
-    p.set_defaults(handler=_sweep)
+    _workers_and_json(p, _sweep)
 
     p = design_sub.add_parser("capacity", help="what the legs can give against what the thesis's movements ask: "
                                                "the utilisation and lag at a time scale, and the fastest "
                                                "time scale the controller accepts (`hil run --time-scale auto`)")
-    p.add_argument("--movements", nargs="+", choices=("circle", "diagonal"), default=["circle", "diagonal"])
-    p.add_argument("--payload-kg", nargs="+", type=number_in_range(float, 0.0, 50.0), default=[0.0],
-                   help="payloads on the platform (default 0)")
-    p.add_argument("--supply-bar", nargs="+", type=number_in_range(float, 1.0, 400.0), default=None,
-                   help="power unit pressures (default: the config's [hydraulic_model] supply_pressure_bar)")
+    _envelope_points(p, [0.0], "payloads on the platform (default 0)", None,
+                     "power unit pressures (default: the config's [hydraulic_model] supply_pressure_bar)")
     p.add_argument("--time-scale", type=number_in_range(float, 0.25, 8.0), default=1.0,
                    help="x the thesis's ta, tm (default 1)")
     p.add_argument("--config", metavar="FILE", default=None, help="controller TOML (its models, geometry)")

@@ -57,15 +57,10 @@ def random_move(rng: np.random.Generator) -> tuple:
 
 def _runs(job) -> list[EdgeRun]:
     move, (payload, supply, start, target, segment, accel), factors = job
-    from firmware_py.config import load_config
-    from hil.experiments import MOVEMENT_OVERRIDES
+    from hil.design.simulate import point_configs
     from hil.in_process import PERIOD_S, InProcessLoop
-    from plant_emulator.params import load_config as load_emulator_config
     from protocol.enums import Ack, State, WaypointFlag
-    overrides = {section: dict(values) for section, values in MOVEMENT_OVERRIDES.items()}
-    overrides |= {"hexapod": {"payload_kg": payload}, "hydraulic_model": {"supply_pressure_bar": supply}}
-    cfg = load_config(overrides=overrides)
-    emulator = load_emulator_config(overrides={"actuator": {"supply_pressure_bar": supply}})
+    cfg, emulator = point_configs(payload, supply)
     alone = int(WaypointFlag.START | WaypointFlag.LAST)
     runs = []
     for factor in factors:

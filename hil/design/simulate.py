@@ -81,6 +81,22 @@ def movement(loop: InProcessLoop, motion: Motion) -> Movement:
                     status.fault.name if status.state is State.FAULT else "NONE")
 
 
+def point_configs(payload_kg: float, supply_bar: float, computed_torque: dict | None = None,
+                  config_path=None) -> tuple[ControllerConfig, EmulatorConfig]:
+    """The controller's configuration as `hil run pm-*` makes it (MOVEMENT_OVERRIDES), the
+    payload and supply declared and `computed_torque` keys over it, and the emulator's at that
+    supply: an envelope point of the design tools."""
+    from firmware_py.config import load_config
+    from hil.experiments import MOVEMENT_OVERRIDES
+    from plant_emulator.params import load_config as load_emulator_config
+    overrides = {section: dict(values) for section, values in MOVEMENT_OVERRIDES.items()}
+    overrides |= {"hexapod": {"payload_kg": payload_kg}, "hydraulic_model": {"supply_pressure_bar": supply_bar}}
+    if computed_torque:
+        overrides["computed_torque"] = dict(computed_torque)
+    return (load_config(config_path, overrides=overrides),
+            load_emulator_config(overrides={"actuator": {"supply_pressure_bar": supply_bar}}))
+
+
 def run_movement(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig, motion: Motion,
                  controller: str = "computed-torque", payload_kg: float = 0.0, time_scale: float = 1.0,
                  seed: int = 7) -> Movement:

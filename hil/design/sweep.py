@@ -45,16 +45,10 @@ class SweepRun:
 
 def _run(args) -> SweepRun:
     key, value, payload, supply, movement, seed = args
-    from firmware_py.config import load_config
     from hil.design.capacity import plan
-    from hil.design.simulate import run_movement, thesis_motions
-    from hil.experiments import MOVEMENT_OVERRIDES, THESIS_MOVEMENTS
-    from plant_emulator.params import load_config as load_emulator_config
-    overrides = {section: dict(values) for section, values in MOVEMENT_OVERRIDES.items()}
-    overrides |= {"computed_torque": {key: value}, "hexapod": {"payload_kg": payload},
-                  "hydraulic_model": {"supply_pressure_bar": supply}}
-    cfg = load_config(overrides=overrides)
-    emulator = load_emulator_config(overrides={"actuator": {"supply_pressure_bar": supply}})
+    from hil.design.simulate import point_configs, run_movement, thesis_motions
+    from hil.experiments import THESIS_MOVEMENTS
+    cfg, emulator = point_configs(payload, supply, {key: value})
     motion = thesis_motions()[movement]
     scale = max(plan(cfg, motion).time_scale, 1.0)        # `--time-scale fit`
     if not math.isfinite(scale):                          # no timing holds it: refused, nothing runs

@@ -60,18 +60,6 @@ class Tightness:
         return out | {"ratio": ratio if math.isfinite(ratio) else None, "tight": self.tight}
 
 
-def configs(payload_kg: float, supply_bar: float, config_path=None):
-    """The controller's (as `hil run pm-*` configures it, payload and supply declared) and the
-    emulator's configuration at a point."""
-    from firmware_py.config import load_config
-    from hil.experiments import MOVEMENT_OVERRIDES
-    from plant_emulator.params import load_config as load_emulator_config
-    overrides = {section: dict(values) for section, values in MOVEMENT_OVERRIDES.items()}
-    overrides |= {"hexapod": {"payload_kg": payload_kg}, "hydraulic_model": {"supply_pressure_bar": supply_bar}}
-    return (load_config(config_path, overrides=overrides),
-            load_emulator_config(overrides={"actuator": {"supply_pressure_bar": supply_bar}}))
-
-
 def opened_run(controller_cfg, emulator_cfg, motion, payload_kg: float, scale: float, seed: int = 7):
     """The movement at `scale` through the controller with its capacity check opened
     (`simulate.Movement`)."""
@@ -91,9 +79,9 @@ def _passes(run) -> bool:
 
 def tightness(movement: str, payload_kg: float, supply_bar: float, seed: int = 7) -> Tightness:
     from hil.design.capacity import PERIOD_S, commit_all, plan
-    from hil.design.simulate import thesis_motions
+    from hil.design.simulate import point_configs, thesis_motions
     from protocol.enums import Ack
-    cfg, emulator = configs(payload_kg, supply_bar)
+    cfg, emulator = point_configs(payload_kg, supply_bar)
     motion = thesis_motions()[movement]
     planned = plan(cfg, motion).time_scale
     if not math.isfinite(planned):
