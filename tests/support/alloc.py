@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-TRACE_FRAMES = 12                 # deep enough to see that an allocation is the plant's own work
+TRACE_FRAMES = 6                  # deep enough to see that an allocation is the plant's own work
 
 
 def allocations(run: Callable[[], None], sources: tuple[str, ...] | None = None,
