@@ -353,9 +353,9 @@ class ComputedTorque(_Gains):
     the rig's estimate before each update."""
 
     def __init__(self, cfg: ControllerConfig, geometry: Geometry, period_s: float, yaw: YawFusion | None = None):
-        super().__init__(cfg, cfg.computed_torque.hexapod, N_LEGS, period_s)
+        super().__init__(cfg, cfg.computed_torque.hexapod_at(period_s), N_LEGS, period_s)
         self.yaw = yaw
-        w, zeta = cfg.computed_torque.yaw_gains
+        w, zeta = cfg.computed_torque.yaw_gains(period_s)
         # with a valid IMU yaw: the yaw's own proportional and derivative gains
         self.kp_imu, self.kd_imu = self.kp.copy(), self.kd.copy()
         self.kp_imu[YAW], self.kd_imu[YAW] = w * w, 2.0 * zeta * w
