@@ -397,7 +397,7 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
         "short": options.short,
         "wall_time_s": round(wall_s, 1), "frames_sent_by_host": run.host.frames_sent,
         "frames_received_by_host": run.host.frames_received, "notes": run.notes,
-        "children": children, "failure": failure}, plots=options.plots)
+        "children": children, "failure": failure}, rate_hz=options.rate_hz, plots=options.plots)
     return doc
 
 
@@ -425,9 +425,11 @@ def _plant_diverged(children: dict) -> str | None:
     return None
 
 
-def analyze_log(scenario: Scenario, log_path: Path, out: Path, devices: str = "hydrapod") -> dict:
-    """`hydrapod hil analyze`: the same analysis on any recorded log (rig or emulator)."""
+def analyze_log(scenario: Scenario, log_path: Path, out: Path, devices: str = "hydrapod",
+                rate_hz: float = 500.0) -> dict:
+    """`hydrapod hil analyze`: the same analysis on any recorded log (rig or emulator) made at
+    `rate_hz`."""
     log = read_log(log_path, devices)
     output_dir(out)
-    return write_outputs(scenario, log, out, extra={"analysed_log": str(log_path)})
+    return write_outputs(scenario, log, out, extra={"analysed_log": str(log_path), "rate_hz": rate_hz}, rate_hz=rate_hz)
 

@@ -22,6 +22,9 @@ def _scenario(name: str):
 
 
 TIME_SCALES = number_in_range(float, 0.5, 10.0)
+RATES_HZ = number_in_range(float, 100.0, 1000.0)
+RATE_HELP = ("the loop's rate: SYNCs per second and the emulator's step (default 500, the thesis's; stock "
+             "devices on one real bus carry 342 at most, `hydrapod bus-load --devices canopen`)")
 DEVICES_HELP = ("the rig's devices, for the emulator and the controller alike: the project's own nodes "
                 "(hydrapod, default) or stock CANopen devices (canopen: CiA 408 valves, CiA 406/404 sensors)")
 
@@ -92,7 +95,7 @@ def _run(args) -> int:
     from hil.runner import RunOptions, run_scenario
     scenario = _scenario(args.scenario)
     out = Path(args.out) if args.out else Path("hil-out") / scenario.name
-    options = RunOptions(out_dir=out, bus=args.bus, pacing=args.pacing, rate_hz=500.0, devices=args.devices,
+    options = RunOptions(out_dir=out, bus=args.bus, pacing=args.pacing, rate_hz=args.rate_hz, devices=args.devices,
                          short=args.short,
                          controllers=_controllers(args.controllers), loads=_loads(args.loads),
                          positions_m=_positions(args.positions), inject=_inject(args.inject),
@@ -165,7 +168,7 @@ def _analyze(args) -> int:
     scenario = _scenario(args.scenario)
     log = Path(args.log)
     out = Path(args.out) if args.out else log.parent
-    return _finish(args, analyze_log(scenario, log, out, args.devices))
+    return _finish(args, analyze_log(scenario, log, out, args.devices, args.rate_hz))
 
 
 def _list(args) -> int:
@@ -193,6 +196,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="default: the scenario's (lockstep, realtime for the timing scenarios)")
     p.add_argument("--out", metavar="DIR", help="output directory (default: hil-out/SCENARIO)")
     p.add_argument("--devices", choices=DEVICE_PROFILES, default="hydrapod", help=DEVICES_HELP)
+    p.add_argument("--rate-hz", type=RATES_HZ, default=500.0, help=RATE_HELP)
     p.add_argument("--short", action="store_true", help="the short variant (what make test runs)")
     p.add_argument("--controllers", metavar="LIST", help="comma-separated subset of the scenario's controllers")
     p.add_argument("--loads", metavar="LIST",
@@ -266,6 +270,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenario", required=True)
     p.add_argument("--out", metavar="DIR", help="where metrics.json, plots and report.md go (default: beside LOG)")
     p.add_argument("--devices", choices=DEVICE_PROFILES, default="hydrapod", help=DEVICES_HELP)
+    p.add_argument("--rate-hz", type=RATES_HZ, default=500.0, help="the rate the log was recorded at (default 500)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(handler=_analyze)
     p = hil_sub.add_parser("list", help="the scenarios")
