@@ -17,6 +17,10 @@ Per transient window (150 ms after each change of the PRMS reference, chapter 5.
    load's path; and, beside them, Kx, Kd, Kp by least squares on eq. 4.50 itself from the
    logged chamber pressures (`load_pressure_fit`).
 Fit index eq. 5.12: F = 1 - |y - ys| / |y - mean(y)|.
+6. the scheduled model of Fig. 5.10: G(s)'s b0, b1, k01 of every working point in a table
+   over the set point, per load, read between the points by spline interpolation (as the
+   thesis's 2-D table does); `scheduled_parameter` reads it, `leave_one_out` judges it at a
+   point the table was made without.
 """
 
 from __future__ import annotations
@@ -159,3 +163,24 @@ def load_pressure_fit(windows: list[tuple]) -> tuple[float, float, float]:
         start += len(xv)
     (kx, kd, kp, *_), *_ = np.linalg.lstsq(a, b, rcond=None)
     return float(kx), float(kd), float(kp)
+
+
+def scheduled_parameter(set_points_m: np.ndarray, values: np.ndarray, at_m: float) -> float:
+    """One parameter of the scheduled model at `at_m`: the spline through (set point, value)
+    of one load (cubic from four points, else the highest order the points allow: the
+    thesis's 2-D table's spline interpolation)."""
+    from scipy.interpolate import make_interp_spline
+    order = min(3, len(set_points_m) - 1)
+    if order < 1:
+        return float(values[0])
+    return float(make_interp_spline(set_points_m, values, k=order)(at_m))
+
+
+def leave_one_out(set_points_m: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Each interior point's value as the scheduled model reads it from the others (NaN at the
+    ends: the table would extrapolate there)."""
+    out = np.full(len(values), np.nan)
+    for i in range(1, len(values) - 1):
+        keep = np.arange(len(values)) != i
+        out[i] = scheduled_parameter(set_points_m[keep], values[keep], set_points_m[i])
+    return out

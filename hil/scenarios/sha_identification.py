@@ -176,10 +176,9 @@ class ShaIdentification(Scenario):
             candidates = [w["plant"] for w in mine if w["plant"] is not None]
             best, best_fit = None, -np.inf
             for plant in candidates:          # thesis: the model that fits every register best
-                fits = [ident.fit_index(w["dy"], w["step_m"] * ident.closed_loop_step(
-                    *ident.closed_loop_of(plant, w["k_v_m"]), w["t"], DELAY_PERIODS * period)) for w in mine]
-                if np.mean(fits) > best_fit:
-                    best, best_fit = plant, float(np.mean(fits))
+                fit = model_fit(plant, mine, period)
+                if fit > best_fit:
+                    best, best_fit = plant, fit
             by_direction = {}
             for name, sign in (("up", 1.0), ("down", -1.0)):
                 own = [w for w in mine if w["plant"] is not None and np.sign(w["step_m"]) == sign]
@@ -221,9 +220,11 @@ class ShaIdentification(Scenario):
                 row["load_pressure"] = {"kx": kx, "kd": kd, "kp": kp}
             rows.append(row)
         checks = self._checks(rows)
-        metrics = {"points": rows, "windows": len(windows), "motion_fits": motion_fits(rows)}
+        scheduled = scheduled_model(rows, windows, period)
+        metrics = {"points": rows, "windows": len(windows), "motion_fits": motion_fits(rows), "scheduled": scheduled}
         figures = self._figures(windows, rows, out, period) if out is not None else []
-        return Analysis(metrics, self.thesis, checks, figures, [self._table(rows), self._sensibility_table(rows)])
+        return Analysis(metrics, self.thesis, checks, figures,
+                        [self._table(rows), self._sensibility_table(rows), scheduled_table(scheduled)])
 
     def _checks(self, rows: list[dict]) -> list[Check]:
         checks = [Check("identified points", len(rows) > 0 and all(r["identified"] for r in rows),
@@ -349,6 +350,7 @@ class ShaIdentification(Scenario):
             figures.append(Figure(path.name, "b0, b1, k01: identified, emulator's linearisation, Table A.3",
                                   "thesis Table A.3"))
         figures += self._chain_figures(rows, out)
+        figures += scheduled_figure(rows, out)
         return figures
 
     @staticmethod
@@ -429,3 +431,78 @@ def motion_fits(rows: list[dict]) -> dict:
         if all(v is not None for v in per.values()):
             fits[f"{load:g}"] = {key: [float(c) for c in v] for key, v in per.items()}
     return fits
+
+
+def model_fit(plant: dict, windows: list[dict], period: float) -> float:
+    """Eq. 5.12's fit index of G(s) = `plant` under each window's P loop, the mean over them."""
+    return float(np.mean([ident.fit_index(w["dy"], w["step_m"] * ident.closed_loop_step(
+        *ident.closed_loop_of(plant, w["k_v_m"]), w["t"], DELAY_PERIODS * period)) for w in windows]))
+
+
+SCHEDULED = ("b0", "b1", "k01")
+
+
+def scheduled_model(rows: list[dict], windows: list[dict], period: float) -> dict:
+    """Fig. 5.10: G(s)'s b0, b1, k01 scheduled on the set point, per load (splines through the
+    identified points). Each interior point judged by the table made without it: its
+    parameters as the table reads them there, and eq. 5.12's fit on its own windows beside
+    its own model's."""
+    out = {"loads": {}, "left_out": []}
+    for load in sorted({r["load_kg"] for r in rows if r["identified"]}):
+        mine = [r for r in rows if r["identified"] and r["load_kg"] == load]
+        x = np.array([r["set_point_mm"] for r in mine]) * MM
+        values = {key: np.array([r["identified"][key] * (MM if key == "k01" else 1.0) for r in mine])
+                  for key in SCHEDULED}
+        out["loads"][f"{load:g}"] = {"set_points_mm": [r["set_point_mm"] for r in mine],
+                                     **{key: [float(v) for v in values[key]] for key in SCHEDULED}}
+        read = {key: ident.leave_one_out(x, values[key]) for key in SCHEDULED}
+        for i, row in enumerate(mine):
+            if not np.isfinite(read["b0"][i]):
+                continue
+            plant = {key: float(read[key][i]) for key in SCHEDULED}
+            own = [w for w in windows if (w["set_point_mm"], w["load_kg"]) == (row["set_point_mm"], load)]
+            out["left_out"].append({"set_point_mm": row["set_point_mm"], "load_kg": load,
+                                    "b0": plant["b0"], "b1": plant["b1"], "k01": plant["k01"] / MM,
+                                    "fit_scheduled": model_fit(plant, own, period), "fit_own": row["fit_best"]})
+    fits = [p["fit_scheduled"] for p in out["left_out"]]
+    out["fit_scheduled_median"] = float(np.median(fits)) if fits else None
+    return out
+
+
+def scheduled_table(scheduled: dict) -> str:
+    rows = scheduled["left_out"]
+    if not rows:
+        return "scheduled model (Fig. 5.10): no interior point to leave out"
+    lines = ["scheduled model (Fig. 5.10), each interior point read from the others' splines: eq. 5.12 fit "
+             "on its windows, scheduled vs its own G(s)",
+             "| set point mm | load kg | b0 1/s2 | b1 1/s | k01 mm/(s V) | fit scheduled | fit own |",
+             "|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['set_point_mm']:g} | {r['load_kg']:g} | {r['b0']:.0f} | {r['b1']:.1f} | {r['k01']:.1f} | "
+              f"{r['fit_scheduled']:.3f} | {r['fit_own']:.3f} |" for r in rows]
+    return "\n".join(lines)
+
+
+def scheduled_figure(rows: list[dict], out: Path) -> list[Figure]:
+    """Fig. 5.10's table: b0, b1, k01 over the set point per load, the splines between the
+    identified points."""
+    done = [r for r in rows if r["identified"]]
+    if not done:
+        return []
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.5))
+    for ax, key in zip(axes, SCHEDULED):
+        for load in sorted({r["load_kg"] for r in done}):
+            mine = [r for r in done if r["load_kg"] == load]
+            x = np.array([r["set_point_mm"] for r in mine])
+            values = np.array([r["identified"][key] for r in mine])
+            c = colour_for_load(load)
+            ax.plot(x, values, "o", color=c, label=f"identified {load:g} kg")
+            grid = np.linspace(x.min(), x.max(), 100)
+            ax.plot(grid, [ident.scheduled_parameter(x, values, g) for g in grid], "-", color=c,
+                    label=f"scheduled {load:g} kg")
+        ax.set_xlabel("set point [mm]")
+        ax.set_title(key)
+    axes[0].legend(fontsize=6)
+    name = "sha_identification_scheduled.png"
+    save(fig, out / name)
+    return [Figure(name, "G(s) scheduled on the set point per load: the identified points and the splines "
+                         "the model reads between them", "thesis Fig. 5.10")]

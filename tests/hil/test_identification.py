@@ -103,3 +103,18 @@ def test_eq_4_50_by_least_squares_recovers_the_constants():
         rate = np.diff(pl) / PERIOD_S
         windows.append((xv[:-1], velocity[:-1], pl[:-1], rate))
     assert ident.load_pressure_fit(windows) == pytest.approx((kx, kd, kp), rel=1e-6)
+
+
+def test_the_scheduled_model_reads_between_the_points_and_judges_each_from_the_others():
+    """Fig. 5.10's table: a spline through the working points (cubic from four), so a
+    parameter cubic in the set point is read exactly between them, and exactly again at a
+    point left out; the ends, which the others would extrapolate, are not judged."""
+    x = np.array([10.0, 30.0, 60.0, 90.0, 120.0, 150.0]) * 1e-3
+    b0 = 2e4 - 3e5 * x + 4e6 * x ** 2 - 9e6 * x ** 3
+    assert ident.scheduled_parameter(x, b0, 0.075) == pytest.approx(2e4 - 3e5 * 0.075 + 4e6 * 0.075 ** 2
+                                                                    - 9e6 * 0.075 ** 3)
+    read = ident.leave_one_out(x, b0)
+    assert np.isnan(read[0]) and np.isnan(read[-1])
+    np.testing.assert_allclose(read[1:-1], b0[1:-1], rtol=1e-9)
+    # two points: the straight line between them
+    assert ident.scheduled_parameter(x[:2], b0[:2], 0.02) == pytest.approx(0.5 * (b0[0] + b0[1]))
