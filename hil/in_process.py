@@ -47,7 +47,8 @@ class InProcessLoop:
                  load_kg: float = 0.0, seed: int = 7, rig: str = "hexapod", rig_model=None):
         self.rig = rig_model if rig_model is not None else make_rig(rig, emulator_cfg, load_kg)
         self.sim = SimulatedRig(self.rig, emulator_cfg, rng=np.random.default_rng(seed))
-        self.ctl = Controller(controller_cfg, rig, PERIOD_S, CONTROLLER_NAMES[kind])
+        # the controller at the emulator's SYNC period (PERIOD_S unless its [nodes] say otherwise)
+        self.ctl = Controller(controller_cfg, rig, emulator_cfg.nodes.sync_period_s, CONTROLLER_NAMES[kind])
         self.meas, self.cmd = self.ctl.new_interfaces()
         self.acks: dict[tuple[int, int], Ack] = {}     # (AckKind, SEQ) -> result, as they come
         self.time_scale = math.nan                     # the last ack's TIME_SCALE (NaN: none)

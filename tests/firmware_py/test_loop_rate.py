@@ -8,8 +8,6 @@ import numpy as np
 import pytest
 
 from firmware_py.config import load_config
-from firmware_py.controller import Controller
-from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
 from hil.in_process import InProcessLoop
 from plant_emulator.params import load_config as load_emulator_config
 from protocol.enums import State
@@ -19,10 +17,8 @@ HOLD_S = 1.5
 
 def holding_loop(rate_hz: float) -> InProcessLoop:
     emulator = load_emulator_config(overrides={"nodes": {"sync_period_ms": 1000.0 / rate_hz}})
-    cfg = load_config()
-    loop = InProcessLoop(cfg, emulator, "computed-torque")
-    loop.ctl = Controller(cfg, "hexapod", 1.0 / rate_hz, CONTROLLER_NAMES["computed-torque"])
-    loop.meas, loop.cmd = loop.ctl.new_interfaces()
+    loop = InProcessLoop(load_config(), emulator, "computed-torque")      # the controller at the same rate
+    assert loop.ctl.period_s == pytest.approx(1.0 / rate_hz)
     loop.activate(cycles=5)
     return loop
 
