@@ -60,6 +60,7 @@ class CaseKind(StrEnum):
     ESTOP = "estop"
     WAYPOINTS = "waypoints"            # bad waypoints, each refused with its reason
     BABBLE = "babble"
+    REBOOT = "reboot"                  # a stock node reset by another master (NMT RESET_NODE)
     STALL = "stall"                    # the controller stopped (SIGSTOP) and resumed
     KILL = "kill"                      # the controller killed
     KILL_EMULATOR = "kill_emulator"
@@ -80,6 +81,7 @@ class Case:
     rigs: tuple[str, ...] = ("hexapod", "testbench")
     on_testbench: dict = field(default_factory=dict)   # fields that differ on the one-leg test bench
     e2e: bool = False             # judged by the E2E check: stock CANopen devices have none (not run there)
+    canopen_only: bool = False    # a stock device's own behaviour: run on `--devices canopen` alone
 
 
 @dataclass
@@ -126,6 +128,13 @@ LOCKSTEP_CASES = [
          CaseKind.TRANSIENT, "FRAME_LOSS", 5, 30, ("SENSOR_TIMEOUT",)),
     Case("3b", "sensor node of leg 3 silent", "SENSOR_TIMEOUT within 5 cycles, held, no NaN", CaseKind.PERSISTENT,
          "SILENT", 3, 0, ("SENSOR_TIMEOUT",), 5),
+    # a stock encoder reset by another master: it boots up PRE-OPERATIONAL with its EDS's
+    # defaults, so its TPDO stops; after RESET it is identified and configured again, then
+    # started. Counted from the host's NMT frame, which the lockstep emulator takes 4-5 cycles
+    # later: 5 cycles without the encoder's frame are 9-10 from it
+    Case("3c", "stock encoder of leg 2 reboots (NMT RESET_NODE), its configuration forgotten",
+         "SENSOR_TIMEOUT within 10 cycles of the NMT command, held; RESET configures it again",
+         CaseKind.REBOOT, "", 2, 0, ("SENSOR_TIMEOUT",), 10, rigs=("hexapod",), canopen_only=True),
     # hexapod: the IMU disagrees with the encoders' attitude (ATTITUDE_MISMATCH); the test
     # bench has no IMU: the motion window or the tracking limit
     # the sensor node of leg 2 freezes its whole frame: the load cell's noise stops first

@@ -263,11 +263,14 @@ def judge_kill_emulator(view: LogView, mark: Marks, baseline: Marks | None, run_
 
 def first_affected_cycle(view: LogView, mark: Marks, case: Case, run_dir: Path | None) -> int | None:
     """Frame faults: the first cycle from the injection without an OK LEG_STATE of the
-    target; plant faults: the fault's onset cycle (None: the emulator never applied it)."""
+    target; a reboot: the NMT command's; plant faults: the fault's onset cycle (None: the
+    emulator never applied it)."""
     if case.kind is CaseKind.PLANT:
         return onset_cycle(view, mark, run_dir)
     k0 = view.cycle_at(mark.t_inject)
     if k0 is None:
+        return k0
+    if case.kind is CaseKind.REBOOT:          # the log's LEG_STATE carries a silent encoder's last position
         return k0
     s = view.log.get(f"LEG_STATE_{case.target}")
     present = set(s.cycle[s.cycle >= k0].tolist())
@@ -344,6 +347,7 @@ JUDGES = {
     CaseKind.BASELINE: judge_baseline,
     CaseKind.TRANSIENT: judge_transient,
     CaseKind.PERSISTENT: judge_fault,
+    CaseKind.REBOOT: judge_fault,
     CaseKind.PLANT: judge_fault,
     CaseKind.ESTOP: judge_estop,
     CaseKind.WAYPOINTS: judge_waypoints,

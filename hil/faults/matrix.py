@@ -16,10 +16,12 @@ PACINGS = ("lockstep", "realtime")
 def sessions(short: bool, pacings: tuple[str, ...] = PACINGS, devices: str = "hydrapod") -> list[Session]:
     """Full: every case on both rigs, the plant cases in both pacings. Short (make test): the
     hexapod, the plant cases in lockstep only. Stock CANopen devices: the cases an E2E check
-    judges are not run (their frames carry none)."""
+    judges are not run (their frames carry none), and a stock node's reboot is run there alone."""
     cases = {"lockstep": LOCKSTEP_CASES, "realtime": realtime_cases(short)}
     if devices == "canopen":
         cases = {pacing: [c for c in listed if not c.e2e] for pacing, listed in cases.items()}
+    else:
+        cases = {pacing: [c for c in listed if not c.canopen_only] for pacing, listed in cases.items()}
     rigs = ("hexapod",) if short else ("hexapod", "testbench")
     return [Session(rig, pacing, cases[pacing]) for rig in rigs for pacing in PACINGS if pacing in pacings]
 

@@ -37,8 +37,9 @@ from hil.metrics import faults_in_windows
 from hil.processes import ChildFailed
 from hil.scenario import Analysis, Check, Scenario
 from protocol.codec import CODECS
-from protocol.enums import Command, EmuCommand, EmuFault, Fault, State, WaypointFlag
+from protocol.enums import Command, EmuCommand, EmuFault, Fault, NmtCommand, State, WaypointFlag
 from protocol.nodes import LEGS_OF_RIG, rig_nodes
+from protocol.outbox import Outbox
 
 
 class Session(Scenario):
@@ -204,6 +205,10 @@ class Session(Scenario):
         elif c.kind is CaseKind.BABBLE:
             self._inject(run, mark)
             self._finish_probe(run)
+        elif c.kind is CaseKind.REBOOT:
+            mark.t_inject = time.time()
+            reset_node(host, encoder_node(c.target, LEGS_OF_RIG[self.rig]))
+            self._finish_probe(run)
         elif c.kind is CaseKind.STALL:
             child = run.controller
             mark.t_inject = time.time()
@@ -291,3 +296,16 @@ def _pump_for(host, seconds: float) -> None:
     while time.monotonic() < end:
         host.pump(min(0.01, max(end - time.monotonic(), 0.0)))
 
+
+
+def encoder_node(leg: int, n_legs: int) -> int:
+    """The stock layout's encoder of `leg` (protocol/devices/canopen-layout.toml)."""
+    from protocol.canopen_layout import load_layout
+    return next(d.node for d in load_layout(n_legs) if d.leg == leg and d.name.endswith("ENCODER"))
+
+
+def reset_node(host, node: int) -> None:
+    """NMT RESET_NODE to `node`, as another master on the bus would send it."""
+    box = Outbox("NMT")
+    box.values[:] = (int(NmtCommand.RESET_NODE), node)
+    host.send(box)
