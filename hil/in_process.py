@@ -132,12 +132,13 @@ def bus_loop(controller_cfg: ControllerConfig, emulator_cfg: EmulatorConfig, rig
     """(loop, controller, bus): the controller's loop on an in-process bus with the emulator's
     `rig` behind it as `devices` (`outside`: called around the emulator's work); activated by
     default: READY holding where the rig stands."""
-    ctl = Controller(controller_cfg, rig, PERIOD_S, CONTROLLER_NAMES[kind])
+    period_s = emulator_cfg.nodes.sync_period_s          # one period for both, as InProcessLoop's
+    ctl = Controller(controller_cfg, rig, period_s, CONTROLLER_NAMES[kind])
     if pacing == "lockstep":                 # as `hil run`: the valves' watchdog outlasts the lockstep wait
         emulator_cfg = build(merge(emulator_cfg.raw, {"nodes": {"sync_timeout_periods": LOCKSTEP_SYNC_TIMEOUT_PERIODS}},
                                    "lockstep"))
     bus = LoopbackBus(make_rig(rig, emulator_cfg), emulator_cfg, outside, devices)
-    loop = ControllerLoop(bus, ctl, 1.0 / PERIOD_S, pacing, clock=bus.clock, log=lambda _: None, devices=devices)
+    loop = ControllerLoop(bus, ctl, 1.0 / period_s, pacing, clock=bus.clock, log=lambda _: None, devices=devices)
     if activate:
         loop.activate()
     return loop, ctl, bus

@@ -55,7 +55,7 @@ class CanopenNodes:
     def __init__(self, n_legs: int, send, layout=LAYOUT_FILE):
         self.layout = load_layout(n_legs, layout)
         self.device = {d.node: d for d in self.layout}
-        self.valve_node = {d.leg: d.node for d in self.layout if d.name.endswith("_VALVE")}
+        self.valve_node = {d.leg: d.node for d in self.layout if d.kind == "valve"}
         # each leg's nodes (its valve, encoder and measuring device): any started samples the leg
         self.leg_nodes = {leg: tuple(d.node for d in self.layout if d.leg == leg) for leg in self.valve_node}
         self.sdo = EmulatedDevices({d.node: d.eds for d in self.layout}, send)

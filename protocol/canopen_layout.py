@@ -35,6 +35,7 @@ class Device:
     sync_start: int = 0        # every-n-th-SYNC TPDOs' start value (0: the EDS's)
     leg: int | None = None     # the leg it belongs to (None: the platform's, the IMU)
     settings: tuple[tuple[int, int, int], ...] = ()    # (index, sub-index, value) written before the PDOs
+    kind: str = ""             # its table in the layout: valve, encoder, leg_sensors, imu
 
 
 def _settings(entry: dict, kind: str, path) -> tuple[tuple[int, int, int], ...]:
@@ -65,10 +66,10 @@ def load_layout(n_legs: int, path=LAYOUT_FILE) -> list[Device]:
             entry = layout[kind]
             starts = entry.get("sync_start", [])
             devices.append(Device(f"LEG{leg}_{kind.upper()}", entry["eds"], entry["node"] + leg - 1,
-                                  starts[leg - 1] if starts else 0, leg, _settings(entry, kind, path)))
+                                  starts[leg - 1] if starts else 0, leg, _settings(entry, kind, path), kind))
     if n_legs == 6:
         devices.append(Device("IMU", layout["imu"]["eds"], layout["imu"]["node"],
-                              settings=_settings(layout["imu"], "imu", path)))
+                              settings=_settings(layout["imu"], "imu", path), kind="imu"))
     return devices
 
 

@@ -94,7 +94,7 @@ class CanopenHardware(Hardware):
         imu = [d.node for d in self.devices if d.leg is None]
         super().__init__(n_legs, [d.node for d in self.devices], imu[0] if imu else None, stats, clock)
         self.names = {d.node: d.name for d in self.devices}
-        self.valve_nodes = {d.node for d in self.devices if d.name.endswith("_VALVE")}
+        self.valve_nodes = {d.node for d in self.devices if d.kind == "valve"}
         self._device = {d.node: d for d in self.devices}
         self._heartbeat_of_id = {HEARTBEAT_BASE + node: k for k, node in enumerate(self.nodes)}
         self._emcy_of_id = {EMCY_BASE + node: node for node in self.nodes}

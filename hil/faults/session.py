@@ -297,11 +297,10 @@ def _pump_for(host, seconds: float) -> None:
         host.pump(min(0.01, max(end - time.monotonic(), 0.0)))
 
 
-
 def encoder_node(leg: int, n_legs: int) -> int:
     """The stock layout's encoder of `leg` (protocol/devices/canopen-layout.toml)."""
     from protocol.canopen_layout import load_layout
-    return next(d.node for d in load_layout(n_legs) if d.leg == leg and d.name.endswith("ENCODER"))
+    return next(d.node for d in load_layout(n_legs) if d.leg == leg and d.kind == "encoder")
 
 
 def reset_node(host, node: int) -> None:
