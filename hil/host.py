@@ -15,8 +15,9 @@ from collections.abc import Callable
 import can
 
 from protocol.codec import CODECS, EncodeStatus, FrameDecoder
+from protocol.devices import HEARTBEAT_BASE
 from protocol.e2e import RxStatus
-from protocol.enums import Ack, AckKind, Command, EmuCommand, State, time_scale_from_wire
+from protocol.enums import Ack, AckKind, Command, EmuCommand, NmtState, State, time_scale_from_wire
 from protocol.nodes import CONTROLLER_NODE, NODE_IDS
 from protocol.outbox import Outbox
 
@@ -65,6 +66,7 @@ class Host:
         self.frames_received = 0
         self.node_heartbeats = 0                # CANopen heartbeats of the nodes
         self.heartbeat_at: dict[int, float] = {}  # each node's last heartbeat (host's monotonic clock)
+        self.booted_at: dict[int, float] = {}     # node -> its last boot-up (epoch, as the log's)
         self._cmd = Outbox("HOST_CMD")
         self._pos = Outbox("HOST_WAYPOINT_POS")
         self._rot = Outbox("HOST_WAYPOINT_ROT")
@@ -103,6 +105,8 @@ class Host:
         if msg.arbitration_id in NODE_HEARTBEAT_IDS:
             self.node_heartbeats += 1
             self.heartbeat_at[msg.arbitration_id] = time.monotonic()
+        if HEARTBEAT_BASE < msg.arbitration_id < HEARTBEAT_BASE + 0x80 and msg.dlc and msg.data[0] == NmtState.BOOTUP:
+            self.booted_at[msg.arbitration_id - HEARTBEAT_BASE] = msg.timestamp
         status = self.decoder.receive_message(msg)
         if status is RxStatus.OK:
             if msg.arbitration_id == self._sync_id:

@@ -130,11 +130,11 @@ LOCKSTEP_CASES = [
          "SILENT", 3, 0, ("SENSOR_TIMEOUT",), 5),
     # a stock encoder reset by another master: it boots up PRE-OPERATIONAL with its EDS's
     # defaults, so its TPDO stops; after RESET it is identified and configured again, then
-    # started. Counted from the host's NMT frame, which the lockstep emulator takes 4-5 cycles
-    # later: 5 cycles without the encoder's frame are 9-10 from it
+    # started. Counted from its boot-up (the host's NMT frame reaches the lockstep emulator
+    # 4-5 cycles after it is sent)
     Case("3c", "stock encoder of leg 2 reboots (NMT RESET_NODE), its configuration forgotten",
-         "SENSOR_TIMEOUT within 10 cycles of the NMT command, held; RESET configures it again",
-         CaseKind.REBOOT, "", 2, 0, ("SENSOR_TIMEOUT",), 10, rigs=("hexapod",), canopen_only=True),
+         "SENSOR_TIMEOUT within 5 cycles of its boot-up, held; RESET configures it again",
+         CaseKind.REBOOT, "", 2, 0, ("SENSOR_TIMEOUT",), 5, rigs=("hexapod",), canopen_only=True),
     # hexapod: the IMU disagrees with the encoders' attitude (ATTITUDE_MISMATCH); the test
     # bench has no IMU: the motion window or the tracking limit
     # the sensor node of leg 2 freezes its whole frame: the load cell's noise stops first

@@ -263,7 +263,7 @@ def judge_kill_emulator(view: LogView, mark: Marks, baseline: Marks | None, run_
 
 def first_affected_cycle(view: LogView, mark: Marks, case: Case, run_dir: Path | None) -> int | None:
     """Frame faults: the first cycle from the injection without an OK LEG_STATE of the
-    target; a reboot: the NMT command's; plant faults: the fault's onset cycle (None: the
+    target; a reboot: its boot-up's; plant faults: the fault's onset cycle (None: the
     emulator never applied it)."""
     if case.kind is CaseKind.PLANT:
         return onset_cycle(view, mark, run_dir)

@@ -205,9 +205,12 @@ class Session(Scenario):
         elif c.kind is CaseKind.BABBLE:
             self._inject(run, mark)
             self._finish_probe(run)
-        elif c.kind is CaseKind.REBOOT:
-            mark.t_inject = time.time()
-            reset_node(host, encoder_node(c.target, LEGS_OF_RIG[self.rig]))
+        elif c.kind is CaseKind.REBOOT:           # from the node's boot-up: when the reset took effect
+            node = encoder_node(c.target, LEGS_OF_RIG[self.rig])
+            host.booted_at.pop(node, None)
+            reset_node(host, node)
+            host.wait_until(lambda: node in host.booted_at, run.cycles(0.5), what=f"node {node}'s boot-up")
+            mark.t_inject = host.booted_at[node]
             self._finish_probe(run)
         elif c.kind is CaseKind.STALL:
             child = run.controller
