@@ -509,6 +509,8 @@ class ControllerLoop:
         self.log(f"identified node(s) {sorted(found)} as configured ({hardware.describe()}; revision(s) "
                  f"{', '.join(revisions)})")
         self._nmt_start()                 # always: a new master's frames start their E2E counters afresh
+        # the start's own time: the SDO configuration before it has its own timeouts
+        give_up = self.clock() + cfg.timing.activation_timeout_s
         self._wait(lambda state: state == NmtState.OPERATIONAL, "OPERATIONAL heartbeat", give_up, should_stop,
                    self._nmt_start)
         self.controller.reset_valves()               # one Reset pulse: clears faults left from before
