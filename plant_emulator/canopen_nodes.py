@@ -61,6 +61,9 @@ class CanopenNodes:
         self.sdo = EmulatedDevices({d.node: d.eds for d in self.layout}, send)
         self.send = send
         self.tpdos: dict[int, list[_Pdo]] = {}          # node -> its TPDOs as started
+        # node -> what was written to it when it started (compiling its PDOs takes ~2 ms here,
+        # ~20x that in an emulated VM: a master repeating its START must not cost it again)
+        self._started_with: dict[int, dict] = {}
         self._tx_order: list[int] = []                  # started nodes, the IMU's first, then by leg
         self.rpdo_of: dict[int, _Pdo] = {}              # COB-ID -> the RPDO it carries
         self.control = {leg: 0 for leg in self.valve_node}   # each valve's last control word
@@ -82,6 +85,8 @@ class CanopenNodes:
         says why on stderr) when they cannot be carried."""
         device, local = self.device[node], self.sdo.nodes[node]
         od, written = local.object_dictionary, written_values(local)
+        if node in self.tpdos and self._started_with.get(node) == written:
+            return True              # started as configured already: a repeated START changes nothing
         try:
             tpdos = [_Pdo(device, PdoCodec(pdo)) for pdo in pdo_maps(od, TPDO, device.name, written)]
             rpdos = [_Pdo(device, PdoCodec(pdo)) for pdo in pdo_maps(od, RPDO, device.name, written)]
@@ -90,6 +95,7 @@ class CanopenNodes:
             return False
         self._forget(node)
         self.tpdos[node] = tpdos
+        self._started_with[node] = written
         self._tx_order = sorted(self.tpdos, key=lambda n: (self.device[n].leg or 0, n))
         self.rpdo_of.update({pdo.codec.frame_id: pdo for pdo in rpdos})
         return True
@@ -97,6 +103,7 @@ class CanopenNodes:
     def _forget(self, node: int) -> None:
         """The node's PDOs as started no longer carried."""
         self.tpdos.pop(node, None)
+        self._started_with.pop(node, None)
         self._tx_order = [n for n in self._tx_order if n != node]
         for cob_id in [c for c, pdo in self.rpdo_of.items() if pdo.device.node == node]:
             del self.rpdo_of[cob_id]

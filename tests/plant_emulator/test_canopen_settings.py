@@ -84,6 +84,19 @@ def test_a_valves_rpdo_timeout_is_its_command_timeout_from_its_start(rig):
     assert emulator.sim.valves[0] is not valve and emulator.sim.valves[0].command_timeout_syncs == NO_COMMAND_TIMEOUT
 
 
+def test_a_repeated_start_keeps_the_compiled_pdos_until_something_is_written(rig):
+    # a master repeats its START until it hears OPERATIONAL; compiling the PDOs again each
+    # time starved the heartbeats of an emulator in a software-emulated VM
+    emulator, wire, _ = rig
+    _nmt(emulator, NmtCommand.START, VALVE)
+    started = emulator.canopen.tpdos[VALVE]
+    _nmt(emulator, NmtCommand.START, VALVE)
+    assert emulator.canopen.tpdos[VALVE] is started
+    assert _download(emulator, wire, VALVE, 0x1400, 5, 10, 2)[0] == 0x60
+    _nmt(emulator, NmtCommand.START, VALVE)
+    assert emulator.canopen.tpdos[VALVE] is not started and emulator.sim.valves[0].command_timeout_syncs == 5
+
+
 @pytest.mark.parametrize("index, sub, value, size, abort", [
     (0x6042, 0, 2, 1, 0x06090031),          # device mode: 1 only (setpoint by bus)
     (0x6043, 0, 0, 1, 0x06090032),          # control mode: 1 only (spool position)
