@@ -32,6 +32,8 @@ class Movement:
     force_n: np.ndarray
     yaw_rad: np.ndarray
     fault: str                                  # the fault that ended it, or "NONE"
+    planned_s: float = math.nan                 # its waypoints' timing, from the first
+    clock_lost_s: float = 0.0                   # what the online time scaling added to it (CTRL_CLOCK's RATE)
 
     @property
     def error_m(self) -> np.ndarray:
@@ -49,6 +51,11 @@ class Movement:
     def completed(self) -> bool:
         return self.fault == "NONE"
 
+    @property
+    def stretch(self) -> float:
+        """How much longer than its timing the movement took: 1 when its clock never slowed."""
+        return 1.0 + self.clock_lost_s / self.planned_s if self.planned_s > 0.0 else 1.0
+
 
 def movement(loop: InProcessLoop, motion: Motion) -> Movement:
     """The movement's waypoints queued as `hil run pm-*` sends them, run to SETTLE_S after
@@ -60,9 +67,11 @@ def movement(loop: InProcessLoop, motion: Motion) -> Movement:
             points.append((point, segment_time(motion, p, part[k], point), flags))
     record = {name: [] for name in ("truth", "reference", "spool", "force", "yaw")}
     status = loop.status
+    lost = [0.0]
 
     def step() -> bool:
         loop.cycle()
+        lost[0] += (1.0 - status.time_rate) * PERIOD_S
         position, quat = loop.rig.platform_pose()
         record["truth"].append(position.copy())
         record["yaw"].append(quat_yaw(quat))
@@ -74,11 +83,12 @@ def movement(loop: InProcessLoop, motion: Motion) -> Movement:
     for point, segment_s, flags in points:        # each acknowledged within a cycle, as over the bus
         if loop.send_waypoint(point, segment_s, motion.ta_s, flags) is not Ack.ACCEPTED:
             raise HostRefused(f"waypoint {np.round(np.asarray(point) * 1e3, 1)} mm refused")
-    for _ in range(int(round((sum(s for _, s, _ in points) + SETTLE_S) / PERIOD_S))):
-        if not step():
-            break
+    planned_s = sum(s for _, s, _ in points)
+    done = 0                                      # the clock's lost time lengthens the run: it ends played
+    while done * PERIOD_S < planned_s + lost[0] + SETTLE_S - 0.5 * PERIOD_S and step():
+        done += 1
     return Movement(*(np.array(record[k]) for k in ("truth", "reference", "spool", "force", "yaw")),
-                    status.fault.name if status.state is State.FAULT else "NONE")
+                    status.fault.name if status.state is State.FAULT else "NONE", planned_s, lost[0])
 
 
 def point_configs(payload_kg: float, supply_bar: float, computed_torque: dict | None = None,

@@ -6,7 +6,9 @@ envelope (a thesis movement, payload and supply declared), in process, emulator 
   opened, how long does a valve sit at its limit;
 - the fastest time scale at which the movement still completes within ERROR_BOUND_MM, the
   check opened: swept from P down (or up, where P itself misses) in STEP steps, and the
-  waypoint the controller refuses there (what pads the plan).
+  waypoint the controller refuses there (what pads the plan). A run's time scale is the one it
+  ran at: the one sent times its stretch, where the online time scaling slowed its clock (a
+  run sent faster than the legs give is slowed to what they give, not run at what was sent).
 
 Tight: P/TIGHT_FACTOR is refused or saturates, and P is within TIGHT_FACTOR of the fastest
 that completes (P <= TIGHT_FACTOR x fastest). A P faster than the fastest that completes is
@@ -40,9 +42,11 @@ class Tightness:
     faster_saturated_ms: float       # ... run anyway: how long a valve sat at its limit
     faster_error_mm: float           # ... and its largest error
     planned_error_mm: float          # the run at P, the check opened (as accepted)
-    fastest_scale: float             # the fastest that completes within the bound (NaN: none in range)
+    fastest_scale: float             # the fastest that completes within the bound, as run (NaN: none in range)
     fastest_error_mm: float
     refused_at: str = ""             # the waypoint the controller refuses at the fastest ("": accepts it)
+    fastest_sent: float = math.nan   # ... the time scale sent for it (its clock slowed: less than as run)
+    planned_stretch: float = 1.0     # how much longer than its timing the run at P took
 
     @property
     def ratio(self) -> float:
@@ -100,32 +104,38 @@ def tightness(movement: str, payload_kg: float, supply_bar: float, seed: int = 7
     at_limit = np.any(np.abs(fast_run.spool) >= SATURATED * cfg.limits.spool_max, axis=1)
     saturated_ms = float(np.sum(at_limit)) * PERIOD_S * 1e3
     at_plan = run(planned)
-    fastest, fastest_mm = math.nan, math.nan
+    fastest, fastest_mm, sent = math.nan, math.nan, math.nan
+
+    def take(r, scale) -> None:
+        nonlocal fastest, fastest_mm, sent
+        if not scale * r.stretch >= fastest:         # as run; NaN: the first
+            fastest, fastest_mm, sent = scale * r.stretch, largest_mm(r), scale
+
     if _passes(at_plan):                               # down from P while it completes within the bound
-        fastest, fastest_mm = planned, largest_mm(at_plan)
+        take(at_plan, planned)
         k = 1
         while planned * (1.0 - k * STEP) >= SWEEP_RANGE[0] * planned:
             scale = planned * (1.0 - k * STEP)
             r = run(scale)
             if not _passes(r):
                 break
-            fastest, fastest_mm = scale, largest_mm(r)
+            take(r, scale)
             k += 1
     else:                                              # up from P to the first that completes
         k = 1
         while planned * (1.0 + k * STEP) <= SWEEP_RANGE[1] * planned:
             r = run(planned * (1.0 + k * STEP))
             if _passes(r):
-                fastest, fastest_mm = planned * (1.0 + k * STEP), largest_mm(r)
+                take(r, planned * (1.0 + k * STEP))
                 break
             k += 1
     refused_at = ""
-    if math.isfinite(fastest):
-        result, seq, position_m, _ = commit_all(cfg, motion.scaled(fastest))
+    if math.isfinite(sent):
+        result, seq, position_m, _ = commit_all(cfg, motion.scaled(sent))
         if result is not Ack.ACCEPTED:
             refused_at = f"{seq + 1} ({', '.join(f'{v:.0f}' for v in position_m * 1e3)})"
     return Tightness(movement, payload_kg, supply_bar, planned, refused, saturated_ms, largest_mm(fast_run),
-                     largest_mm(at_plan), fastest, fastest_mm, refused_at)
+                     largest_mm(at_plan), fastest, fastest_mm, refused_at, sent, at_plan.stretch)
 
 
 def _job(args) -> Tightness:
@@ -142,15 +152,17 @@ def sweep_tightness(movements, payloads_kg, supplies_bar, seed: int = 7, workers
 
 def format_tightness(rows: list[Tightness]) -> str:
     lines = [f"movement  kg   bar  plan   x{TIGHT_FACTOR:.2f} faster: refused  saturated ms  error mm   "
-             f"at plan mm  fastest <= {ERROR_BOUND_MM:g} mm (error)  plan/fastest  tight  refused there: waypoint (mm)"]
+             f"at plan mm (as run)  fastest <= {ERROR_BOUND_MM:g} mm as run (error; sent)  plan/fastest  tight  "
+             f"refused there: waypoint (mm)"]
     for r in rows:
         if not math.isfinite(r.planned_scale):
             lines.append(f"{r.movement:<9} {r.payload_kg:<4g} {r.supply_bar:<4g} no timing fits")
             continue
-        fastest = f"{r.fastest_scale:.2f} ({r.fastest_error_mm:.1f})" if math.isfinite(r.fastest_scale) else "none"
+        fastest = (f"{r.fastest_scale:.2f} ({r.fastest_error_mm:.1f}; sent {r.fastest_sent:.2f})"
+                   if math.isfinite(r.fastest_scale) else "none")
         lines.append(f"{r.movement:<9} {r.payload_kg:<4g} {r.supply_bar:<4g} {r.planned_scale:4.2f}   "
                      f"{'yes' if r.faster_refused else 'no':>21}  {r.faster_saturated_ms:12.0f}  "
-                     f"{r.faster_error_mm:8.1f}   {r.planned_error_mm:10.1f}  {fastest:>22}  "
+                     f"{r.faster_error_mm:8.1f}   {r.planned_error_mm:5.1f} (x{r.planned_stretch:.2f})  {fastest:>34}  "
                      f"{r.ratio:12.2f}  {'yes' if r.tight else 'no ':<5}  {r.refused_at or '-'}")
     tight = sum(r.tight for r in rows)
     lines.append(f"tight at {tight} of {len(rows)} points")

@@ -6,10 +6,13 @@ docs/MEASUREMENTS.md's; bad arguments: tests/project/test_cli_error_paths.py."""
 import json
 import math
 
+import numpy as np
 import pytest
 
 from hil.cli import main
-from hil.design.tightness import TIGHT_FACTOR, Tightness
+from hil.design.simulate import SETTLE_S, point_configs, thesis_motions
+from hil.design.tightness import TIGHT_FACTOR, Tightness, opened_run
+from hil.in_process import PERIOD_S
 
 
 def _row(planned, fastest, refused=True, saturated_ms=0.0):
@@ -34,3 +37,18 @@ def test_the_circle_at_40_bar_is_planned_tight(capsys):
     assert row["planned_error_mm"] <= 10.0
     assert 1.0 <= row["ratio"] <= TIGHT_FACTOR and row["tight"]
     assert row["refused_at"].startswith("2 (173, 100, 631)")     # faster, the circle's first segment refuses
+
+
+@pytest.mark.slow                       # in process: one emulated movement
+def test_a_run_whose_clock_slows_is_played_to_its_end_and_counted_as_run():
+    # the diagonal at 0.8 x its timing with 0 kg at 40 bar, the check opened: the valves draw
+    # the accumulator down to the time scaling's share and the clock slows (1.8 s lost here)
+    cfg, emulator = point_configs(0.0, 40.0)
+    motion = thesis_motions()["diagonal"]
+    run = opened_run(cfg, emulator, motion, 0.0, 0.8)
+    assert run.completed and run.clock_lost_s > 0.5
+    assert run.stretch == pytest.approx(1.0 + run.clock_lost_s / run.planned_s) and 0.8 * run.stretch > 1.0
+    # recorded until SETTLE_S after the reference has played its last point, not its timing's end
+    assert len(run.reference_m) * PERIOD_S == pytest.approx(run.planned_s + run.clock_lost_s + SETTLE_S,
+                                                             abs=2 * PERIOD_S)
+    assert np.allclose(run.reference_m[-1], motion.parts[-1][-1], atol=1e-4)
