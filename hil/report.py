@@ -30,6 +30,7 @@ def write_outputs(scenario: Scenario, log: LogData, out: Path, extra: dict, rate
                 "lost_by_message": log.lost, "unknown_frames": log.unknown_frames, "rx_status": log.rx_counts},
         "ctrl_status_timing": timing,
         "figures": [f.file for f in analysis.figures],
+        "rate_hz": rate_hz,
         **extra,
     }
     (out / "metrics.json").write_text(json.dumps(doc, indent=1, default=_plain))

@@ -393,7 +393,7 @@ def run_scenario(scenario: Scenario, options: RunOptions) -> dict:
     if diverged:
         failure = (failure + "\n" if failure else "") + diverged
     doc = write_outputs(scenario, log, out, extra={
-        "bus": str(spec), "pacing": pacing, "rate_hz": options.rate_hz, "devices": options.devices,
+        "bus": str(spec), "pacing": pacing, "devices": options.devices,
         "short": options.short,
         "wall_time_s": round(wall_s, 1), "frames_sent_by_host": run.host.frames_sent,
         "frames_received_by_host": run.host.frames_received, "notes": run.notes,
@@ -431,5 +431,5 @@ def analyze_log(scenario: Scenario, log_path: Path, out: Path, devices: str = "h
     `rate_hz`."""
     log = read_log(log_path, devices)
     output_dir(out)
-    return write_outputs(scenario, log, out, extra={"analysed_log": str(log_path), "rate_hz": rate_hz}, rate_hz=rate_hz)
+    return write_outputs(scenario, log, out, extra={"analysed_log": str(log_path)}, rate_hz=rate_hz)
 

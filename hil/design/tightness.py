@@ -107,9 +107,11 @@ def tightness(movement: str, payload_kg: float, supply_bar: float, seed: int = 7
     fastest, fastest_mm, sent = math.nan, math.nan, math.nan
 
     def take(r, scale) -> None:
+        """Keep the run if it ran faster than the fastest so far (its timing as run)."""
         nonlocal fastest, fastest_mm, sent
-        if not scale * r.stretch >= fastest:         # as run; NaN: the first
-            fastest, fastest_mm, sent = scale * r.stretch, largest_mm(r), scale
+        as_run = scale * r.stretch
+        if math.isnan(fastest) or as_run < fastest:
+            fastest, fastest_mm, sent = as_run, largest_mm(r), scale
 
     if _passes(at_plan):                               # down from P while it completes within the bound
         take(at_plan, planned)
