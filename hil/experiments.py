@@ -38,10 +38,12 @@ class Motion:
     ta_s: float
     tm_s: float
     description: str
+    time_scale: float = 1.0            # x the thesis's timing (the approach's speed scales with it)
 
     def scaled(self, time_scale: float) -> Motion:
-        """The same movement `time_scale` times slower (ta and tm scaled)."""
-        return replace(self, ta_s=self.ta_s * time_scale, tm_s=self.tm_s * time_scale)
+        """The same movement `time_scale` times slower (ta, tm and the approach scaled)."""
+        return replace(self, ta_s=self.ta_s * time_scale, tm_s=self.tm_s * time_scale,
+                       time_scale=self.time_scale * time_scale)
 
     def waypoints(self) -> np.ndarray:
         return np.concatenate([self.parts[0][:1]] + [part[1:] for part in self.parts])
@@ -154,11 +156,12 @@ def on_the_wire(position_m, segment_time_s: float, accel_time_s: float, flags: i
 
 def segment_time(motion: Motion, part: int, start, end) -> float:
     """The thesis's tm, except the approach from home (part 0), whose timing the thesis does
-    not give: at APPROACH_SPEED_M_S (0.25 s for 200 mm asks more than the actuators give)."""
+    not give: at APPROACH_SPEED_M_S at the thesis's timing (0.25 s for 200 mm asks more than
+    the actuators give), scaled with the rest, so a time scale slows every part alike."""
     if part > 0:
         return motion.tm_s
     distance = float(np.linalg.norm(np.asarray(end) - np.asarray(start)))
-    return round(max(motion.tm_s, distance / APPROACH_SPEED_M_S), 3)
+    return round(max(motion.tm_s, motion.time_scale * distance / APPROACH_SPEED_M_S), 3)
 
 
 # -- the test bench's sine (chapter 7.6.2) ----------------------------------------------------

@@ -14,7 +14,8 @@ its set pressure (`SupplyBudget`: the oil that gives, `physics.power_unit`).
 
 The judgement is the lag a force shortfall leaves: where a leg needs more than its share,
 the missing force over its joint-space inertia accelerates the leg behind its reference;
-where it has spare force, that spare brings the lag's rate back to zero. A brief peak (the
+where it has spare force, that spare brings the lag's rate back to zero, after the chain's
+end with the spare its last pose leaves. A brief peak (the
 SLS's 50 ms acceleration) leaves a fraction of a millimetre; a sustained one (a payload's
 weight at speed) grows without bound. What is left at a chain's end is where a chain that
 starts as it ends starts from (turning back at a corner asks the same force direction on
@@ -189,6 +190,14 @@ def shortfall_lag(capacity: LegCapacity, loads: Loads, scale: float, share: floa
     excess = np.where(force >= 0.0, force - push, pull - force)
     worst, at, leg = lag_of(excess, force, loads.inertia_kg, loads.dt_s * scale, loads.to_platform,
                             loads.angle_weight, state)
+    # holding the last pose: what its weight leaves each leg toward the force it lacked
+    push_rest, pull_rest = capacity.limits(np.zeros_like(velocity[-1]))
+    held = loads.static_n[-1]
+    spare = np.where(state[LAG_DIRECTION] > 0.0, share * push_rest - held, held - share * pull_rest)
+    settled, settled_leg = settled_lag(spare, loads.inertia_kg[-1], loads.to_platform[-1:], loads.angle_weight,
+                                       state)
+    if settled > worst:
+        worst, at, leg = settled, excess.shape[0] - 1, settled_leg
     return worst, at, leg, state
 
 
@@ -211,27 +220,50 @@ def lag_of(excess_n, force_n, inertia_kg, dt_s, to_platform, angle_weight, state
                 direction[leg] = 1.0 if force_n[k, leg] >= 0.0 else -1.0
             rate[leg] = max(rate[leg] + excess_n[k, leg] / inertia_kg[k, leg] * dt_s, 0.0)
             lag[leg] = lag[leg] + rate[leg] * dt_s if rate[leg] > 0.0 else 0.0
-        error, largest = 0.0, 0
-        for leg in range(legs):
-            if lag[leg] > lag[largest]:
-                largest = leg
-        if to_platform.shape[0] == 0:
-            error = lag[largest]
-        else:
-            position = angle = 0.0
-            for axis in range(6):
-                component = 0.0
-                for leg in range(legs):
-                    component += to_platform[k, axis, leg] * direction[leg] * lag[leg]
-                if axis < 3:
-                    position += component * component
-                else:
-                    angle += component * component
-            error = max(math.sqrt(position), angle_weight * math.sqrt(angle))
+        error, largest = lags_error(to_platform, k, angle_weight, direction, lag)
         if error > worst:
             worst, at, leg_at = error, k, largest
     state[0, :], state[1, :], state[2, :] = rate, lag, direction
     return worst, at, leg_at
+
+
+@njit(cache=True)
+def lags_error(to_platform, k, angle_weight, direction, lag):
+    """(the error the legs' lags make at sample k, the leg lagging most): `lag_of`'s."""
+    legs = lag.shape[0]
+    largest = 0
+    for leg in range(legs):
+        if lag[leg] > lag[largest]:
+            largest = leg
+    if to_platform.shape[0] == 0:
+        return lag[largest], largest
+    position = angle = 0.0
+    for axis in range(6):
+        component = 0.0
+        for leg in range(legs):
+            component += to_platform[k, axis, leg] * direction[leg] * lag[leg]
+        if axis < 3:
+            position += component * component
+        else:
+            angle += component * component
+    return max(math.sqrt(position), angle_weight * math.sqrt(angle)), largest
+
+
+@njit(cache=True)
+def settled_lag(spare_n, inertia_kg, to_platform, angle_weight, state):
+    """(the error, the leg lagging most) once the legs have stopped falling behind after the
+    chain's end, holding its last pose: a leg still losing ground there (rate > 0) is brought
+    back only by the spare its share leaves over that pose's weight toward the force it lacked
+    (`spare_n`), adding rate^2 / (2 spare / inertia) to its lag (each leg at its most at once:
+    an upper bound); inf where it has none. A pose held near a leg's limit leaves it almost
+    nothing to stop a lag with. `state` is not changed."""
+    rate, lag, direction = state[0], state[1].copy(), state[2]
+    for leg in range(lag.shape[0]):
+        if rate[leg] > 0.0:
+            if spare_n[leg] <= 0.0:
+                return math.inf, leg
+            lag[leg] += rate[leg] * rate[leg] * inertia_kg[leg] / (2.0 * spare_n[leg])
+    return lags_error(to_platform, 0, angle_weight, direction, lag)
 
 
 def supply_deficit(capacity: LegCapacity, loads: Loads, scale: float, share: float,

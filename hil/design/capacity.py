@@ -101,7 +101,7 @@ def commit_all(cfg: ControllerConfig, motion: Motion, rig: HexapodModel | None =
 def plan(cfg: ControllerConfig, motion: Motion) -> Plan:
     """The smallest time scale on `motion`'s ta and tm (its approach from home included)
     whose waypoints the controller's queue accepts, all of them, with `cfg` as declared, at
-    PLAN_MARGIN faster, and no faster than the whole movement's `movement_floor`."""
+    it and at PLAN_MARGIN faster, and no faster than the whole movement's `movement_floor`."""
     rig = HexapodModel(cfg, PERIOD_S)
     low, high = PLAN_SCALES
     floor = movement_floor(cfg, motion)
@@ -110,6 +110,8 @@ def plan(cfg: ControllerConfig, motion: Motion) -> Plan:
         scale = math.ceil(floor * 100.0) / 100.0
     for rounds in range(PLAN_ROUNDS):
         result, seq, position_m, needed = commit_all(cfg, motion.scaled(scale / PLAN_MARGIN), rig)
+        if result is Ack.ACCEPTED:           # near its edge the check is not monotonic: the timing sent too
+            result, seq, position_m, needed = commit_all(cfg, motion.scaled(scale), rig)
         if result is Ack.ACCEPTED:
             return Plan(scale, rounds, "")
         reason = (f"waypoint {seq + 1} ({np.round(position_m * 1e3, 1).tolist()} mm) {result.name}"

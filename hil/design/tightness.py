@@ -10,9 +10,10 @@ envelope (a thesis movement, payload and supply declared), in process, emulator 
   ran at: the one sent times its stretch, where the online time scaling slowed its clock (a
   run sent faster than the legs give is slowed to what they give, not run at what was sent).
 
-Tight: P/TIGHT_FACTOR is refused or saturates, and P is within TIGHT_FACTOR of the fastest
-that completes (P <= TIGHT_FACTOR x fastest). A P faster than the fastest that completes is
-the check's optimism; a P more than TIGHT_FACTOR slower, its padding. "The check opened":
+Tight: P/TIGHT_FACTOR is refused or saturates, the run at P completes within the bound, and
+P is within TIGHT_FACTOR of the fastest that completes, either way. P below the fastest is the
+check's optimism (the run at P completes only because its clock slows: `planned_stretch`); P
+more than TIGHT_FACTOR above, its padding. "The check opened":
 the controller's own waypoint check with legs of unbounded force and an ideal supply (the
 workspace, singularity and speed checks stay); the online time scaling stays on.
 """
@@ -47,6 +48,7 @@ class Tightness:
     refused_at: str = ""             # the waypoint the controller refuses at the fastest ("": accepts it)
     fastest_sent: float = math.nan   # ... the time scale sent for it (its clock slowed: less than as run)
     planned_stretch: float = 1.0     # how much longer than its timing the run at P took
+    planned_completes: bool = True   # the run at P completes within ERROR_BOUND_MM
 
     @property
     def ratio(self) -> float:
@@ -56,7 +58,7 @@ class Tightness:
     @property
     def tight(self) -> bool:
         exceeds = self.faster_refused or self.faster_saturated_ms > 0.0
-        return exceeds and 1.0 <= self.ratio <= TIGHT_FACTOR
+        return exceeds and self.planned_completes and 1.0 / TIGHT_FACTOR <= self.ratio <= TIGHT_FACTOR
 
     def as_dict(self) -> dict:
         out = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in self.__dict__.items()}
@@ -113,7 +115,8 @@ def tightness(movement: str, payload_kg: float, supply_bar: float, seed: int = 7
         if math.isnan(fastest) or as_run < fastest:
             fastest, fastest_mm, sent = as_run, largest_mm(r), scale
 
-    if _passes(at_plan):                               # down from P while it completes within the bound
+    planned_completes = _passes(at_plan)
+    if planned_completes:                              # down from P while it completes within the bound
         take(at_plan, planned)
         k = 1
         while planned * (1.0 - k * STEP) >= SWEEP_RANGE[0] * planned:
@@ -137,7 +140,8 @@ def tightness(movement: str, payload_kg: float, supply_bar: float, seed: int = 7
         if result is not Ack.ACCEPTED:
             refused_at = f"{seq + 1} ({', '.join(f'{v:.0f}' for v in position_m * 1e3)})"
     return Tightness(movement, payload_kg, supply_bar, planned, refused, saturated_ms, largest_mm(fast_run),
-                     largest_mm(at_plan), fastest, fastest_mm, refused_at, sent, at_plan.stretch)
+                     largest_mm(at_plan), fastest, fastest_mm, refused_at, sent, at_plan.stretch,
+                     planned_completes)
 
 
 def _job(args) -> Tightness:

@@ -15,8 +15,9 @@ from hil.design.tightness import TIGHT_FACTOR, Tightness, opened_run
 from hil.in_process import PERIOD_S
 
 
-def _row(planned, fastest, refused=True, saturated_ms=0.0):
-    return Tightness("circle", 0.0, 25.0, planned, refused, saturated_ms, 12.0, 4.0, fastest, 9.0)
+def _row(planned, fastest, refused=True, saturated_ms=0.0, completes=True):
+    return Tightness("circle", 0.0, 25.0, planned, refused, saturated_ms, 12.0, 4.0, fastest, 9.0,
+                     planned_completes=completes)
 
 
 def test_tight_needs_the_faster_timing_to_exceed_and_the_plan_near_the_fastest():
@@ -24,7 +25,9 @@ def test_tight_needs_the_faster_timing_to_exceed_and_the_plan_near_the_fastest()
     assert _row(1.0, 0.9, refused=False, saturated_ms=4.0).tight        # accepted, but a valve at its limit
     assert not _row(1.0, 0.9, refused=False).tight                      # 15 % faster neither refused nor limited
     assert not _row(1.0, 1.0 / (TIGHT_FACTOR + 0.01)).tight              # padded
-    assert not _row(1.0, 1.05).tight                                    # optimistic: the plan misses the bound
+    assert _row(1.0, 1.05).tight                                        # the run at P slowed by its clock, within 15 %
+    assert not _row(1.0, 1.05, completes=False).tight                   # optimistic: the run at P misses the bound
+    assert not _row(1.0, TIGHT_FACTOR + 0.01).tight                     # optimistic beyond 15 %
     assert math.isnan(_row(math.nan, math.nan).ratio)
 
 
