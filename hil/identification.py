@@ -99,19 +99,76 @@ def low_pass(x: np.ndarray, cutoff_hz: float, rate_hz: float) -> np.ndarray:
     return signal.sosfiltfilt(sos, x)
 
 
-def motion_parameters(y_m: np.ndarray, pl_pa: np.ndarray, area_m2: float, period_s: float,
-                      cutoff_hz: float) -> dict | None:
-    """m [kg], sigma [N s/m], Fe [N] from A PL = m y'' + sigma y' + Fe (eq. 5.6-5.7)."""
+def force_terms(y_m: np.ndarray, pl_pa: np.ndarray, area_m2: float, period_s: float,
+                cutoff_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Eq. 5.6's measured terms through the zero-phase low-pass: (A PL [N], y' [m/s], y''
+    [m/s^2]); None for a record too short or with gaps."""
     if len(y_m) < 20 or not (np.all(np.isfinite(y_m)) and np.all(np.isfinite(pl_pa))):
         return None
     rate = 1.0 / period_s
-    yf = low_pass(y_m, cutoff_hz, rate)
-    force = area_m2 * low_pass(pl_pa, cutoff_hz, rate)
-    velocity = np.gradient(yf, period_s)
-    accel = np.gradient(velocity, period_s)
-    a = np.column_stack([accel, velocity, np.ones_like(yf)])
+    velocity = np.gradient(low_pass(y_m, cutoff_hz, rate), period_s)
+    return area_m2 * low_pass(pl_pa, cutoff_hz, rate), velocity, np.gradient(velocity, period_s)
+
+
+def motion_parameters(terms: tuple | None) -> dict | None:
+    """m [kg], sigma [N s/m], Fe [N] from A PL = m y'' + sigma y' + Fe (eq. 5.6-5.7) on
+    `force_terms`."""
+    if terms is None:
+        return None
+    force, velocity, accel = terms
+    a = np.column_stack([accel, velocity, np.ones_like(force)])
     (m, sigma, fe), *_ = np.linalg.lstsq(a, force, rcond=None)             # eq. 5.7
     return {"m": float(m), "sigma": float(sigma), "fe": float(fe)}
+
+
+def load_change(terms: tuple, mass_kg: float, sigma_ns_m: float, rest: int) -> np.ndarray:
+    """delta Fe [N] of eq. 5.6 over a window: Fe = A PL - m y'' - sigma y' on `force_terms`,
+    less its mean over the first `rest` samples (at rest before the change); the samples after."""
+    force, velocity, accel = terms
+    fe = force - mass_kg * accel - sigma_ns_m * velocity
+    return fe[rest:] - float(np.mean(fe[:rest]))
+
+
+def complete_response(plant: dict, k_v_m: float, mass_kg: float, sigma_ns_m: float, area_m2: float,
+                      t_s: np.ndarray, step_m: float, load_n: np.ndarray, delay_s: float) -> np.ndarray:
+    """Eq. 5.11 under u = K e: the output change [m] a reference step of `step_m` and the load's
+    change `load_n` [N] (on `t_s`) drive, G(s) = `plant` (b0, b1, k01 in SI) and the load's path
+    from the sensibilities of `plant`, m, sigma (eq. 5.8-5.10): -k02 b0 (s + z0) /
+    (s^3 + b1 s^2 + b0 s + K k01 b0)."""
+    from scipy import signal
+    path = complete_model(*sensibilities(plant["b0"], plant["b1"], plant["k01"], mass_kg, sigma_ns_m, area_m2),
+                          mass_kg, sigma_ns_m, area_m2)
+    n0, a2, a1, a0 = closed_loop_of(plant, k_v_m)
+    gain = -path["k02"] * plant["b0"]
+    _, load, _ = signal.lsim(signal.lti([gain, gain * path["z0"]], [1.0, a2, a1, a0]), load_n, t_s)
+    return step_m * closed_loop_step(n0, a2, a1, a0, t_s, delay_s) + load
+
+
+def complete_fits(plant: dict, mass_kg: float, sigma_ns_m: float, area_m2: float, windows: list[dict],
+                  delay_s: float) -> np.ndarray:
+    """Eq. 5.12 of the complete model on each window (keys t, dy, step_m, k_v_m, load_n)."""
+    return np.array([fit_index(w["dy"], complete_response(plant, w["k_v_m"], mass_kg, sigma_ns_m, area_m2, w["t"],
+                                                          w["step_m"], w["load_n"], delay_s)) for w in windows])
+
+
+def refine_complete(plant: dict, mass_kg: float, sigma_ns_m: float, area_m2: float, windows: list[dict],
+                    delay_s: float, iterations: int = 300) -> dict:
+    """Chapter 5.2.4's refinement: Kx, Kd, Kp changed to maximise eq. 5.12 of the complete model
+    over `windows` (their mean), from the ones `plant` gives. With m and sigma held, eq.
+    5.8-5.10 map Kx, Kd, Kp one to one onto b0, b1, k01: those are searched (Nelder-Mead on
+    their logarithms); the refined G(s) is returned."""
+    from scipy.optimize import minimize
+
+    def plant_of(q):
+        b0, b1, k01 = np.exp(q)
+        return {"b0": float(b0), "b1": float(b1), "k01": float(k01)}
+
+    def cost(q):
+        return -float(np.mean(complete_fits(plant_of(q), mass_kg, sigma_ns_m, area_m2, windows, delay_s)))
+    start = np.log([plant["b0"], plant["b1"], plant["k01"]])
+    result = minimize(cost, start, method="Nelder-Mead", options={"maxiter": iterations, "xatol": 1e-3,
+                                                                  "fatol": 1e-5})
+    return plant_of(result.x)
 
 
 def sensibilities(b0: float, b1: float, k01: float, mass_kg: float, sigma_ns_m: float,

@@ -215,6 +215,9 @@ SCENARIO_RUNS = {
         == {(p, load, (0.25, 0.3)) for p in (60.0, 210.0) for load in (0.0, 6.0)}
         and all(r["sensibilities"]["kx"] > 0 and r["sensibilities"]["kd"] > 0 and r["sensibilities"]["kp"] < 0
                 and r["emulator"]["kx"] > 0 for r in m["points"])
+        # chapter 5.2.4's refinement on the complete model, every window judged against G(s) alone
+        and all(r["complete"]["windows"] == r["windows"] and 0 <= r["complete"]["at_least_g"] <= r["windows"]
+                and r["complete"]["kx"] > 0 for r in m["points"])
         # Fig. 5.10's table per load (two set points: no interior point to judge)
         and set(m["scheduled"]["loads"]) == {"0", "6"} and m["scheduled"]["left_out"] == [])),
 }
