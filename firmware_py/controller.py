@@ -250,6 +250,9 @@ class Controller:
     def host_command(self, command: int, argument: int) -> Ack:
         if self.reinitialise and command in MOTION_COMMANDS:
             return Ack.BAD_STATE             # after RESET: not before every sensor has reported again
+        if (command == Command.ENABLE and self.sup.state is State.IDLE
+                and not self.rig.check.holds(self.meas.position_m, float(self.joint.mass_kg[0]))):
+            return Ack.BEYOND_CAPACITY       # the valves stay in HOLD: sealed, they hold beyond the supply
         result = self.sup.command(command, argument)
         if result is Ack.ACCEPTED:
             self._do_action()

@@ -37,6 +37,11 @@ class HostError(RuntimeError):
     """The run cannot go on: no bus traffic, a refused command, a state never reached."""
 
 
+class PlatformNotHeld(HostError):
+    """ENABLE refused BEYOND_CAPACITY: the legs cannot hold the platform where it is; its
+    valves stay in HOLD and nothing more can move it."""
+
+
 class WaypointRefused(HostError):
     """A waypoint the controller refused (`result`; BEYOND_CAPACITY: `time_scale` fits)."""
 

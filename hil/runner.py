@@ -19,7 +19,7 @@ from pathlib import Path
 
 from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
 from hil.experiments import PLANNED_TIME_SCALES
-from hil.host import Host, HostError
+from hil.host import Host, HostError, PlatformNotHeld
 from hil.logdata import read_log
 from hil.metrics import faults_in_windows
 from hil.processes import Child, ChildFailed, describe_status
@@ -303,6 +303,9 @@ class Run:
             result = self.host.command(Command.ENABLE, expect_ok=False)
             if result is Ack.ACCEPTED:
                 return
+            if result is Ack.BEYOND_CAPACITY:
+                raise PlatformNotHeld("HOST_CMD ENABLE refused: BEYOND_CAPACITY (the legs cannot hold the platform "
+                                      "where it is; its valves stay in HOLD)")
             if result is not Ack.BAD_STATE or self.host.state is not State.IDLE or time.monotonic() > give_up:
                 raise HostError(f"HOST_CMD ENABLE refused: {result.name} (state "
                                 f"{self.host.state.name if self.host.state else None})")

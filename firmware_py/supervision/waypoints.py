@@ -30,6 +30,7 @@ KNOWN_FLAGS = int(sum(WaypointFlag))         # other FLAGS bits are reserved and
 SAMPLES_PER_ACCEL = 8                        # the capacity check's samples per SLS acceleration time
 PATH_POSES_PER_STAGE = 3                     # a staged commit checks this many poses of the path a stage
 TURN_BACK_COS = -0.5                         # a chain turns back from the one before it: beyond 120 deg
+HOLD_S = 0.01                                # ENABLE's hold judged over this (static: any length)
 
 
 @dataclass
@@ -60,6 +61,12 @@ class TestbenchCheck:
         self.waypoints, self.margin_m, self.moving_mass_kg, self.stroke_m = (waypoints, stroke_margin_m,
                                                                              moving_mass_kg, stroke_m)
         self.capacity = capacity
+
+    def holds(self, strokes, load_kg: float) -> bool:
+        """The leg holds its slide and load at rest (the full range at rest: nothing moves)."""
+        loads = leg_loads(hold_at(np.asarray(strokes, float), HOLD_S), 0.0, HOLD_S, HOLD_S,
+                          self.moving_mass_kg + load_kg, GRAVITY_M_S2)
+        return holds(self.capacity, loads)
 
     def stages(self, chain: Chain, pos, rot, step: bool, load_kg: float) -> Stages[tuple]:
         """One stage: the bench's check is cheap."""
@@ -100,6 +107,15 @@ class HexapodCheck:
 
     def __call__(self, chain: Chain, pos, rot, step: bool, load_kg: float):
         return at_once(self.stages(chain, pos, rot, step, load_kg))
+
+    def holds(self, strokes, load_kg: float) -> bool:
+        """The legs hold the platform at rest at `strokes` with the payload the check knows
+        (its estimate); a pose it cannot place (DK lost, singular) is left to those checks."""
+        try:
+            loads = self.loads.loads(hold_at(np.asarray(strokes, float), HOLD_S), 0.0, HOLD_S, HOLD_S)
+        except ValueError:
+            return True
+        return holds(self.capacity, loads)
 
     def stages(self, chain: Chain, pos, rot, step: bool, load_kg: float) -> Stages[tuple]:
         from firmware_py.mechanics.rotation import rpy_to_quat
@@ -143,6 +159,12 @@ class HexapodCheck:
         yield
         return (yield from capacity_verdict_stages(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3,
                                                    chain.carried_lag(strokes)))
+
+
+def holds(capacity: LegCapacity, loads) -> bool:
+    """Every leg's static force at the hold's last sample within what it gives at rest (the
+    whole range: holding leaves nothing to move; the sealed valves of HOLD hold more)."""
+    return bool(np.all(capacity.utilisation(loads.static_n[-1], np.zeros(loads.static_n.shape[1])) <= 1.0))
 
 
 def capacity_verdict_stages(waypoints: Waypoints, capacity: LegCapacity, loads, strokes,

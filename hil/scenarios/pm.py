@@ -22,7 +22,7 @@ from hil.experiments import (
     diagonal_motion,
     movement_waypoints,
 )
-from hil.host import HostError
+from hil.host import HostError, PlatformNotHeld
 from hil.logdata import LogData
 from hil.metrics import iae, split_faults
 from hil.plotting import plt, save
@@ -61,6 +61,7 @@ class PlatformMovement(Scenario):
     # both movements at 2: docs/MEASUREMENTS.md "Hexapod gains")
     time_scale = 1.0
     time_scalable = True
+    platform_lost = False            # a thesis controller left it where the legs cannot hold it
     retime_on_refusal = False        # `--time-scale auto`: a refusal's TIME_SCALE is taken
 
     @abstractmethod
@@ -72,7 +73,11 @@ class PlatformMovement(Scenario):
         return self.thesis_motion().scaled(self.time_scale)
 
     def script(self, run) -> None:
+        self.platform_lost = False
         for controller in self.chosen(run):
+            if self.platform_lost:
+                run.notes.append(f"{controller}: not run (the platform is where the legs cannot hold it)")
+                continue
             run.select(controller)
             for attempt in range(1, MAX_ATTEMPTS + 1):
                 try:
@@ -93,10 +98,17 @@ class PlatformMovement(Scenario):
                     continue
                 if controller not in THESIS_CONTROLLERS:
                     raise error
+                try:
+                    run.recover_from_fault()
+                except PlatformNotHeld as lost:
+                    run.notes.append(f"{controller}: fault {fault} during the movement at {self.time_scale:g} x the "
+                                     f"thesis's timing, the platform left where the legs cannot hold it ({lost}): "
+                                     f"its figures are of the part before; the run ends there")
+                    self.platform_lost = True
+                    break
                 run.notes.append(f"{controller}: fault {fault} during the movement at {self.time_scale:g} x the "
                                  f"thesis's timing: its figures are of the part before; recovered, the next "
                                  f"controller runs")
-                run.recover_from_fault()
                 break
 
     def configure_for(self, controllers: tuple[str, ...]) -> str | None:
