@@ -100,15 +100,12 @@ class PlatformMovement(Scenario):
                     raise error
                 try:
                     run.recover_from_fault()
+                    after = "recovered, the next controller runs"
                 except PlatformNotHeld as lost:
-                    run.notes.append(f"{controller}: fault {fault} during the movement at {self.time_scale:g} x the "
-                                     f"thesis's timing, the platform left where the legs cannot hold it ({lost}): "
-                                     f"its figures are of the part before; the run ends there")
+                    after = f"the platform is where the legs cannot hold it ({lost}): the run ends there"
                     self.platform_lost = True
-                    break
                 run.notes.append(f"{controller}: fault {fault} during the movement at {self.time_scale:g} x the "
-                                 f"thesis's timing: its figures are of the part before; recovered, the next "
-                                 f"controller runs")
+                                 f"thesis's timing: its figures are of the part before; {after}")
                 break
 
     def configure_for(self, controllers: tuple[str, ...]) -> str | None:

@@ -469,12 +469,11 @@ def refined_chain(plant: dict, windows: list[dict], mass_kg: float, sigma_ns_m: 
     window's load change the residual of eq. 5.6 (what m, sigma and the chambers' force leave),
     Kx, Kd, Kp refined by eq. 5.12 over the point's windows; its constants and each window's
     fit against G(s) alone (None: no window with its force terms)."""
-    usable = [w for w in windows if w["force_terms"] is not None]
+    rest = int(round(PRE_S / period))
+    usable = [w | {"load_n": ident.load_change(w["force_terms"], mass_kg, sigma_ns_m, rest)}
+              for w in windows if w["force_terms"] is not None]
     if not usable:
         return None
-    rest = int(round(PRE_S / period))
-    for w in usable:
-        w["load_n"] = ident.load_change(w["force_terms"], mass_kg, sigma_ns_m, rest)
     alone = window_fits(plant, usable, period)
     refined = ident.refine_complete(plant, mass_kg, sigma_ns_m, area_m2, usable, DELAY_PERIODS * period)
     fits = ident.complete_fits(refined, mass_kg, sigma_ns_m, area_m2, usable, DELAY_PERIODS * period)
