@@ -48,7 +48,7 @@ from physics import hydraulics as hy
 from physics.actuator import piston_force
 from physics.constants import BAR
 from protocol.dbc import signal_scale
-from protocol.enums import Ack, Command, Fault, State, TestMode, ValveState, WaypointFlag
+from protocol.enums import Ack, Command, Fault, State, TestMode, ValveState
 from protocol.interfaces import Measurements, ValveCommands
 
 MOTION_COMMANDS = (Command.ENABLE, Command.HOME, Command.PARK, Command.START)
@@ -253,6 +253,8 @@ class Controller:
         if (command == Command.ENABLE and self.sup.state is State.IDLE
                 and not self.rig.check.holds(self.meas.position_m, float(self.joint.mass_kg[0]))):
             return Ack.BEYOND_CAPACITY       # the valves stay in HOLD: sealed, they hold beyond the supply
+        if command == Command.START and self.sup.state is State.READY and not self.waypoints.head_complete():
+            return Ack.INCOMPLETE            # a trajectory plays only once its LAST is queued
         result = self.sup.command(command, argument)
         if result is Ack.ACCEPTED:
             self._do_action()
@@ -287,8 +289,7 @@ class Controller:
         """`waypoint_commit` in stages (the host link spreads them over the cycles' slack)."""
         result = yield from self.waypoints.commit_stages(tag, seq, segment_time, accel_time, flags,
                                                          self._commit_context)
-        if (result is Ack.ACCEPTED and self.waypoints.queue[-1].flags & WaypointFlag.START
-                and self.state is State.READY):
+        if result is Ack.ACCEPTED and self.waypoints.head_starts_now() and self.state is State.READY:
             self.host_command(Command.START, 0)
         self._publish()
         return result

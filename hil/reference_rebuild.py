@@ -27,6 +27,7 @@ import numpy as np
 
 from firmware_py.motion_control.time_scaling import DISABLED, RATE_ONE, ScalingRule, rate_step, supply_update
 from firmware_py.motion_control.trajectory import T_START, TM, JointTrajectory, hold_at, through_points
+from firmware_py.supervision.waypoints import head_length, head_starts
 from hil.logdata import LogData
 from protocol.enums import Ack, AckKind, Command, State, WaypointFlag
 
@@ -155,9 +156,9 @@ def rebuild(log: LogData, rig: str, period_s: float, initial_position=None,
 
     def start(cycle_start: int, log_cycle: int):
         nonlocal queue, running, last_point
-        if not queue:
+        take = head_length([w["flags"] for w in queue])
+        if take == 0:
             return
-        take = next((k + 1 for k, w in enumerate(queue) if w["flags"] & WaypointFlag.LAST), len(queue))
         chosen, queue = queue[:take], queue[take:]
         origin = last_point if last_point is not None else positions[min(max(log_cycle, 0), len(positions) - 1)]
         if chosen[0]["flags"] & WaypointFlag.STEP:
@@ -175,6 +176,9 @@ def rebuild(log: LogData, rig: str, period_s: float, initial_position=None,
                          [w["pose"] for w in chosen], times)
         motions.append(running)
 
+    def starts_now() -> bool:
+        return head_starts([w["flags"] for w in queue])
+
     def advance(to_cycle: int):
         """Play motions that end before `to_cycle`, chaining queued 'start now' trajectories."""
         nonlocal running, last_point
@@ -182,7 +186,7 @@ def rebuild(log: LogData, rig: str, period_s: float, initial_position=None,
             finished = running
             running = None
             last_point = finished.trajectory.sample([1e9])[0][0]
-            if queue and queue[0]["flags"] & WaypointFlag.START:
+            if starts_now():
                 start(finished.end_cycle + 1, finished.end_cycle)
 
     unknown_from: list[int] = []
@@ -207,7 +211,7 @@ def rebuild(log: LogData, rig: str, period_s: float, initial_position=None,
                 w = pending.pop(seq)
                 w["strokes"] = strokes_of(w["pose"])
                 queue.append(w)
-                if w["flags"] & WaypointFlag.START and running is None:
+                if starts_now() and running is None:
                     start(event.cycle, event.cycle)
             elif kind == AckKind.HOST_CMD and (-1000 - seq) in pending:
                 command = pending.pop(-1000 - seq)["command"]

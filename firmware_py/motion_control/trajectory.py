@@ -114,8 +114,9 @@ class JointTrajectory:
         return out[0], out[1], out[2]
 
 
-def through_points(points, ta_s, tm_s, start_velocity=None) -> JointTrajectory:
-    """Multi-point SLS through points (n_points, n_joints), at rest at the last point.
+def through_points(points, ta_s, tm_s, start_velocity=None, end_at_rest: bool = True) -> JointTrajectory:
+    """Multi-point SLS through points (n_points, n_joints), at rest at the last point (or,
+    `end_at_rest` False, reaching it as an intermediate point: a chain with more to come).
 
     ta_s and tm_s are each one value for every segment or one per segment.
     """
@@ -129,7 +130,7 @@ def through_points(points, ta_s, tm_s, start_velocity=None) -> JointTrajectory:
     segments = np.empty((n_seg, points.shape[1], 8))
     start = 0.0
     for k in range(n_seg):
-        last = k == n_seg - 1
+        last = end_at_rest and k == n_seg - 1
         segments[k] = sls_coefficients(points[k], velocity, points[k + 1], float(accel_times[k]),
                                        float(durations[k]), last)
         segments[k, :, T_START] = start

@@ -147,6 +147,7 @@ class Loads:
     to_platform: np.ndarray          # (n, 6, legs) the legs' errors to the platform's pose (Jx^-1);
                                      # (0, 6, legs): no platform, the legs' own
     angle_weight: float = 0.0        # m per rad: a rotation error this large counts as that position error
+    ends_at_rest: bool = True        # False: the chain goes on (a lag still growing at the end carries on)
 
     def at_scale(self, scale: float) -> tuple[np.ndarray, np.ndarray]:
         """(force, velocity) when the trajectory's time runs `scale` x slower."""
@@ -190,6 +191,8 @@ def shortfall_lag(capacity: LegCapacity, loads: Loads, scale: float, share: floa
     excess = np.where(force >= 0.0, force - push, pull - force)
     worst, at, leg = lag_of(excess, force, loads.inertia_kg, loads.dt_s * scale, loads.to_platform,
                             loads.angle_weight, state)
+    if not loads.ends_at_rest:         # the chain goes on: its next segment takes the lag from here
+        return worst, at, leg, state
     # holding the last pose: what its weight leaves each leg toward the force it lacked
     push_rest, pull_rest = capacity.limits(np.zeros_like(velocity[-1]))
     held = loads.static_n[-1]

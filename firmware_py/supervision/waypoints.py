@@ -6,7 +6,9 @@ Rules (docs/PROTOCOL.md): HOST_WAYPOINT_POS and _ROT are staged under their TAG;
 HOST_WAYPOINT_TIME with the same TAG (= SEQ & 0xF) commits them, whatever its result
 consuming the staged halves of its TAG. The first SEQ after start-up or CLEAR_WAYPOINTS is
 free; then each accepted SEQ must be the previous accepted one + 1 (mod 256), and a refused
-one does not count. Rigs: `testbench` (a waypoint's Z is the stroke; X, Y and the rotation
+one does not count. A trajectory plays only once its LAST is queued, so a waypoint without
+LAST is judged as the trajectory passes it (no stop there) and one with LAST as it ends at
+rest; the queue's last place is kept for a LAST. Rigs: `testbench` (a waypoint's Z is the stroke; X, Y and the rotation
 must be 0) and `hexapod` (platform poses; strokes by inverse kinematics, the path between
 waypoints checked pose by pose).
 """
@@ -84,8 +86,9 @@ class TestbenchCheck:
         if step:
             return Ack.ACCEPTED, strokes, math.nan, chain.drawn_m3, None
         trajectory, t0 = chain.trajectory(strokes)
-        loads = leg_loads(trajectory, t0, trajectory.duration_s, chain.sample_dt_s(),
+        loads = leg_loads(trajectory, t0, chain.judged_until(trajectory), chain.sample_dt_s(),
                           self.moving_mass_kg + load_kg, GRAVITY_M_S2)
+        loads.ends_at_rest = chain.ends
         return at_once(capacity_verdict_stages(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3,
                                                chain.carried_lag(strokes)))
 
@@ -153,9 +156,11 @@ class HexapodCheck:
         trajectory, t0 = chain.trajectory(strokes)
         yield
         try:
-            loads = yield from self.loads.loads_stages(trajectory, t0, trajectory.duration_s, chain.sample_dt_s())
+            loads = yield from self.loads.loads_stages(trajectory, t0, chain.judged_until(trajectory),
+                                                       chain.sample_dt_s())
         except ValueError:                 # a pose between the checked ones: DK lost or singular
             return refused(Ack.SINGULAR)
+        loads.ends_at_rest = chain.ends
         yield
         return (yield from capacity_verdict_stages(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3,
                                                    chain.carried_lag(strokes)))
@@ -186,23 +191,29 @@ def capacity_verdict_stages(waypoints: Waypoints, capacity: LegCapacity, loads, 
 @dataclass
 class Chain:
     """The segment being committed and the ones queued before it that it continues (since
-    the last LAST): the trajectory the controller will build from them, as if this segment
-    ended at rest. The blend into this segment is judged with it."""
+    the last LAST): the trajectory the controller will build from them, this segment ending
+    at rest where it is LAST (`ends`) and passing its waypoint otherwise. The blend into this
+    segment is judged with it."""
     points: list                   # the chain's start, then each queued waypoint's strokes
     accel_times: list
     segment_times: list
     drawn_m3: float = 0.0          # the oil the supply misses when this segment starts
     after: Waypoint | None = None  # the last waypoint of the chain this one starts as it ends (START)
+    ends: bool = True              # this segment is the chain's LAST
+    lag_before: np.ndarray | None = None   # the lag the segment before it in the chain leaves
 
     def carried_lag(self, strokes) -> np.ndarray | None:
-        """The lag this chain starts with: what `after`'s segment leaves, where this chain turns
-        back (its first segment more than 120 deg from that one, in joint space: the same force
-        on both sides of the waypoint); None otherwise (the position loop takes what is left
-        while the legs turn)."""
+        """The lag this segment starts with: within a chain, what the segment before it leaves;
+        a chain's first, what `after`'s segment leaves, where this chain turns back (its first
+        segment more than 120 deg from that one, in joint space: the same force on both sides
+        of the waypoint); None otherwise (the position loop takes what is left while the legs
+        turn)."""
+        if len(self.points) > 1:
+            return self.lag_before
         if self.after is None or self.after.lag_after is None:
             return None
         before = self.after.strokes - self.after.start
-        first = (self.points[1] if len(self.points) > 1 else np.asarray(strokes)) - self.points[0]
+        first = np.asarray(strokes) - self.points[0]
         scale = float(np.linalg.norm(first) * np.linalg.norm(before))
         return self.after.lag_after if scale > 0.0 and float(np.dot(first, before)) < TURN_BACK_COS * scale else None
 
@@ -215,8 +226,25 @@ class Chain:
 
     def trajectory(self, strokes) -> tuple[JointTrajectory, float]:
         """(the chain through `strokes`, the time this segment starts in it)."""
-        trajectory = through_points(np.array(self.points + [strokes]), self.accel_times, self.segment_times)
+        trajectory = through_points(np.array(self.points + [strokes]), self.accel_times, self.segment_times,
+                                    end_at_rest=self.ends)
         return trajectory, float(sum(self.segment_times[:-1]))
+
+    def judged_until(self, trajectory: JointTrajectory) -> float:
+        """The end of what this commit judges: the chain's end at rest, else a sample short of
+        the waypoint (the next segment is judged from there, its blend with it)."""
+        return trajectory.duration_s if self.ends else trajectory.duration_s - self.sample_dt_s()
+
+
+def head_length(flags) -> int:
+    """How many waypoints (their FLAGS in queue order) the head trajectory takes: through the
+    first LAST; 0 without one (a trajectory plays only once complete)."""
+    return next((k + 1 for k, f in enumerate(flags) if f & WaypointFlag.LAST), 0)
+
+
+def head_starts(flags) -> bool:
+    """The head trajectory is complete and one of its waypoints is flagged START."""
+    return any(f & WaypointFlag.START for f in flags[:head_length(flags)])
 
 
 def peak_velocity_ok(waypoints: Waypoints, chain: Chain, strokes, step: bool) -> bool:
@@ -280,8 +308,9 @@ class WaypointQueue:
                 return Ack.SEQUENCE_GAP
             if state not in COMMIT_STATES:
                 return Ack.BAD_STATE
-            if len(self.queue) >= self.capacity:
-                return Ack.QUEUE_FULL
+            last = bool(flags & WaypointFlag.LAST)
+            if len(self.queue) >= self.capacity - (0 if last else 1):
+                return Ack.QUEUE_FULL                           # the last place is kept for a LAST
             if not all(math.isfinite(v) for v in pos + rot + (segment_time, accel_time)):
                 return Ack.NOT_FINITE
             if not (accel_time > 0.0 and segment_time >= 2.0 * accel_time):
@@ -293,6 +322,7 @@ class WaypointQueue:
                 return Ack.BAD_ARGUMENT                         # a step is a trajectory of its own
             generation = self.generation
             chain = self.chain(previous, segment_time, accel_time)
+            chain.ends = bool(known & WaypointFlag.LAST)
             chain.drawn_m3 = self.queue[-1].drawn_after_m3 if self.queue else drawn_m3
             chain.after = self.chain_after(len(chain.points) - 1, known, running)
             verdict = yield from self.check.stages(chain, pos, rot, step, load_kg)
@@ -320,7 +350,7 @@ class WaypointQueue:
             return Chain([start], [accel_time], [segment_time])
         return Chain([chained[0].start] + [w.strokes for w in chained],
                      [w.accel_time_s for w in chained] + [accel_time],
-                     [w.segment_time_s for w in chained] + [segment_time])
+                     [w.segment_time_s for w in chained] + [segment_time], lag_before=chained[-1].lag_after)
 
     def chain_after(self, queued: int, flags: WaypointFlag, running: Waypoint | None) -> Waypoint | None:
         """The waypoint a chain starts after, `queued` of its waypoints in the queue and the one
@@ -332,16 +362,20 @@ class WaypointQueue:
         before = len(self.queue) - queued - 1
         return self.queue[before] if before >= 0 else running
 
+    def head_complete(self) -> bool:
+        """The queue's head trajectory has its LAST queued (or nothing is queued): START may play it."""
+        return head_length([w.flags for w in self.queue]) > 0 or not self.queue
+
     def head_starts_now(self) -> bool:
-        """The queue's first waypoint asks to start as soon as the running motion ends."""
-        return bool(self.queue) and bool(self.queue[0].flags & WaypointFlag.START)
+        """The queue's head trajectory is complete and asks to start as soon as it may."""
+        return head_starts([w.flags for w in self.queue])
 
     def take(self, start) -> tuple[JointTrajectory, list[int]] | None:
         """The trajectory of the queue's head (through its LAST waypoint) from `start`, and the
-        SEQ of each segment; None when the queue is empty."""
-        if not self.queue:
+        SEQ of each segment; None when nothing complete is queued."""
+        take = head_length([w.flags for w in self.queue])
+        if take == 0:
             return None
-        take = next((k + 1 for k, w in enumerate(self.queue) if w.flags & WaypointFlag.LAST), len(self.queue))
         chosen, self.queue = self.queue[:take], self.queue[take:]
         self.generation += 1
         self.taken_drawn_m3 = chosen[-1].drawn_after_m3
