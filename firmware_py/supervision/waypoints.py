@@ -8,9 +8,9 @@ consuming the staged halves of its TAG. The first SEQ after start-up or CLEAR_WA
 free; then each accepted SEQ must be the previous accepted one + 1 (mod 256), and a refused
 one does not count. A trajectory plays only once its LAST is queued, so a waypoint without
 LAST is judged as the trajectory passes it (no stop there) and one with LAST as it ends at
-rest; the queue's last place is kept for a LAST. Rigs: `testbench` (a waypoint's Z is the stroke; X, Y and the rotation
-must be 0) and `hexapod` (platform poses; strokes by inverse kinematics, the path between
-waypoints checked pose by pose).
+rest; the queue's last place is kept for a LAST. Rigs: `testbench` (a waypoint's Z is the
+stroke; X, Y and the rotation must be 0) and `hexapod` (platform poses; strokes by inverse
+kinematics, the path between waypoints checked pose by pose).
 """
 
 from __future__ import annotations
@@ -302,27 +302,26 @@ class WaypointQueue:
         rot = self._staged_rot.pop(tag, None)
         if pos is None or rot is None or (seq & 0x0F) != tag:
             return Ack.INCOMPLETE
+        known = WaypointFlag(flags & KNOWN_FLAGS)
+        last, step = bool(known & WaypointFlag.LAST), bool(known & WaypointFlag.STEP)
         while True:
             state, previous, load_kg, drawn_m3, running = context()
             if self.expected_seq is not None and seq != self.expected_seq:
                 return Ack.SEQUENCE_GAP
             if state not in COMMIT_STATES:
                 return Ack.BAD_STATE
-            last = bool(flags & WaypointFlag.LAST)
             if len(self.queue) >= self.capacity - (0 if last else 1):
                 return Ack.QUEUE_FULL                           # the last place is kept for a LAST
             if not all(math.isfinite(v) for v in pos + rot + (segment_time, accel_time)):
                 return Ack.NOT_FINITE
             if not (accel_time > 0.0 and segment_time >= 2.0 * accel_time):
                 return Ack.BAD_ARGUMENT
-            known = WaypointFlag(flags & KNOWN_FLAGS)
-            step = bool(known & WaypointFlag.STEP)
             after_last = not self.queue or bool(self.queue[-1].flags & WaypointFlag.LAST)
-            if step and not (known & WaypointFlag.LAST and after_last):
+            if step and not (last and after_last):
                 return Ack.BAD_ARGUMENT                         # a step is a trajectory of its own
             generation = self.generation
             chain = self.chain(previous, segment_time, accel_time)
-            chain.ends = bool(known & WaypointFlag.LAST)
+            chain.ends = last
             chain.drawn_m3 = self.queue[-1].drawn_after_m3 if self.queue else drawn_m3
             chain.after = self.chain_after(len(chain.points) - 1, known, running)
             verdict = yield from self.check.stages(chain, pos, rot, step, load_kg)
@@ -367,8 +366,9 @@ class WaypointQueue:
         return head_length([w.flags for w in self.queue]) > 0 or not self.queue
 
     def head_starts_now(self) -> bool:
-        """The queue's head trajectory is complete and asks to start as soon as it may."""
-        return head_starts([w.flags for w in self.queue])
+        """The queue's head trajectory is complete and asks to start as soon as it may (asked in
+        the cycle as a motion ends: with nothing queued it makes nothing)."""
+        return bool(self.queue) and head_starts([w.flags for w in self.queue])
 
     def take(self, start) -> tuple[JointTrajectory, list[int]] | None:
         """The trajectory of the queue's head (through its LAST waypoint) from `start`, and the

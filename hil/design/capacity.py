@@ -103,10 +103,18 @@ def commit_all(cfg: ControllerConfig, motion: Motion, rig: HexapodModel | None =
     return Ack.ACCEPTED, -1, np.zeros(3), math.nan
 
 
+def commit_both(cfg: ControllerConfig, motion: Motion, scale: float, rig: HexapodModel | None = None
+                ) -> tuple[Ack, int, np.ndarray, float]:
+    """`commit_all` at PLAN_MARGIN faster than `scale`, then (near its edge the check is not
+    monotonic) at `scale` itself: the first refusal, or ACCEPTED."""
+    rig = HexapodModel(cfg, PERIOD_S) if rig is None else rig
+    verdict = commit_all(cfg, motion.scaled(scale / PLAN_MARGIN), rig)
+    return verdict if verdict[0] is not Ack.ACCEPTED else commit_all(cfg, motion.scaled(scale), rig)
+
+
 def accepted(cfg: ControllerConfig, motion: Motion, scale: float) -> bool:
     """The controller accepts every waypoint of `motion` at `scale` and at PLAN_MARGIN faster."""
-    rig = HexapodModel(cfg, PERIOD_S)
-    return all(commit_all(cfg, motion.scaled(s), rig)[0] is Ack.ACCEPTED for s in (scale / PLAN_MARGIN, scale))
+    return commit_both(cfg, motion, scale)[0] is Ack.ACCEPTED
 
 
 def plan(cfg: ControllerConfig, motion: Motion) -> Plan:
@@ -121,9 +129,7 @@ def plan(cfg: ControllerConfig, motion: Motion) -> Plan:
     if math.isfinite(floor) and floor > low:
         scale = math.ceil(floor * 100.0) / 100.0
     for rounds in range(PLAN_ROUNDS):
-        result, seq, position_m, needed = commit_all(cfg, motion.scaled(scale / PLAN_MARGIN), rig)
-        if result is Ack.ACCEPTED:           # near its edge the check is not monotonic: the timing sent too
-            result, seq, position_m, needed = commit_all(cfg, motion.scaled(scale), rig)
+        result, seq, position_m, needed = commit_both(cfg, motion, scale, rig)
         if result is Ack.ACCEPTED and math.isnan(edge):
             edge = scale                     # then the plan, EDGE_MARGIN above it, accepted as well
             scale = max(math.ceil(edge * EDGE_MARGIN * 100.0) / 100.0, edge)
