@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib.util
+import os
 import shutil
 import subprocess
 import sysconfig
@@ -41,7 +42,8 @@ def counter():
         if compiler is None:
             raise CounterBuildError("no C compiler (cc or gcc) on PATH: the allocation counter is built with one")
         built.parent.mkdir(parents=True, exist_ok=True)
-        partial = built.with_suffix(".partial")
+        # each process its own partial file: pytest's workers may build at once; the rename is atomic
+        partial = built.with_suffix(f".{os.getpid()}.partial")
         command = [compiler, "-shared", "-fPIC", "-O2", *(f"-I{d}" for d in include), str(SOURCE), "-o", str(partial)]
         result = subprocess.run(command, capture_output=True, text=True)
         if result.returncode != 0:
