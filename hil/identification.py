@@ -36,15 +36,50 @@ def proportional_gain(u_v: np.ndarray, error_m: np.ndarray) -> tuple[float, floa
     return float(k), float(u0)
 
 
+def lti_response(num, den, u: np.ndarray, dt_s: float) -> np.ndarray:
+    """The response of the strictly proper num(s) / den(s), at rest at the first sample, to `u`
+    sampled `dt_s` apart and linear between its samples: `scipy.signal.lsim`'s (its default
+    first-order hold, the same discretisation), as a convolution. lsim converts the system and
+    steps its state in Python each call: the refinement calls this ~10^4 times."""
+    from scipy.linalg import expm
+    den = np.asarray(den, dtype=float)
+    n = len(den) - 1
+    c = np.zeros(n)
+    c[n - len(num):] = np.asarray(num, dtype=float) / den[0]
+    a = np.zeros((n, n))                            # controllable canonical form
+    a[0] = -den[1:] / den[0]
+    a[1:, :-1] = np.eye(n - 1)
+    # x(k+1) = Ad x(k) + B0 u(k) + B1 u(k+1) over an input linear between samples
+    m = np.zeros((n + 2, n + 2))
+    m[:n, :n], m[0, n], m[n, n + 1] = a * dt_s, dt_s, 1.0
+    e = expm(m)
+    ad, b1 = e[:n, :n], e[:n, n + 1]
+    b0 = e[:n, n] - b1
+    samples = len(u)
+    # C Ad^k B0 and C Ad^k B1 for every k: through Ad's eigenvalues where they are distinct
+    # (the poles'), else by its powers
+    z, v = np.linalg.eig(ad)
+    if np.linalg.cond(v) < 1e8:
+        left, powers = c @ v, np.power.outer(z, np.arange(samples))
+        h0, h1 = (np.real((left * np.linalg.solve(v, b)) @ powers) for b in (b0, b1))
+    else:
+        h0, h1, row = np.empty(samples), np.empty(samples), c.copy()
+        for k in range(samples):
+            h0[k], h1[k] = row @ b0, row @ b1
+            row = row @ ad
+    u = np.asarray(u, dtype=float)
+    out = np.zeros(samples)
+    out[1:] = (np.convolve(h0, u)[:samples - 1] + np.convolve(h1, u[1:])[:samples - 1])
+    return out
+
+
 def closed_loop_step(n0: float, a2: float, a1: float, a0: float, t_s: np.ndarray, delay_s: float) -> np.ndarray:
     """Unit-step response of n0 / (s^3 + a2 s^2 + a1 s + a0), delayed by `delay_s`, on the
     equally spaced `t_s` (the delay a whole number of its steps)."""
-    from scipy import signal
     out = np.zeros(len(t_s))
     late = t_s >= delay_s - 1e-12
     if late.sum() >= 2:
-        tau = t_s[late] - t_s[late][0]
-        _, out[late] = signal.step(signal.lti([n0], [1.0, a2, a1, a0]), T=tau)
+        out[late] = lti_response([n0], [1.0, a2, a1, a0], np.ones(int(late.sum())), float(t_s[1] - t_s[0]))
     return out
 
 
@@ -135,12 +170,11 @@ def complete_response(plant: dict, k_v_m: float, mass_kg: float, sigma_ns_m: flo
     change `load_n` [N] (on `t_s`) drive, G(s) = `plant` (b0, b1, k01 in SI) and the load's path
     from the sensibilities of `plant`, m, sigma (eq. 5.8-5.10): -k02 b0 (s + z0) /
     (s^3 + b1 s^2 + b0 s + K k01 b0)."""
-    from scipy import signal
     path = complete_model(*sensibilities(plant["b0"], plant["b1"], plant["k01"], mass_kg, sigma_ns_m, area_m2),
                           mass_kg, sigma_ns_m, area_m2)
     n0, a2, a1, a0 = closed_loop_of(plant, k_v_m)
     gain = -path["k02"] * plant["b0"]
-    _, load, _ = signal.lsim(signal.lti([gain, gain * path["z0"]], [1.0, a2, a1, a0]), load_n, t_s)
+    load = lti_response([gain, gain * path["z0"]], [1.0, a2, a1, a0], load_n, float(t_s[1] - t_s[0]))
     return step_m * closed_loop_step(n0, a2, a1, a0, t_s, delay_s) + load
 
 

@@ -42,6 +42,20 @@ def test_closed_loop_step_is_the_scipy_step_delayed():
     assert y[0] == y[1] == 0.0
 
 
+@pytest.mark.parametrize("poles", [(-30.0 + 100.0j, -30.0 - 100.0j, -400.0), (-50.0, -50.0, -50.0)])
+def test_the_lti_response_is_scipy_lsim(poles):
+    """lsim is the oracle: the same first-order hold, an input not at rest at the first sample,
+    distinct and repeated poles (the latter by Ad's powers)."""
+    rng = np.random.default_rng(4)
+    t = np.arange(120) * PERIOD_S
+    u = 3.0 + rng.normal(0.0, 1.0, len(t)).cumsum()
+    den = np.real(np.poly(poles))
+    for num in ([2e5], [7e3, -4e5]):
+        _, reference, _ = signal.lsim(signal.lti(num, den), u, t)
+        np.testing.assert_allclose(ident.lti_response(num, den, u, PERIOD_S), reference,
+                                   rtol=0.0, atol=1e-9 * np.max(np.abs(reference)))
+
+
 def test_motion_parameters_from_eq_5_7():
     t = np.arange(400) * PERIOD_S
     y = 0.15 + 0.01 * np.sin(2 * np.pi * 3.0 * t) + 0.004 * np.sin(2 * np.pi * 7.0 * t)
