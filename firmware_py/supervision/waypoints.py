@@ -88,9 +88,7 @@ class TestbenchCheck:
         trajectory, t0 = chain.trajectory(strokes)
         loads = leg_loads(trajectory, t0, chain.judged_until(trajectory), chain.sample_dt_s(),
                           self.moving_mass_kg + load_kg, GRAVITY_M_S2)
-        loads.ends_at_rest = chain.ends
-        return at_once(capacity_verdict_stages(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3,
-                                               chain.carried_lag(strokes)))
+        return at_once(capacity_verdict_stages(self.waypoints, self.capacity, loads, strokes, chain))
 
 
 class HexapodCheck:
@@ -160,10 +158,8 @@ class HexapodCheck:
                                                        chain.sample_dt_s())
         except ValueError:                 # a pose between the checked ones: DK lost or singular
             return refused(Ack.SINGULAR)
-        loads.ends_at_rest = chain.ends
         yield
-        return (yield from capacity_verdict_stages(self.waypoints, self.capacity, loads, strokes, chain.drawn_m3,
-                                                   chain.carried_lag(strokes)))
+        return (yield from capacity_verdict_stages(self.waypoints, self.capacity, loads, strokes, chain))
 
 
 def holds(capacity: LegCapacity, loads) -> bool:
@@ -173,11 +169,13 @@ def holds(capacity: LegCapacity, loads) -> bool:
 
 
 def capacity_verdict_stages(waypoints: Waypoints, capacity: LegCapacity, loads, strokes,
-                            drawn_m3: float = 0.0, lag: np.ndarray | None = None) -> Stages[tuple]:
+                            chain: Chain) -> Stages[tuple]:
     """(ACCEPTED, strokes, NaN, the oil drawn at the segment's end, the lag it leaves), or
-    (BEYOND_CAPACITY, None, the smallest time scale that fits (inf: none), NaN, None);
-    `drawn_m3` and `lag`: the oil the supply misses and the legs' lag when the segment starts
-    (the motions before it)."""
+    (BEYOND_CAPACITY, None, the smallest time scale that fits (inf: none), NaN, None): `loads`
+    along `chain`'s segment, judged from the oil the supply misses and the legs' lag when it
+    starts (the motions before it), ending at rest where it is LAST."""
+    loads.ends_at_rest = chain.ends
+    drawn_m3, lag = chain.drawn_m3, chain.carried_lag(strokes)
     share, lag_max = waypoints.capacity_share, waypoints.lag_max_m
     verdict = yield from judge_stages(capacity, loads, 1.0, share, lag_max, drawn_m3, lag)
     if verdict.within:
@@ -320,8 +318,7 @@ class WaypointQueue:
             if step and not (last and after_last):
                 return Ack.BAD_ARGUMENT                         # a step is a trajectory of its own
             generation = self.generation
-            chain = self.chain(previous, segment_time, accel_time)
-            chain.ends = last
+            chain = self.chain(previous, segment_time, accel_time, last)
             chain.drawn_m3 = self.queue[-1].drawn_after_m3 if self.queue else drawn_m3
             chain.after = self.chain_after(len(chain.points) - 1, known, running)
             verdict = yield from self.check.stages(chain, pos, rot, step, load_kg)
@@ -337,8 +334,9 @@ class WaypointQueue:
         self.expected_seq = (seq + 1) % 256
         return Ack.ACCEPTED
 
-    def chain(self, previous, segment_time: float, accel_time: float) -> Chain:
-        """The queued waypoints this segment continues (none after a LAST), and its own times."""
+    def chain(self, previous, segment_time: float, accel_time: float, ends: bool) -> Chain:
+        """The queued waypoints this segment continues (none after a LAST), its own times, and
+        whether it is the chain's LAST (`ends`)."""
         chained = []
         for w in reversed(self.queue):
             if w.flags & WaypointFlag.LAST:
@@ -346,10 +344,11 @@ class WaypointQueue:
             chained.insert(0, w)
         if not chained:
             start = self.queue[-1].strokes if self.queue else np.asarray(previous, dtype=float)
-            return Chain([start], [accel_time], [segment_time])
+            return Chain([start], [accel_time], [segment_time], ends=ends)
         return Chain([chained[0].start] + [w.strokes for w in chained],
                      [w.accel_time_s for w in chained] + [accel_time],
-                     [w.segment_time_s for w in chained] + [segment_time], lag_before=chained[-1].lag_after)
+                     [w.segment_time_s for w in chained] + [segment_time], ends=ends,
+                     lag_before=chained[-1].lag_after)
 
     def chain_after(self, queued: int, flags: WaypointFlag, running: Waypoint | None) -> Waypoint | None:
         """The waypoint a chain starts after, `queued` of its waypoints in the queue and the one

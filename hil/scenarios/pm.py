@@ -121,10 +121,10 @@ class PlatformMovement(Scenario):
 
     def planned_time_scale(self, controller_sections: dict, thesis_where_it_fits: bool = False) -> tuple[float, str]:
         """The planned time scale of the movement for the controller configured with these
-        sections (`hil.design.capacity.plan`: 2 % above the fastest it accepts), or 1 where
+        sections (`hil.design.capacity.plan`: EDGE_MARGIN above the fastest it accepts), or 1 where
         `thesis_where_it_fits` and it accepts that; and how it was found. UserInputError when
         none within the accepted range fits."""
-        from hil.design.capacity import PLAN_SCALES, accepted, plan
+        from hil.design.capacity import EDGE_MARGIN, PLAN_SCALES, accepted, plan
         cfg = self._controller_config(controller_sections)
         found = plan(cfg, self.thesis_motion())
         declared = (f"payload {cfg.hexapod.payload_kg:g} kg, supply "
@@ -133,7 +133,8 @@ class PlatformMovement(Scenario):
             option = "fit" if thesis_where_it_fits else "auto"
             raise UserInputError(f"--time-scale {option}: no time scale within {PLAN_SCALES[0]:g}-{PLAN_SCALES[1]:g} "
                                  f"fits {self.name} with {declared}: {found.reason}")
-        how = f"2 % above the smallest the controller's capacity check accepts, {declared}"
+        margin_pct = (EDGE_MARGIN - 1.0) * 100.0
+        how = f"{margin_pct:g} % above the smallest the controller's capacity check accepts, {declared}"
         if thesis_where_it_fits and accepted(cfg, self.thesis_motion(), 1.0):
             return 1.0, f"the thesis's timing: it fits ({how}: {found.time_scale:g})"
         return found.time_scale, how
