@@ -453,6 +453,7 @@ class Plausibility(Section):
     spool: float = key("spool_pct", 1.0, 100.0, per=PCT)
     cycles: int = key("cycles", 1, 100000)
     travel_m: float = key("travel_mm", 0.0, 1000.0, si=MM)
+    overrun_share: float = key("overrun_pct", 1.0, 100.0, per=PCT)
     attitude_mismatch_rad: float = key("attitude_mismatch_deg", 0.01, 90.0, si=math.pi / 180.0)
     attitude_mismatch_samples: int = key("attitude_mismatch_samples", 1, 10000)
 

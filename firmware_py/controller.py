@@ -86,7 +86,8 @@ class Controller:
         self.frames = FrameMonitor(cfg.supervisor, n)
         self.limits = LimitMonitor(cfg.limits, n, rig.stroke_m)
         spool, cycles = rig.plausibility_window
-        self.plausibility = MotionPlausibility(n, spool, cycles, cfg.plausibility.travel_m)
+        self.plausibility = MotionPlausibility(n, spool, cycles, cfg.plausibility.travel_m, rig.check.capacity,
+                                               cfg.plausibility.overrun_share)
         res, encoder_m = cfg.residuals, cfg.actuator.encoder_resolution_m
         supply_pa = cfg.hydraulic_model.supply_pressure_pa
         self.load_cells = FrozenLoadCells(n, res.load_cell_noise_n, signal_scale("LEG_STATE_1", "FORCE"))
@@ -171,7 +172,7 @@ class Controller:
         self.limits.check_always(self.spool_cmd, self.joint.kalman_x, meas.force_n)
         self.limits.check_active(meas.position_m, self.joint.velocity_estimate, self.joint.error_m)
         rig.pose_error_exceeds(self.joint.error_m)
-        self.plausibility.update(self.spool_cmd, meas.position_m)
+        self.plausibility.update(self.spool_cmd, meas.position_m, meas.force_n, self.joint.velocity_estimate)
         self.residuals.start(meas.position_m, meas.pressure_valid, meas.pa_pa, meas.pb_pa)
         self.residuals.update(self.spool_applied, meas.fresh, meas.position_m, meas.force_n, rig.gravity_axial,
                               self.joint.acceleration_estimate, meas.pressure_fresh, meas.pa_pa, meas.pb_pa,
@@ -566,7 +567,7 @@ class Controller:
         sup.fault(self.limits.check_active(meas.position_m, joint.velocity_estimate, joint.error_m))
         if self.rig.pose_error_exceeds(joint.error_m):
             sup.fault(Fault.TRACKING_ERROR)
-        if self.plausibility.update(self.spool_cmd, meas.position_m):
+        if self.plausibility.update(self.spool_cmd, meas.position_m, meas.force_n, joint.velocity_estimate):
             sup.fault(Fault.MOTION_PLAUSIBILITY)
 
     def _write(self, cmd: ValveCommands) -> None:

@@ -9,7 +9,10 @@ sink while the valves push them up).
 
 Rule: while the valve input stays beyond `spool_min` (fraction of full input) with one sign for
 `window` cycles, the encoder must advance at least `travel_min` in that direction from the
-furthest point back it reached in the window; a window without it is implausible.
+furthest point back it reached in the window; a window without it is implausible. A leg whose
+load cell shows `overrun_share` of the force its valve gives fully open that way at its
+velocity (`supervision.capacity`'s table) is held back by its load, not failing to move: its
+window starts again (a payload's corner pulls a leg back through its reversal at its limit).
 Defaults (controller.toml): on the hexapod 30 % input for 0.2 s, 0.5 mm (4 encoder counts):
 its legs (190-260 kg of joint-space inertia) tripped a 10 %, 50 ms window in the chapter
 11 movements, and they hold the platform's weight at > 10 % input without moving. On the
@@ -29,12 +32,24 @@ from firmware_py.mechanics.rotation import angle_between_matrices, rpy_to_matrix
 
 
 @njit(cache=True)
-def motion_window(spool, position_m, spool_min, window, travel_min_m, count, start, sign):
+def at_capacity(spool, force_n, velocity_m_s, grid_m_s, push_n, pull_n, share, leg) -> bool:
+    """The leg's load cell shows `share` of the force the valve gives fully open in the
+    spool's direction at its velocity (push / pull over `grid_m_s`, held at its ends)."""
+    v = min(max(velocity_m_s[leg], grid_m_s[0]), grid_m_s[-1])
+    if spool[leg] > 0.0:
+        return force_n[leg] >= share * np.interp(v, grid_m_s, push_n)
+    return force_n[leg] <= share * np.interp(v, grid_m_s, pull_n)
+
+
+@njit(cache=True)
+def motion_window(spool, position_m, force_n, velocity_m_s, spool_min, window, travel_min_m, grid_m_s, push_n,
+                  pull_n, overrun_share, count, start, sign):
     """One cycle of every leg's motion window; True when a leg completed one without moving
     `travel_min_m` along its command."""
     implausible = False
     for leg in range(spool.shape[0]):
-        driven = abs(spool[leg]) >= spool_min
+        driven = abs(spool[leg]) >= spool_min and not at_capacity(spool, force_n, velocity_m_s, grid_m_s, push_n,
+                                                                  pull_n, overrun_share, leg)
         s = (1.0 if spool[leg] > 0.0 else -1.0) if driven else 0.0
         if s != sign[leg]:                   # a new direction (or none) starts a new window here
             start[leg] = position_m[leg]
@@ -57,8 +72,11 @@ def motion_window(spool, position_m, spool_min, window, travel_min_m, count, sta
 
 
 class MotionPlausibility:
-    def __init__(self, n: int, spool_min: float, window: int, travel_min_m: float):
+    def __init__(self, n: int, spool_min: float, window: int, travel_min_m: float, capacity, overrun_share: float):
+        """`capacity`: the legs' `supervision.capacity.LegCapacity` (its force range over velocity)."""
         self.spool_min, self.window, self.travel_min_m = spool_min, window, travel_min_m
+        self.grid_m_s, self.push_n, self.pull_n = capacity.velocities_m_s, capacity.push_n, capacity.pull_n
+        self.overrun_share = overrun_share
         self.count = np.zeros(n, dtype=np.int64)        # cycles in the current window
         self.start = np.zeros(n)                         # encoder reading when it began
         self.sign = np.zeros(n)                          # the command's direction in it (0: none)
@@ -67,11 +85,14 @@ class MotionPlausibility:
         self.count.fill(0)
         self.sign.fill(0.0)
 
-    def update(self, spool: np.ndarray, position_m: np.ndarray) -> bool:
+    def update(self, spool: np.ndarray, position_m: np.ndarray, force_n: np.ndarray,
+               velocity_m_s: np.ndarray) -> bool:
         """One cycle: `spool` the commanded valve input (fraction of full input), `position_m`
-        the encoder. True when a leg completed a window without moving along its command."""
-        return motion_window(spool, position_m, self.spool_min, self.window, self.travel_min_m, self.count,
-                             self.start, self.sign)
+        the encoder, `force_n` the load cells, `velocity_m_s` the legs' estimate. True when a
+        leg completed a window without moving along its command."""
+        return motion_window(spool, position_m, force_n, velocity_m_s, self.spool_min, self.window,
+                             self.travel_min_m, self.grid_m_s, self.push_n, self.pull_n, self.overrun_share,
+                             self.count, self.start, self.sign)
 
 
 class AttitudeCrossCheck:

@@ -9,44 +9,73 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from firmware_py.config import load_config
+from firmware_py.supervision.capacity import leg_capacity
 from firmware_py.supervision.plausibility import AttitudeCrossCheck, MotionPlausibility
 from protocol.enums import Ack, EmuFault, Fault, State
 from tests.support.loops import bus_loop, cycles, cycles_until_fault, inject, send_waypoint, valve_words
 
+CAPACITY = leg_capacity(load_config())
+
+
+def window(n: int, spool_min: float, cycles: int, travel_m: float):
+    """A motion window, and its update with the load cells and velocities at rest (no load)."""
+    check = MotionPlausibility(n, spool_min, cycles, travel_m, CAPACITY, 0.9)
+    rest = np.zeros(n)
+    return check, lambda spool, y: check.update(spool, y, rest, rest)
+
 
 def test_plausibility_window_needs_motion_along_the_command():
-    check = MotionPlausibility(2, spool_min=0.2, window=10, travel_min_m=1e-3)
+    check, update = window(2, spool_min=0.2, cycles=10, travel_m=1e-3)
     spool, y = np.array([0.3, -0.3]), np.zeros(2)
     for _ in range(9):                                   # leg 1 follows, leg 2 does not
         y[0] += 0.5e-3
-        assert not check.update(spool, y)
+        assert not update(spool, y)
     y[0] += 0.5e-3
-    assert check.update(spool, y)                        # the 10th cycle closes leg 2's window
+    assert update(spool, y)                        # the 10th cycle closes leg 2's window
     check.reset()
     for _ in range(30):                                  # both move their way: never
         y += np.array([0.2e-3, -0.2e-3])
-        assert not check.update(spool, y)
+        assert not update(spool, y)
     for k in range(30):                                  # a command that flips every 5 cycles
-        assert not check.update(spool * (1 if k // 5 % 2 else -1), y)
+        assert not update(spool * (1 if k // 5 % 2 else -1), y)
     for _ in range(30):                                  # below the threshold: not judged
-        assert not check.update(np.array([0.19, -0.19]), y)
+        assert not update(np.array([0.19, -0.19]), y)
 
 
 def test_plausibility_counts_progress_from_the_furthest_point_back():
     """A heavy load still coasting against a reversed command, then following it, is
     plausible (sha-identification's P-control reversals with 6 kg); coasting, then still, is not."""
-    check = MotionPlausibility(2, spool_min=0.05, window=25, travel_min_m=0.5e-3)
+    check, update = window(2, spool_min=0.05, cycles=25, travel_m=0.5e-3)
     spool, y = np.array([0.1, 0.1]), np.zeros(2)
     for k in range(25):
         y -= 0.2e-3 if k < 12 else 0.0                  # both coast back 2.4 mm for 12 cycles
         y[0] += 0.3e-3 if k >= 12 else 0.0               # then leg 1 comes forward 3.9 mm: net -1.5 mm
-        tripped = check.update(spool, y)
+        tripped = update(spool, y)
     assert tripped                                       # leg 2 never came forward
     check.reset()
     y[:] = 0.0
     for k in range(25):                                  # leg 1 alone now: the same motion
         y[0] += -0.2e-3 if k < 12 else 0.3e-3
-        assert not check.update(np.array([0.1, 0.0]), y)
+        assert not update(np.array([0.1, 0.0]), y)
+
+
+def test_a_leg_held_back_at_its_limit_is_not_a_leg_that_cannot_move():
+    """A payload's corner: a leg pulling at its limit while its load carries it through its
+    reversal, the command beyond the threshold for the whole window. At the force its valve
+    gives it is held back by its load and its window starts again; the same motion with the
+    load cell at half of it (a supply lost, a seized rod) is implausible."""
+    push, pull = (float(limit[0]) for limit in CAPACITY.limits(np.zeros(1)))
+    for share, tripped in ((1.0, False), (0.5, True)):
+        check = MotionPlausibility(1, 0.3, 100, 0.5e-3, CAPACITY, 0.9)
+        y, velocity = np.zeros(1), np.zeros(1)
+        results = []
+        for k in range(100):
+            velocity[0] = -0.1 + 0.2 * k / 100                # -100 -> +100 mm/s through 0
+            y += velocity * 0.002
+            results.append(check.update(np.array([-0.75]), y, np.array([share * pull]), velocity))
+        assert any(results) is tripped, share
+    assert push > 0.0 > pull
 
 
 def test_a_stuck_encoder_during_a_move_faults_within_half_a_second():
