@@ -32,13 +32,12 @@ from firmware_py.mechanics.rotation import angle_between_matrices, rpy_to_matrix
 
 
 @njit(cache=True)
-def at_capacity(spool, force_n, velocity_m_s, grid_m_s, push_n, pull_n, share, leg) -> bool:
-    """The leg's load cell shows `share` of the force the valve gives fully open in the
-    spool's direction at its velocity (push / pull over `grid_m_s`, held at its ends)."""
-    v = min(max(velocity_m_s[leg], grid_m_s[0]), grid_m_s[-1])
-    if spool[leg] > 0.0:
-        return force_n[leg] >= share * np.interp(v, grid_m_s, push_n)
-    return force_n[leg] <= share * np.interp(v, grid_m_s, pull_n)
+def at_capacity(spool, force_n, velocity_m_s, grid_m_s, push_n, pull_n, share) -> bool:
+    """A leg's load cell shows `share` of the force its valve gives fully open in the spool's
+    direction at its velocity (push / pull over `grid_m_s`, held at its ends)."""
+    if spool > 0.0:
+        return force_n >= share * np.interp(velocity_m_s, grid_m_s, push_n)
+    return force_n <= share * np.interp(velocity_m_s, grid_m_s, pull_n)
 
 
 @njit(cache=True)
@@ -48,8 +47,8 @@ def motion_window(spool, position_m, force_n, velocity_m_s, spool_min, window, t
     `travel_min_m` along its command."""
     implausible = False
     for leg in range(spool.shape[0]):
-        driven = abs(spool[leg]) >= spool_min and not at_capacity(spool, force_n, velocity_m_s, grid_m_s, push_n,
-                                                                  pull_n, overrun_share, leg)
+        driven = abs(spool[leg]) >= spool_min and not at_capacity(spool[leg], force_n[leg], velocity_m_s[leg],
+                                                                  grid_m_s, push_n, pull_n, overrun_share)
         s = (1.0 if spool[leg] > 0.0 else -1.0) if driven else 0.0
         if s != sign[leg]:                   # a new direction (or none) starts a new window here
             start[leg] = position_m[leg]

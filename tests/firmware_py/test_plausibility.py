@@ -32,7 +32,7 @@ def test_plausibility_window_needs_motion_along_the_command():
         y[0] += 0.5e-3
         assert not update(spool, y)
     y[0] += 0.5e-3
-    assert update(spool, y)                        # the 10th cycle closes leg 2's window
+    assert update(spool, y)                              # the 10th cycle closes leg 2's window
     check.reset()
     for _ in range(30):                                  # both move their way: never
         y += np.array([0.2e-3, -0.2e-3])
