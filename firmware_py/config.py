@@ -247,6 +247,7 @@ class ComputedTorque(Section):
     stiff_integral_per_s2: float = key("stiff_integral_per_s2", 0.0, 1000.0)
     stiff_rest_hold_s: float = key("stiff_rest_hold_s", 0.0, 100.0)
     stiff_rest_unwind_s: float = key("stiff_rest_unwind_s", 0.0, 100.0)    # 0: never
+    windup_share: float = key("windup_capacity_pct", 1.0, 100000.0, si=0.01)
     yaw_bandwidth_hz: float = key("yaw_bandwidth_hz", 0.1, 50.0)
     yaw_damping: float = key("yaw_damping", 0.1, 5.0)
     yaw_blend_s: float = key("yaw_blend_s", 0.01, 100.0)

@@ -120,10 +120,12 @@ class HexapodModel:
         self.gravity_axial = self.platform.gravity_axial
         self.tau_n = self.platform.force_n
         self.home_pose = tuple(self.geometry.home_position_m)
-        self.check = HexapodCheck(cfg.waypoints, kinematics.dk_tolerance_m, self.geometry, leg_capacity(cfg))
+        capacity = leg_capacity(cfg)
+        self.check = HexapodCheck(cfg.waypoints, kinematics.dk_tolerance_m, self.geometry, capacity)
         ct = cfg.computed_torque
         self.yaw = YawFusion(period_s, ct.yaw_blend_s, ct.imu_max_age_s)
-        self.computed_torque = ComputedTorque(cfg, self.geometry, period_s, self.yaw)
+        self.computed_torque = ComputedTorque(cfg, self.geometry, period_s, self.yaw,
+                                              (capacity.velocities_m_s, capacity.push_n, capacity.pull_n))
         self.plausibility_window = (cfg.plausibility.spool, cfg.plausibility.cycles)
         self.stop_cycles = round(cfg.supervisor.controlled_stop_s / period_s)
         self.attitude_check = AttitudeCrossCheck(cfg.plausibility.attitude_mismatch_rad,

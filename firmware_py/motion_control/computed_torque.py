@@ -21,7 +21,11 @@ pose, and the legs are driven through the inverse of their dynamics, in three st
    light directions (z, roll, pitch) the PID's force barely moves the legs, so its integral
    cannot take out their lag there: it also joins their commanded velocity,
    v_r + lambda e_leg + J_s K_s int(e_s);
-3. the spool to volts, saturated; the integral stops while a valve saturates. Where valves
+3. the spool to volts, saturated; the integral stops while a valve saturates, and while a
+   leg's force command is beyond `windup_capacity_pct` of what its valve gives fully open at
+   its reference's velocity (at the supply it reads): near rest a leg reaches that limit with
+   its spool well inside u_max, and an integral wound up against it overshoots once the leg
+   can follow again. Where valves
    are at their limit, the others' forces are chosen again (`reallocate_into`): the limited
    legs give what their load cells read, and the free ones keep the platform's acceleration
    error least, its rotations first, instead of the uneven shortfall turning it (the yaw's
@@ -251,6 +255,34 @@ def stiff_origin_step(integral, alpha, origin) -> None:
 
 
 @njit(cache=True)
+def beyond_force_range(force, velocity, supply_ratio, grid, push, pull, share) -> bool:
+    """True when a leg's force exceeds `share` of its range at its velocity: `push` and `pull`
+    over the ascending `grid` at the configured supply (NaN: a speed the open valve cannot
+    reach, so any force that way), each valve's at its supply ratio r through the orifices'
+    similarity (r F(v / sqrt(r))); held at the grid's ends."""
+    last = grid.shape[0] - 1
+    for i in range(force.shape[0]):
+        r = supply_ratio[i]
+        v = min(max(velocity[i] / math.sqrt(r), grid[0]), grid[last])
+        low, high = 0, last
+        while high - low > 1:                      # grid[low] <= v <= grid[high]
+            middle = (low + high) // 2
+            if grid[middle] <= v:
+                low = middle
+            else:
+                high = middle
+        t = (v - grid[low]) / (grid[high] - grid[low])
+        table = push if force[i] >= 0.0 else pull
+        limit = share * r * ((1.0 - t) * table[low] + t * table[high])
+        if force[i] >= 0.0:
+            if not force[i] <= limit:              # NaN: beyond
+                return True
+        elif not force[i] >= limit:
+            return True
+    return False
+
+
+@njit(cache=True)
 def integrate_into(integral, error, period_s) -> None:
     for k in range(integral.shape[0]):
         integral[k] += error[k] * period_s
@@ -352,9 +384,17 @@ class ComputedTorque(_Gains):
     `yaw`: the platform's yaw from the IMU beside the legs (None: the legs alone), updated by
     the rig's estimate before each update."""
 
-    def __init__(self, cfg: ControllerConfig, geometry: Geometry, period_s: float, yaw: YawFusion | None = None):
+    def __init__(self, cfg: ControllerConfig, geometry: Geometry, period_s: float, yaw: YawFusion | None = None,
+                 force_range: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
+        """`force_range`: (velocity grid, push, pull) of a leg's force with its valve fully open
+        at the configured supply (`supervision.capacity.LegCapacity`'s); None: only a saturated
+        valve stops the integral."""
         super().__init__(cfg, cfg.computed_torque.hexapod_at(period_s), N_LEGS, period_s)
         self.yaw = yaw
+        self.windup_share = cfg.computed_torque.windup_share
+        unbounded = (np.array([-1.0, 1.0]), np.full(2, 1e30), np.full(2, -1e30))     # never reached
+        grid, push, pull = unbounded if force_range is None else force_range
+        self.range_grid, self.range_push, self.range_pull = (np.array(a, dtype=float) for a in (grid, push, pull))
         w, zeta = cfg.computed_torque.yaw_gains(period_s)
         # with a valid IMU yaw: the yaw's own proportional and derivative gains
         self.kp_imu, self.kd_imu = self.kp.copy(), self.kd.copy()
@@ -461,7 +501,11 @@ class ComputedTorque(_Gains):
                                 force_measured, velocity_ref, self.velocity_error, strokes_ref)
             keep_limited_into(self.spool_limited, self.u_max, self.spool_cmd)
         self.force_ref_prev[:] = platform.force_n
-        if not saturated:                     # conditional integration (anti-windup)
+        # conditional integration (anti-windup): not while a valve saturates or a leg is asked
+        # beyond what it can give
+        if not saturated and not beyond_force_range(self.force_cmd, velocity_ref, self.supply_ratio,
+                                                    self.range_grid, self.range_push, self.range_pull,
+                                                    self.windup_share):
             integrate_into(self.integral, self.error, self.period_s)
         # the velocity's share fades once the reference has rested rest_hold_cycles (the legs
         # settle onto it first); the kernel runs every cycle (alpha 0: held)

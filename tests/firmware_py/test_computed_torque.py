@@ -17,11 +17,13 @@ from firmware_py.motion_control.computed_torque import (
     STIFF_FIRST,
     ComputedTorque,
     LegComputedTorque,
+    beyond_force_range,
     pose_error_into,
     valve_map_eval,
 )
 from firmware_py.motion_control.joint_space import COMPUTED_TORQUE, CONTROLLER_NAMES
 from firmware_py.rig_model import HexapodModel
+from firmware_py.supervision.capacity import leg_capacity
 from hil.cli import main
 from protocol.enums import Ack, Command
 from tests.support.loops import command
@@ -203,6 +205,39 @@ def test_the_integral_stops_while_a_valve_saturates(held_cfg):
     assert ct.update(platform, home, home - joint_error, zeros, joint_error, zeros, zeros, platform.force_n - 2000.0)
     assert np.max(np.abs(ct.spool_cmd)) == pytest.approx(held_cfg.limits.spool_max)
     np.testing.assert_array_equal(ct.integral, held)
+
+
+def test_the_force_range_check_reads_the_capacity_table_as_numpy_does(cfg):
+    """`beyond_force_range` against the check's own table read by np.interp
+    (`LegCapacity.utilisation`): a leg beyond `share` of its range is beyond; at r times the
+    supply, r F(v / sqrt(r)) (the orifices' similarity)."""
+    capacity = leg_capacity(cfg)
+    grid, push, pull = capacity.velocities_m_s, capacity.push_n, capacity.pull_n
+    rng = np.random.default_rng(5)
+    ones = np.ones(1)
+    for _ in range(2000):
+        force, velocity = rng.uniform(-400.0, 400.0, 1), rng.uniform(-0.6, 0.6, 1)
+        share = rng.uniform(0.5, 2.0)
+        ours = beyond_force_range(force, velocity, ones, grid, push, pull, share)
+        assert ours == bool(capacity.utilisation(force, velocity)[0] > share), (force, velocity, share)
+    # at 1.44 x the supply, at 0.12 m/s: the range at 0.1 m/s, 1.44 x
+    r = np.array([1.44])
+    push_at, _ = capacity.limits(np.array([0.1]))
+    assert not beyond_force_range(np.array([0.99 * 1.44 * push_at[0]]), np.array([0.12]), r, grid, push, pull, 1.0)
+    assert beyond_force_range(np.array([1.01 * 1.44 * push_at[0]]), np.array([0.12]), r, grid, push, pull, 1.0)
+
+
+def test_the_integral_stops_while_a_leg_is_asked_beyond_its_range(held_cfg):
+    """Conditional integration at a leg's force limit: held 1 mm aside, with the valves inside
+    their range, x integrates; asked beyond a share no leg holding the platform stays under
+    (1 %), it holds (the `windup_capacity_pct` of the packaged 150 %)."""
+    free, _, _ = _held_off(held_cfg, (1e-3, 0.0, 0.0), 20)
+    assert np.max(np.abs(free.spool_cmd)) < held_cfg.limits.spool_max
+    assert free.integral[0] == pytest.approx(-20 * PERIOD_S * 1e-3, rel=1e-3)
+    tight = load_config(overrides={"computed_torque": {"stiff_rest_hold_s": 100.0, "windup_capacity_pct": 1.0}})
+    held, _, _ = _held_off(tight, (1e-3, 0.0, 0.0), 20)
+    assert np.max(np.abs(held.spool_cmd)) < tight.limits.spool_max
+    assert not np.any(held.integral)
 
 
 def test_at_rest_the_velocity_share_fades_and_the_integral_stays(cfg):
