@@ -124,8 +124,7 @@ class HexapodModel:
         self.check = HexapodCheck(cfg.waypoints, kinematics.dk_tolerance_m, self.geometry, capacity)
         ct = cfg.computed_torque
         self.yaw = YawFusion(period_s, ct.yaw_blend_s, ct.imu_max_age_s)
-        self.computed_torque = ComputedTorque(cfg, self.geometry, period_s, self.yaw,
-                                              (capacity.velocities_m_s, capacity.push_n, capacity.pull_n))
+        self.computed_torque = ComputedTorque(cfg, self.geometry, period_s, self.yaw, capacity)
         self.plausibility_window = (cfg.plausibility.spool, cfg.plausibility.cycles)
         self.stop_cycles = round(cfg.supervisor.controlled_stop_s / period_s)
         self.attitude_check = AttitudeCrossCheck(cfg.plausibility.attitude_mismatch_rad,

@@ -255,29 +255,22 @@ def stiff_origin_step(integral, alpha, origin) -> None:
 
 
 @njit(cache=True)
+def force_range_at(velocity_m_s, supply_ratio, grid_m_s, push_n, pull_n, pushing) -> float:
+    """A leg's force with its valve fully open that way at its velocity: push or pull over
+    `grid_m_s` at the configured supply (held at the grid's ends; NaN: a speed the open valve
+    cannot reach), at `supply_ratio` r of it through the orifices' similarity, r F(v / sqrt(r))."""
+    root = math.sqrt(supply_ratio)
+    return supply_ratio * np.interp(velocity_m_s / root, grid_m_s, push_n if pushing else pull_n)
+
+
+@njit(cache=True)
 def beyond_force_range(force, velocity, supply_ratio, grid, push, pull, share) -> bool:
-    """True when a leg's force exceeds `share` of its range at its velocity: `push` and `pull`
-    over the ascending `grid` at the configured supply (NaN: a speed the open valve cannot
-    reach, so any force that way), each valve's at its supply ratio r through the orifices'
-    similarity (r F(v / sqrt(r))); held at the grid's ends."""
-    last = grid.shape[0] - 1
+    """True when a leg's force exceeds `share` of its range at its velocity (`force_range_at`;
+    a NaN range is exceeded)."""
     for i in range(force.shape[0]):
-        r = supply_ratio[i]
-        v = min(max(velocity[i] / math.sqrt(r), grid[0]), grid[last])
-        low, high = 0, last
-        while high - low > 1:                      # grid[low] <= v <= grid[high]
-            middle = (low + high) // 2
-            if grid[middle] <= v:
-                low = middle
-            else:
-                high = middle
-        t = (v - grid[low]) / (grid[high] - grid[low])
-        table = push if force[i] >= 0.0 else pull
-        limit = share * r * ((1.0 - t) * table[low] + t * table[high])
-        if force[i] >= 0.0:
-            if not force[i] <= limit:              # NaN: beyond
-                return True
-        elif not force[i] >= limit:
+        pushing = force[i] >= 0.0
+        limit = share * force_range_at(velocity[i], supply_ratio[i], grid, push, pull, pushing)
+        if not (force[i] <= limit if pushing else force[i] >= limit):      # NaN: beyond
             return True
     return False
 
@@ -385,15 +378,15 @@ class ComputedTorque(_Gains):
     the rig's estimate before each update."""
 
     def __init__(self, cfg: ControllerConfig, geometry: Geometry, period_s: float, yaw: YawFusion | None = None,
-                 force_range: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
-        """`force_range`: (velocity grid, push, pull) of a leg's force with its valve fully open
-        at the configured supply (`supervision.capacity.LegCapacity`'s); None: only a saturated
-        valve stops the integral."""
+                 capacity=None):
+        """`capacity`: the legs' `supervision.capacity.LegCapacity` (their force range over
+        velocity, valve fully open, at the configured supply); None: only a saturated valve
+        stops the integral."""
         super().__init__(cfg, cfg.computed_torque.hexapod_at(period_s), N_LEGS, period_s)
         self.yaw = yaw
         self.windup_share = cfg.computed_torque.windup_share
-        unbounded = (np.array([-1.0, 1.0]), np.full(2, 1e30), np.full(2, -1e30))     # never reached
-        grid, push, pull = unbounded if force_range is None else force_range
+        grid, push, pull = ((np.array([-1.0, 1.0]), np.full(2, 1e30), np.full(2, -1e30)) if capacity is None
+                            else (capacity.velocities_m_s, capacity.push_n, capacity.pull_n))     # None: never reached
         self.range_grid, self.range_push, self.range_pull = (np.array(a, dtype=float) for a in (grid, push, pull))
         w, zeta = cfg.computed_torque.yaw_gains(period_s)
         # with a valid IMU yaw: the yaw's own proportional and derivative gains

@@ -29,15 +29,15 @@ import numpy as np
 from numba import njit
 
 from firmware_py.mechanics.rotation import angle_between_matrices, rpy_to_matrix_into
+from firmware_py.motion_control.computed_torque import force_range_at
 
 
 @njit(cache=True)
 def at_capacity(spool, force_n, velocity_m_s, grid_m_s, push_n, pull_n, share) -> bool:
     """A leg's load cell shows `share` of the force its valve gives fully open in the spool's
-    direction at its velocity (push / pull over `grid_m_s`, held at its ends)."""
-    if spool > 0.0:
-        return force_n >= share * np.interp(velocity_m_s, grid_m_s, push_n)
-    return force_n <= share * np.interp(velocity_m_s, grid_m_s, pull_n)
+    direction at its velocity (`force_range_at` at the configured supply)."""
+    limit = share * force_range_at(velocity_m_s, 1.0, grid_m_s, push_n, pull_n, spool > 0.0)
+    return force_n >= limit if spool > 0.0 else force_n <= limit
 
 
 @njit(cache=True)
