@@ -446,6 +446,7 @@ class TimeScaling(Section):
     rate_min: float = key("rate_min_pct", 5.0, 100.0, per=PCT)
     slow_per_s: float = key("slow_per_s", 0.01, 100.0)
     recover_per_s: float = key("recover_per_s", 0.01, 100.0)
+    hold_s: float = key("hold_ms", 0.0, 1000.0, si=MS)
 
 
 @frozen

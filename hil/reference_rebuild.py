@@ -75,12 +75,12 @@ class ClockReplay:
         """(the clock at each cycle from `start` through the one that reaches the end, that
         cycle), as `Reference.advance` runs it."""
         end_t = _end_time(trajectory)
-        r, rate, ticks, out = self.rule, RATE_ONE, 0, []
+        r, rate, holding, ticks, out = self.rule, RATE_ONE, 0, 0, []
         k = start
         while True:
             if k < self.n_cycles:
-                rate = rate_step(rate, self.latest_pa[k], self.spool_sent[k], r.supply_low_pa, r.spool_limit_counts,
-                                 r.rate_min, r.slow, r.recover)
+                rate, holding = rate_step(rate, holding, self.latest_pa[k], self.spool_sent[k], r.supply_low_pa,
+                                          r.spool_limit_counts, r.rate_min, r.slow, r.recover, r.hold)
             ticks += rate
             t = ticks / RATE_ONE * period_s
             out.append(t)

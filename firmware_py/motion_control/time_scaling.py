@@ -37,6 +37,7 @@ class ScalingRule:
     recover: int                  # its rise per cycle otherwise
     spool_limit_counts: int       # a command at or beyond this many counts is at its limit
     supply_low_pa: float          # any valve's latest P-port sample below this: flow runs short
+    hold: int = 1                 # the rate keeps falling this many cycles from the last trigger
 
 
 def rule_of(cfg, period_s: float) -> ScalingRule:
@@ -46,7 +47,8 @@ def rule_of(cfg, period_s: float) -> ScalingRule:
                        max(int(round(ts.slow_per_s * period_s * RATE_ONE)), 1),
                        max(int(round(ts.recover_per_s * period_s * RATE_ONE)), 1),
                        int(round(cfg.limits.spool_max * SPOOL_COUNTS)),
-                       cfg.waypoints.capacity_share * cfg.hydraulic_model.supply_pressure_pa)
+                       cfg.waypoints.capacity_share * cfg.hydraulic_model.supply_pressure_pa,
+                       max(int(round(ts.hold_s / period_s)), 1))
 
 
 @njit(cache=True)
@@ -67,15 +69,20 @@ def supply_update(ps_pa, fresh, latest) -> None:
 
 
 @njit(cache=True)
-def rate_step(rate, latest_pa, spool_sent, supply_low_pa, limit_counts, rate_min, slow, recover) -> int:
-    """This cycle's rate from the last one's: lower while any valve's command is at its limit
-    or any valve's supply below `supply_low_pa`, else back towards full speed."""
+def rate_step(rate, holding, latest_pa, spool_sent, supply_low_pa, limit_counts, rate_min, slow, recover,
+              hold) -> tuple[int, int]:
+    """(this cycle's rate, the cycles it still keeps falling) from the last one's: lower while
+    any valve's command is at its limit or any valve's supply below `supply_low_pa` and for
+    `hold` cycles after, else back towards full speed. Without the hold the rule chatters at
+    half the cycle rate: the slowing lowers a_r's y' r' term, the valve leaves its limit, the
+    rate climbs, a_r jumps back and the valve is at its limit again."""
     triggered = spool_at_limit(spool_sent, limit_counts)
     for p in latest_pa:
         triggered = triggered or p < supply_low_pa
-    if triggered:
-        return max(rate - slow, rate_min)
-    return min(rate + recover, RATE_ONE)
+    holding = hold if triggered else max(holding - 1, 0)
+    if holding > 0:
+        return max(rate - slow, rate_min), holding
+    return min(rate + recover, RATE_ONE), holding
 
 
 @njit(cache=True)
@@ -95,19 +102,21 @@ class Clock:
         self.latest_pa = np.full(n_legs, np.nan)
         self.rate = RATE_ONE
         self.previous_rate = RATE_ONE
+        self.holding = 0          # cycles the rate keeps falling (`rate_step`)
         self.ticks = 0
         self.scaling = False      # the running trajectory is one the rule scales
 
     def start(self, scaled: bool) -> None:
         self.rate = self.previous_rate = RATE_ONE
+        self.holding = 0
         self.ticks = 0
         self.scaling = scaled and self.rule.enabled
 
     def warm_up(self, spool) -> None:
         """Compile the cycle's kernels (numba) before the first cycle needs them."""
         r = self.rule
-        rate_step(RATE_ONE, self.latest_pa, spool, r.supply_low_pa, r.spool_limit_counts, r.rate_min, r.slow,
-                  r.recover)
+        rate_step(RATE_ONE, 0, self.latest_pa, spool, r.supply_low_pa, r.spool_limit_counts, r.rate_min, r.slow,
+                  r.recover, r.hold)
         scale_derivatives(self.latest_pa.copy(), self.latest_pa.copy(), 1.0, 0.0)
         supply_update(self.latest_pa.copy(), np.zeros(len(self.latest_pa), dtype=np.bool_), self.latest_pa.copy())
 
@@ -120,8 +129,8 @@ class Clock:
         self.previous_rate = self.rate
         if self.scaling:
             r = self.rule
-            self.rate = rate_step(self.rate, self.latest_pa, spool_sent, r.supply_low_pa, r.spool_limit_counts,
-                                  r.rate_min, r.slow, r.recover)
+            self.rate, self.holding = rate_step(self.rate, self.holding, self.latest_pa, spool_sent, r.supply_low_pa,
+                                                r.spool_limit_counts, r.rate_min, r.slow, r.recover, r.hold)
         self.ticks += self.rate
 
     def cycles(self) -> float:

@@ -12,7 +12,7 @@
                                     [--force-bandwidth-hz] [--velocity-filter-hz] [--json]
     hydrapod design edge-moves [--moves N] [--seed S] [--workers W] [--json]
     hydrapod design tightness [--movements M ...] [--payload-kg M ...] [--supply-bar P ...] [--seed S]
-                              [--workers N] [--json]
+                              [--controller-config FILE] [--workers N] [--json]
     hydrapod design sweep --key KEY --values V,V [--points nominal|envelope] [--movements M,M] [--seeds S,S]
                           [--workers N] [--json]
 
@@ -108,8 +108,9 @@ def _tightness(args) -> int:
     from hil.design.tightness import format_tightness, sweep_tightness
     for payload in args.payload_kg:         # a value the configs refuse: one line, before any run
         for supply in args.supply_bar:
-            point_configs(payload, supply)
-    rows = sweep_tightness(args.movements, args.payload_kg, args.supply_bar, args.seed, args.workers)
+            point_configs(payload, supply, config_path=args.controller_config)
+    rows = sweep_tightness(args.movements, args.payload_kg, args.supply_bar, args.seed, args.workers,
+                           args.controller_config)
     print(json.dumps([r.as_dict() for r in rows], indent=1) if args.json else format_tightness(rows))
     return 0
 
@@ -436,6 +437,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     _envelope_points(p, [0.0, 1.5, 3.0, 4.5, 6.0], "payloads (default 0 1.5 3 4.5 6)", [20.0, 25.0, 40.0],
                      "power unit pressures (default 20 25 40)")
     p.add_argument("--seed", type=number_in_range(int, 0, 2**31 - 1), default=7, help="the sensors' noise seed")
+    p.add_argument("--controller-config", metavar="FILE",
+                   help="controller config sections over the packaged ones (e.g. [time_scaling] hold_ms = 0)")
     _workers_and_json(p, _tightness)
 
     p = design_sub.add_parser("sweep", help="one [computed_torque] key over values: the thesis's movements in "

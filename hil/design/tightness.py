@@ -83,11 +83,13 @@ def _passes(run) -> bool:
     return run.completed and float(np.max(run.max_error_m)) * 1e3 <= ERROR_BOUND_MM
 
 
-def tightness(movement: str, payload_kg: float, supply_bar: float, seed: int = 7) -> Tightness:
+def tightness(movement: str, payload_kg: float, supply_bar: float, seed: int = 7,
+              config_path: str | None = None) -> Tightness:
+    """One point; `config_path`: controller config sections over the packaged configuration."""
     from hil.design.capacity import PERIOD_S, commit_all, plan
     from hil.design.simulate import point_configs, thesis_motions
     from protocol.enums import Ack
-    cfg, emulator = point_configs(payload_kg, supply_bar)
+    cfg, emulator = point_configs(payload_kg, supply_bar, config_path=config_path)
     motion = thesis_motions()[movement]
     planned = plan(cfg, motion).time_scale
     if not math.isfinite(planned):
@@ -148,8 +150,9 @@ def _job(args) -> Tightness:
     return tightness(*args)
 
 
-def sweep_tightness(movements, payloads_kg, supplies_bar, seed: int = 7, workers: int = 2) -> list[Tightness]:
-    jobs = [(m, p, s, seed) for m in movements for p in payloads_kg for s in supplies_bar]
+def sweep_tightness(movements, payloads_kg, supplies_bar, seed: int = 7, workers: int = 2,
+                    config_path: str | None = None) -> list[Tightness]:
+    jobs = [(m, p, s, seed, config_path) for m in movements for p in payloads_kg for s in supplies_bar]
     if workers <= 1:
         return [_job(j) for j in jobs]
     with ProcessPoolExecutor(max_workers=workers) as pool:
