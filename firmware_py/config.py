@@ -428,6 +428,7 @@ class Waypoints(Section):
     velocity_max_m_s: float = key("velocity_max_mm_s", 0.1, 1e4, si=MM)
     step_max_m: float = key("step_max_mm", 0.0, 300.0, si=MM)
     capacity_share: float = key("capacity_share_pct", 10.0, 100.0, per=PCT)
+    supply_share: float = key("supply_share_pct", 10.0, 100.0, per=PCT)
     lag_max_m: float = key("lag_max_mm", 0.01, 100.0, si=MM)
     lag_angle_max_rad: float = key("lag_angle_max_deg", 0.01, 90.0, si=math.pi / 180.0)
 

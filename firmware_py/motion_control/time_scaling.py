@@ -47,7 +47,7 @@ def rule_of(cfg, period_s: float) -> ScalingRule:
                        max(int(round(ts.slow_per_s * period_s * RATE_ONE)), 1),
                        max(int(round(ts.recover_per_s * period_s * RATE_ONE)), 1),
                        int(round(cfg.limits.spool_max * SPOOL_COUNTS)),
-                       cfg.waypoints.capacity_share * cfg.hydraulic_model.supply_pressure_pa,
+                       cfg.waypoints.supply_share * cfg.hydraulic_model.supply_pressure_pa,
                        max(int(round(ts.hold_s / period_s)), 1))
 
 

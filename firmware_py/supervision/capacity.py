@@ -9,8 +9,8 @@ sampling at s = 1 answers every time scale.
 
 The power unit is shared: what the valves draw (at each leg's force and velocity, the valve
 map's steady state: the chamber it fills, the leakage, the underlaps) beyond the pump's flow
-empties the accumulator and the line, and the supply may fall no further than the share of
-its set pressure (`SupplyBudget`: the oil that gives, `physics.power_unit`).
+empties the accumulator and the line, and the supply may fall no further than its floor, a
+share of its set pressure (`SupplyBudget`: the oil that gives, `physics.power_unit`).
 
 The judgement is the lag a force shortfall leaves: where a leg needs more than its share,
 the missing force over its joint-space inertia accelerates the leg behind its reference;
@@ -65,16 +65,17 @@ class SupplyBudget:
     hydraulics: np.ndarray
     friction: np.ndarray             # the seals' (LuGre vector): the piston gives the leg's force and theirs
     valve_map: tuple                 # (force_n, velocity_m_s, spool, pressure_a_pa, pressure_b_pa) at the supply
+    floor_share: float               # the supply may fall to this share of its set pressure
 
-    def reserve_m3(self, share: float) -> float:
-        """The oil the line and accumulator give before the supply falls to `share` of its set."""
+    def reserve_m3(self) -> float:
+        """The oil the line and accumulator give before the supply falls to its floor."""
         set_pa = float(self.power[pu.PU_SET])
-        return pu.usable_volume(self.power, set_pa, share * set_pa)
+        return pu.usable_volume(self.power, set_pa, self.floor_share * set_pa)
 
     def deficit_m3(self, force_n: np.ndarray, velocity_m_s: np.ndarray, dt_s: float,
                    initial_m3: float = 0.0) -> tuple[float, float]:
         """(the largest volume the valves draw beyond the pump's flow, the volume at the end),
-        from `initial_m3` already drawn (the share is kept on the pressure the accumulator may
+        from `initial_m3` already drawn (the margin is kept on the pressure the accumulator may
         fall to, `reserve_m3`)."""
         return largest_deficit(force_n, velocity_m_s, dt_s, *self.valve_map, self.hydraulics, self.friction,
                                float(self.power[pu.PU_SET]), float(self.power[pu.PU_PUMP]), initial_m3)
@@ -111,12 +112,15 @@ class LegCapacity:
 
     @classmethod
     def of(cls, hydraulics: np.ndarray, friction: np.ndarray, supply_pa: float,
-           power: np.ndarray | None = None, valve_map: tuple | None = None) -> LegCapacity:
-        """`power` and `valve_map` (at `supply_pa`) both or neither (an ideal supply)."""
+           power: np.ndarray | None = None, valve_map: tuple | None = None,
+           floor_share: float | None = None) -> LegCapacity:
+        """`power`, `valve_map` (at `supply_pa`) and `floor_share` all or none (an ideal supply)."""
+        if (power is None) != (floor_share is None):
+            raise ValueError("a power unit needs the share of its set pressure it may fall to, and only it")
         push, pull = _table(float(supply_pa), np.asarray(hydraulics, float).tobytes(),
                             np.asarray(friction, float).tobytes())
         budget = None if power is None else SupplyBudget(np.asarray(power, float), np.asarray(hydraulics, float),
-                                                         np.asarray(friction, float), valve_map)
+                                                         np.asarray(friction, float), valve_map, floor_share)
         return cls(VELOCITY_GRID_M_S, push, pull, budget)
 
     def limits(self, velocity_m_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -269,22 +273,22 @@ def settled_lag(spare_n, inertia_kg, to_platform, angle_weight, state):
     return lags_error(to_platform, 0, angle_weight, direction, lag)
 
 
-def supply_deficit(capacity: LegCapacity, loads: Loads, scale: float, share: float,
+def supply_deficit(capacity: LegCapacity, loads: Loads, scale: float,
                    initial_m3: float = 0.0) -> tuple[float, float, float]:
-    """(the oil drawn beyond the pump's share, the reserve for it, what is drawn at the end)
+    """(the oil drawn beyond the pump's flow, the reserve for it, what is drawn at the end)
     [m^3] at `scale`, from `initial_m3` drawn before (the motions before it)."""
     budget = capacity.supply
     if budget is None:
         return 0.0, math.inf, 0.0
     force, velocity = loads.at_scale(scale)
     worst, end = budget.deficit_m3(force, velocity, loads.dt_s * scale, initial_m3)
-    return worst, budget.reserve_m3(share), end
+    return worst, budget.reserve_m3(), end
 
 
 def fits(capacity: LegCapacity, loads: Loads, scale: float, share: float, lag_max_m: float,
          initial_m3: float = 0.0, initial_lag: np.ndarray | None = None) -> bool:
     """Within capacity at `scale`: the lag within its bound and the supply within its reserve."""
-    deficit, reserve, _ = supply_deficit(capacity, loads, scale, share, initial_m3)
+    deficit, reserve, _ = supply_deficit(capacity, loads, scale, initial_m3)
     return deficit <= reserve and shortfall_lag(capacity, loads, scale, share, initial_lag)[0] <= lag_max_m
 
 
@@ -298,7 +302,7 @@ def judge_stages(capacity: LegCapacity, loads: Loads, scale: float, share: float
     """`judge` in three stages: the lag, the supply, the utilisation."""
     lag, k, leg, end_lag = shortfall_lag(capacity, loads, scale, share, initial_lag)
     yield
-    deficit, reserve, end = supply_deficit(capacity, loads, scale, share, initial_m3)
+    deficit, reserve, end = supply_deficit(capacity, loads, scale, initial_m3)
     yield
     force, velocity = loads.at_scale(scale)
     ratio = capacity.utilisation(force, velocity)
@@ -451,4 +455,5 @@ def leg_capacity(cfg) -> LegCapacity:
     """The controller's legs: its [actuator] hydraulics and [friction] at the configured supply,
     on its [power_unit]."""
     supply_pa = cfg.hydraulic_model.supply_pressure_pa
-    return LegCapacity.of(cfg.hydraulics, cfg.friction.vector, supply_pa, cfg.power, cfg.valve_map.at_supply(supply_pa))
+    return LegCapacity.of(cfg.hydraulics, cfg.friction.vector, supply_pa, cfg.power, cfg.valve_map.at_supply(supply_pa),
+                          cfg.waypoints.supply_share)
