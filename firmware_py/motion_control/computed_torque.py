@@ -385,9 +385,9 @@ class ComputedTorque(_Gains):
         super().__init__(cfg, cfg.computed_torque.hexapod_at(period_s), N_LEGS, period_s)
         self.yaw = yaw
         self.windup_share = cfg.computed_torque.windup_share
-        grid, push, pull = ((np.array([-1.0, 1.0]), np.full(2, 1e30), np.full(2, -1e30)) if capacity is None
-                            else (capacity.velocities_m_s, capacity.push_n, capacity.pull_n))     # None: never reached
-        self.range_grid, self.range_push, self.range_pull = (np.array(a, dtype=float) for a in (grid, push, pull))
+        self.ranges = capacity is not None
+        self.range_grid, self.range_push, self.range_pull = (
+            (capacity.velocities_m_s, capacity.push_n, capacity.pull_n) if self.ranges else (None, None, None))
         w, zeta = cfg.computed_torque.yaw_gains(period_s)
         # with a valid IMU yaw: the yaw's own proportional and derivative gains
         self.kp_imu, self.kd_imu = self.kp.copy(), self.kd.copy()
@@ -496,9 +496,9 @@ class ComputedTorque(_Gains):
         self.force_ref_prev[:] = platform.force_n
         # conditional integration (anti-windup): not while a valve saturates or a leg is asked
         # beyond what it can give
-        if not saturated and not beyond_force_range(self.force_cmd, velocity_ref, self.supply_ratio,
-                                                    self.range_grid, self.range_push, self.range_pull,
-                                                    self.windup_share):
+        if not saturated and not (self.ranges and beyond_force_range(
+                self.force_cmd, velocity_ref, self.supply_ratio, self.range_grid, self.range_push, self.range_pull,
+                self.windup_share)):
             integrate_into(self.integral, self.error, self.period_s)
         # the velocity's share fades once the reference has rested rest_hold_cycles (the legs
         # settle onto it first); the kernel runs every cycle (alpha 0: held)

@@ -66,15 +66,21 @@ class Tightness:
         return out | {"ratio": ratio if math.isfinite(ratio) else None, "tight": self.tight}
 
 
+def open_check(loop) -> None:
+    """The controller's waypoint check with legs of unbounded force and an ideal supply (the
+    workspace, singularity and speed checks stay)."""
+    from firmware_py.supervision.capacity import VELOCITY_GRID_M_S, LegCapacity
+    unbounded = np.full(VELOCITY_GRID_M_S.shape, 1e9)
+    loop.ctl.rig.check.capacity = LegCapacity(VELOCITY_GRID_M_S, unbounded, -unbounded)
+
+
 def opened_run(controller_cfg, emulator_cfg, motion, payload_kg: float, scale: float, seed: int = 7):
     """The movement at `scale` through the controller with its capacity check opened
     (`simulate.Movement`)."""
-    from firmware_py.supervision.capacity import VELOCITY_GRID_M_S, LegCapacity
     from hil.design.simulate import movement
     from hil.in_process import InProcessLoop
     loop = InProcessLoop(controller_cfg, emulator_cfg, "computed-torque", payload_kg, seed)
-    unbounded = np.full(VELOCITY_GRID_M_S.shape, 1e9)
-    loop.ctl.rig.check.capacity = LegCapacity(VELOCITY_GRID_M_S, unbounded, -unbounded)
+    open_check(loop)
     loop.activate()
     return movement(loop, motion.scaled(scale))
 

@@ -6,9 +6,9 @@ Wound up meanwhile, the integral swings the platform past the stop; stopped ther
 import numpy as np
 import pytest
 
-from firmware_py.supervision.capacity import VELOCITY_GRID_M_S, LegCapacity
 from hil.design.edge_moves import SETTLE_S, random_move
 from hil.design.simulate import point_configs
+from hil.design.tightness import open_check
 from hil.in_process import PERIOD_S, InProcessLoop
 from protocol.enums import Ack, WaypointFlag
 
@@ -21,8 +21,7 @@ def _past_the_stop_mm(windup_capacity_pct: float) -> tuple[float, float]:
     payload, supply, start, target, segment, accel = random_move(np.random.default_rng(MOVE_SEED))
     cfg, emulator = point_configs(payload, supply, {"windup_capacity_pct": windup_capacity_pct})
     loop = InProcessLoop(cfg, emulator, "computed-torque", payload, 1)
-    unbounded = np.full(VELOCITY_GRID_M_S.shape, 1e9)
-    loop.ctl.rig.check.capacity = LegCapacity(VELOCITY_GRID_M_S, unbounded, -unbounded)
+    open_check(loop)
     alone = int(WaypointFlag.START | WaypointFlag.LAST)
     loop.activate()
     loop.waypoint(start, 2.0, 0.5, alone)           # as `design edge-moves` starts it
