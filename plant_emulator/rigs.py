@@ -72,9 +72,10 @@ def testbench_advance(st: np.ndarray, slide: np.ndarray, bolted: bool, command: 
     seal = 0.0
     guide = 0.0
     together = True
+    decay = hy.spool_decay(h, hp)
     for _ in range(n):
         if not jammed:
-            st[hy.S_SPOOL] = hy.spool_step(st[hy.S_SPOOL], command, h, hp)
+            st[hy.S_SPOOL] = hy.spool_lag(st[hy.S_SPOOL], command, decay)
         drive = hy.piston_force(st[hy.S_PA], st[hy.S_PB], hp)            # eq. 4.15
         seal_z, seal_c = force_split(st[hy.S_Z], v, fp)                  # eq. 6.1-6.3
         guide_z, guide_c = force_split(st[hy.S_ZG], vs, gp)              # eq. D.3
@@ -147,11 +148,12 @@ def legs_hydraulics(st: np.ndarray, stroke: np.ndarray, velocity: np.ndarray, co
     for i in range(st.shape[0]):
         st[i, hy.S_Y] = stroke[i]
         st[i, hy.S_V] = velocity[i]
+    decay = hy.spool_decay(h, hp)
     for _ in range(n):
         drawn = slope = 0.0
         for i in range(st.shape[0]):
             if not jammed[i]:
-                st[i, hy.S_SPOOL] = hy.spool_step(st[i, hy.S_SPOOL], command[i], h, hp)
+                st[i, hy.S_SPOOL] = hy.spool_lag(st[i, hy.S_SPOOL], command[i], decay)
             st[i, hy.S_Z] = z_step(st[i, hy.S_Z], velocity[i], h, fp)
             hy.chamber_step(st[i], stroke[i], velocity[i], ps, h, hp, ports[i], seal_leak[i])
             flow, flow_slope = hy.supply_flow(st[i, hy.S_SPOOL], st[i, hy.S_PA], st[i, hy.S_PB], ps, hp, ports[i])

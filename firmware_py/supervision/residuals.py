@@ -84,6 +84,7 @@ def residual_step(hp, fp, ps, period_s, substeps, spool_applied, fresh, position
     A leg not `seeded` waits for its first pressure sample (no level, no model)."""
     area, ratio = hp[hy.HP_AREA_A], hp[hy.HP_ALPHA]
     h = period_s / substeps
+    decay = hy.spool_decay(h, hp)
     for i in range(position.shape[0]):
         row = state[i]
         if not seeded[i]:
@@ -101,7 +102,7 @@ def residual_step(hp, fp, ps, period_s, substeps, spool_applied, fresh, position
             dy, v = 0.0, 0.0
             stale[i] += 1
         for j in range(substeps):
-            row[hy.S_SPOOL] = hy.spool_step(row[hy.S_SPOOL], spool_applied[i], h, hp)
+            row[hy.S_SPOOL] = hy.spool_lag(row[hy.S_SPOOL], spool_applied[i], decay)
             hy.chamber_step(row, y_prev[i] + dy * (j + 1) / substeps, dy / period_s, ps[i], h, hp, 1.0,
                             hp[hy.HP_SEAL_LEAK])
         if not fresh[i]:
@@ -300,8 +301,9 @@ def sample_floor_pa(noise_pa: float, wire_step_pa: float) -> float:
 def predict_chambers(row, hp, spool, y_start, dy, ps, period_s, steps):
     """One period of one leg's chambers in `steps` steps, the piston swept by `dy`."""
     h = period_s / steps
+    decay = hy.spool_decay(h, hp)
     for j in range(steps):
-        row[hy.S_SPOOL] = hy.spool_step(row[hy.S_SPOOL], spool, h, hp)
+        row[hy.S_SPOOL] = hy.spool_lag(row[hy.S_SPOOL], spool, decay)
         hy.chamber_step(row, y_start + dy * (j + 1) / steps, dy / period_s, ps, h, hp, 1.0, hp[hy.HP_SEAL_LEAK])
 
 

@@ -37,6 +37,47 @@ def run(rig, seconds):
         rig.advance(PERIOD)
 
 
+def _edges(spool, pa, pb, ps, hp):
+    """eq. 4.4-4.6 with underlap, every edge evaluated by eq. 4.2 as written (NumPy's power)."""
+    lam, pt, kv = hp[hy.HP_LAMINAR], hp[hy.HP_TANK], hp[hy.HP_KV]
+    root = lambda dp: dp / np.power(dp * dp + lam * lam, 0.25)                          # noqa: E731
+    slope = lambda dp: (0.5 * dp * dp + lam * lam) / np.power(dp * dp + lam * lam, 1.25)  # noqa: E731
+    a_pa, a_at = max(spool + hp[hy.HP_LAP_P], 0.0), max(hp[hy.HP_LAP_T] - spool, 0.0)
+    a_pb, a_bt = max(hp[hy.HP_LAP_P] - spool, 0.0), max(spool + hp[hy.HP_LAP_T], 0.0)
+    qa, qb = kv * (a_pa * root(ps - pa) - a_at * root(pa - pt)), kv * (a_pb * root(ps - pb) - a_bt * root(pb - pt))
+    dqa = -kv * (a_pa * slope(ps - pa) + a_at * slope(pa - pt))
+    dqb = -kv * (a_pb * slope(ps - pb) + a_bt * slope(pb - pt))
+    drawn = kv * (a_pa * root(ps - pa) + a_pb * root(ps - pb))
+    return qa, qb, dqa, dqb, drawn, kv * (a_pa * slope(ps - pa) + a_pb * slope(ps - pb))
+
+
+@settings(max_examples=300, deadline=None)
+@given(spool=st.floats(-1.0, 1.0), pa=st.floats(-0.9e5, 60e5), pb=st.floats(-0.9e5, 60e5), ps=st.floats(1e5, 40e5))
+def test_the_valve_kernels_are_eq_4_2_on_every_edge(cfg, spool, pa, pb, ps):
+    """The kernels take the fourth root as two square roots and skip closed edges (for speed):
+    the flows, their slopes and the supply's draw are eq. 4.2-4.6 as written, to rounding."""
+    hp = cfg.hp
+    expected = _edges(spool, pa, pb, ps, hp)
+    got = (*hy.valve_flows(spool, pa, pb, ps, hp), *hy.supply_flow(spool, pa, pb, ps, hp, 1.0))
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-18)
+    dp, h = pa - pb, 1e-3 * hp[hy.HP_LAMINAR]
+    numeric = (hy.orifice_root(dp + h, hp[hy.HP_LAMINAR]) - hy.orifice_root(dp - h, hp[hy.HP_LAMINAR])) / (2 * h)
+    assert hy.orifice_root_slope(dp, hp[hy.HP_LAMINAR]) == pytest.approx(numeric, rel=1e-5)
+
+
+def test_the_spool_lag_over_many_steps_is_its_exact_step(cfg):
+    """`spool_lag` with one `spool_decay` is `spool_step`, and both the exact first-order lag
+    toward the command saturated at full input."""
+    hp, h = cfg.hp, PERIOD / 8
+    stepped = lagged = exact = 0.1
+    for command in (0.8, 0.8, -1.5, 0.0, 1.7):
+        stepped = hy.spool_step(stepped, command, h, hp)
+        lagged = hy.spool_lag(lagged, command, hy.spool_decay(h, hp))
+        target = min(max(command, -1.0), 1.0)
+        exact = target + (exact - target) * math.exp(-h / hp[hy.HP_TAU_SPOOL])
+        assert stepped == lagged == pytest.approx(exact, rel=1e-14, abs=1e-16)
+
+
 @pytest.mark.parametrize("load", [0.0, 6.0])
 def test_open_loop_step_gives_constant_velocity(cfg, load):
     """Fig. 6.3: a constant valve input moves the piston at constant velocity after ~0.5 s."""
