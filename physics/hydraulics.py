@@ -163,7 +163,9 @@ def bulk_modulus(p: float, hp: np.ndarray) -> float:
     """
     p_abs = max(p + ATMOSPHERE_PA, 1000.0)
     n = hp[HP_POLY_N]
-    eps = hp[HP_AIR0] * (ATMOSPHERE_PA / p_abs) ** (1.0 / n)
+    ratio = ATMOSPHERE_PA / p_abs
+    # isothermal air (n = 1, the configured hoses) needs no power: the same value, exactly
+    eps = hp[HP_AIR0] * (ratio if n == 1.0 else ratio ** (1.0 / n))
     compliance = (1.0 / hp[HP_BETA_OIL] + eps / (n * p_abs)) / (1.0 + eps) + 1.0 / hp[HP_BETA_WALL]
     return 1.0 / compliance
 

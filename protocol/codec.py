@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
+from numba import njit
 
 from protocol import e2e
 from protocol.dbc import Schedule, load_database, schedule_of, schedules
@@ -102,6 +103,21 @@ def _signal_spec(sig) -> SignalSpec:
     )
 
 
+@njit(cache=True)
+def quantize_kernel(table, values, out) -> bool:
+    """`MessageCodec.quantize_into` on its signal table (rows: index, to_si, scale, offset,
+    raw_min, raw_max): each value rounded half to even to its step, as `round` in
+    `encode_into`, and saturated; False, `out` unchanged, when one is not finite."""
+    for k in range(table.shape[0]):
+        if not math.isfinite(values[int(table[k, 0])]):
+            return False
+    for k in range(table.shape[0]):
+        i, to_si, scale, offset = int(table[k, 0]), table[k, 1], table[k, 2], table[k, 3]
+        raw = min(max(np.rint((values[i] / to_si - offset) / scale), table[k, 4]), table[k, 5])
+        out[i] = (raw * scale + offset) * to_si
+    return True
+
+
 class MessageCodec:
     """Encoder/decoder of one DBC message, compiled at construction."""
 
@@ -125,6 +141,9 @@ class MessageCodec:
             (i, s.start, (1 << s.length) - 1, s.to_si, s.scale, s.offset, s.raw_min, s.raw_max)
             for i, s in enumerate(self.signals) if i >= first
         )
+        # the same per payload signal for `quantize_kernel`: index, to_si, scale, offset, raw range
+        self._quantize = np.array([(i, to_si, scale, offset, raw_min, raw_max)
+                                   for i, _, _, to_si, scale, offset, raw_min, raw_max in self._enc], dtype=float)
 
     @staticmethod
     def _dec_field(s: SignalSpec, to_unit: float):
@@ -173,14 +192,9 @@ class MessageCodec:
         bytes: each value rounded to its signal's step and saturated at its range, as
         `decode_into(encode_into(values))` gives (the E2E entries of `out` left as they are).
         False, `out` unchanged, when a value is not finite (no such frame is sent)."""
-        if isinstance(values, np.ndarray):
-            values = values.tolist()
-        if not all(math.isfinite(values[entry[0]]) for entry in self._enc):
-            return False
-        for i, _, _, to_si, scale, offset, raw_min, raw_max in self._enc:
-            raw = min(max(round((values[i] / to_si - offset) / scale), raw_min), raw_max)
-            out[i] = (raw * scale + offset) * to_si
-        return True
+        if not isinstance(values, np.ndarray):
+            values = np.asarray(values, dtype=float)
+        return quantize_kernel(self._quantize, values, out)
 
     def decode_into(self, data, out) -> None:
         """Unpack `data` (exactly `dlc` bytes) into `out` in SI units, signal order."""

@@ -65,6 +65,18 @@ def test_the_valve_kernels_are_eq_4_2_on_every_edge(cfg, spool, pa, pb, ps):
     assert hy.orifice_root_slope(dp, hp[hy.HP_LAMINAR]) == pytest.approx(numeric, rel=1e-5)
 
 
+@pytest.mark.parametrize("index", [1.0, 1.4])
+def test_the_bulk_modulus_is_its_series_law_isothermal_or_not(cfg, index):
+    """Oil with polytropic air and the hose wall in series (the isothermal case takes no power)."""
+    hp = cfg.hp.copy()
+    hp[hy.HP_POLY_N] = index
+    for p in (-0.5e5, 0.0, 3e5, 25e5, 200e5):
+        p_abs = p + 101325.0
+        eps = hp[hy.HP_AIR0] * (101325.0 / p_abs) ** (1.0 / index)
+        compliance = (1.0 / hp[hy.HP_BETA_OIL] + eps / (index * p_abs)) / (1.0 + eps) + 1.0 / hp[hy.HP_BETA_WALL]
+        assert hy.bulk_modulus(p, hp) == pytest.approx(1.0 / compliance, rel=1e-14)
+
+
 def test_the_spool_lag_over_many_steps_is_its_exact_step(cfg):
     """`spool_lag` with one `spool_decay` is `spool_step`, and both the exact first-order lag
     toward the command saturated at full input."""
