@@ -97,6 +97,21 @@ def orifice_root_and_slope(dp: float, laminar_pa: float):
     return dp / root4, (0.5 * dp * dp + laminar_pa * laminar_pa) / (q * root4)
 
 
+@numba.njit(cache=True, inline="always")
+def edge_pair_flow(a_in: float, dp_in: float, a_out: float, dp_out: float, laminar_pa: float):
+    """One chamber's flow in through its supply edge (opening `a_in`, drop `dp_in`) less
+    the flow out through its return edge (eq. 4.2 each), and the sum of the edges' root
+    slopes; a closed edge (opening 0) passes nothing and is not evaluated."""
+    flow, slope = 0.0, 0.0
+    if a_in > 0.0:
+        root, root_slope = orifice_root_and_slope(dp_in, laminar_pa)
+        flow, slope = a_in * root, a_in * root_slope
+    if a_out > 0.0:
+        root, root_slope = orifice_root_and_slope(dp_out, laminar_pa)
+        flow, slope = flow - a_out * root, slope + a_out * root_slope
+    return flow, slope
+
+
 @numba.njit(cache=True)
 def valve_flows(spool: float, pa: float, pb: float, ps: float, hp: np.ndarray):
     """Flows into chambers A and B through the valve (eq. 4.4-4.6 with edge underlap),
@@ -106,20 +121,8 @@ def valve_flows(spool: float, pa: float, pb: float, ps: float, hp: np.ndarray):
     a_at = max(hp[HP_LAP_T] - spool, 0.0)     # A -> T opens with negative spool
     a_pb = max(hp[HP_LAP_P] - spool, 0.0)     # P -> B
     a_bt = max(spool + hp[HP_LAP_T], 0.0)     # B -> T
-    qa, qb, dqa, dqb = 0.0, 0.0, 0.0, 0.0
-    # a closed edge passes nothing: only the open ones are evaluated
-    if a_pa > 0.0:
-        root, slope = orifice_root_and_slope(ps - pa, lam)
-        qa, dqa = a_pa * root, a_pa * slope
-    if a_at > 0.0:
-        root, slope = orifice_root_and_slope(pa - pt, lam)
-        qa, dqa = qa - a_at * root, dqa + a_at * slope
-    if a_pb > 0.0:
-        root, slope = orifice_root_and_slope(ps - pb, lam)
-        qb, dqb = a_pb * root, a_pb * slope
-    if a_bt > 0.0:
-        root, slope = orifice_root_and_slope(pb - pt, lam)
-        qb, dqb = qb - a_bt * root, dqb + a_bt * slope
+    qa, dqa = edge_pair_flow(a_pa, ps - pa, a_at, pa - pt, lam)
+    qb, dqb = edge_pair_flow(a_pb, ps - pb, a_bt, pb - pt, lam)
     return kv * qa, kv * qb, -kv * dqa, -kv * dqb
 
 
@@ -129,16 +132,9 @@ def supply_flow(spool: float, pa: float, pb: float, ps: float, hp: np.ndarray, p
     when a chamber above the supply drives oil back) and its slope d / d ps; nothing through
     closed load-holding valves (`ports` 0, as `pressure_rates`)."""
     kv, lam = hp[HP_KV] * ports, hp[HP_LAMINAR]
-    a_pa = max(spool + hp[HP_LAP_P], 0.0)
-    a_pb = max(hp[HP_LAP_P] - spool, 0.0)
-    flow, slope = 0.0, 0.0
-    if a_pa > 0.0:
-        root, root_slope = orifice_root_and_slope(ps - pa, lam)
-        flow, slope = a_pa * root, a_pa * root_slope
-    if a_pb > 0.0:
-        root, root_slope = orifice_root_and_slope(ps - pb, lam)
-        flow, slope = flow + a_pb * root, slope + a_pb * root_slope
-    return kv * flow, kv * slope
+    into_a, slope_a = edge_pair_flow(max(spool + hp[HP_LAP_P], 0.0), ps - pa, 0.0, 0.0, lam)
+    into_b, slope_b = edge_pair_flow(max(hp[HP_LAP_P] - spool, 0.0), ps - pb, 0.0, 0.0, lam)
+    return kv * (into_a + into_b), kv * (slope_a + slope_b)
 
 
 @numba.njit(cache=True)
