@@ -78,9 +78,8 @@ S_SIZE = 7
 
 @numba.njit(cache=True, inline="always")
 def orifice_root(dp: float, laminar_pa: float) -> float:
-    """sqrt|dp| sign(dp) of eq. 4.2, laminar (linear) below `laminar_pa`: dp / q^(1/4),
-    q = dp^2 + laminar^2 (the fourth root as two square roots, several times faster than pow)."""
-    return dp / math.sqrt(math.sqrt(dp * dp + laminar_pa * laminar_pa))
+    """sqrt|dp| sign(dp) of eq. 4.2, laminar (linear) below `laminar_pa`."""
+    return orifice_root_and_slope(dp, laminar_pa)[0]
 
 
 @numba.njit(cache=True, inline="always")
@@ -91,7 +90,9 @@ def orifice_root_slope(dp: float, laminar_pa: float) -> float:
 
 @numba.njit(cache=True, inline="always")
 def orifice_root_and_slope(dp: float, laminar_pa: float):
-    """`orifice_root` and `orifice_root_slope` from one fourth root."""
+    """eq. 4.2's sqrt|dp| sign(dp), regularised as dp / q^(1/4) with q = dp^2 + laminar^2
+    (laminar below `laminar_pa`), and its slope, from one fourth root (two square roots,
+    several times faster than pow)."""
     q = dp * dp + laminar_pa * laminar_pa
     root4 = math.sqrt(math.sqrt(q))
     return dp / root4, (0.5 * dp * dp + laminar_pa * laminar_pa) / (q * root4)
