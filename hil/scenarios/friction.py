@@ -52,6 +52,7 @@ BOTTOM_M, TOP_M = 0.040, 0.264     # where the steps start (the stroke guard is 
 GAIN_GUESS_MM_S_V = 300.0          # host side: room a step needs (Table A.3's k01 is 224-294)
 VELOCITY_RANGE_MM_S = (2.0, 200.0) # the steps aim at these speeds on each side (Fig. 6.4: to ~250 mm/s)
 TRIES = 3                          # steps per target speed, when one lands at rest
+REPEAT_V = 0.002                   # an input this close to one tried is a repeat (HOST_TEST's VALVE: 1 mV)
 PROBES_V = (0.2, -0.2, 0.5, -0.5)  # the first steps at each load, before any velocity is known
 VALVE_MAX_V = 0.9                  # 0.9 V: ~250 mm/s, as far as the stroke allows for a 1 s window
 SMOOTH_S = 0.05                    # Fig. 6.3's velocity: the encoder's record averaged over this
@@ -95,7 +96,10 @@ def _track_velocity(track, first: int, last: int, period: float) -> float | None
 
 def _input_for(velocity: float, seen: list[tuple[float, float]]) -> float:
     """The valve input expected to give `velocity`, interpolated on the steps seen so far
-    (ordered by velocity; inputs made monotone: the map is, but noise at rest is not)."""
+    (ordered by velocity; inputs made monotone: the map is, but noise at rest is not).
+    Steps at rest all sit at v ~ 0, so near breakaway the interpolation keeps returning an
+    input already tried: then the bracket's midpoint (the largest input seen slower than the
+    target, the smallest faster), as regula falsi falls back to bisection."""
     pairs = sorted(seen, key=lambda p: p[1])
     v = np.array([p[1] for p in pairs])
     u = np.maximum.accumulate(np.array([p[0] for p in pairs]))
@@ -105,7 +109,24 @@ def _input_for(velocity: float, seen: list[tuple[float, float]]) -> float:
         guess = u[i[0]] + slope * (velocity - v[i[0]])
     else:
         guess = float(np.interp(velocity, v, u))
+    slower = [ui for ui, vi in seen if vi < velocity]
+    faster = [ui for ui, vi in seen if vi > velocity]
+    if slower and faster and max(slower) < min(faster) and \
+            min(abs(guess - ui) for ui, _ in seen) < REPEAT_V:
+        guess = 0.5 * (max(slower) + min(faster))
     return float(np.clip(guess, -VALVE_MAX_V, VALVE_MAX_V))
+
+
+def _speed_range(u: float, seen: list[tuple[float, float]]) -> tuple[float, float]:
+    """(slowest, fastest) velocity a step at input `u` may take [m/s]: between those of the
+    nearest inputs seen below and above it (the map is monotone), at rest included; without
+    one on a side, the gain guess GAIN_GUESS_MM_S_V x u there."""
+    guess = u * GAIN_GUESS_MM_S_V * MM
+    below = [(ui, v) for ui, v in seen if ui <= u]
+    above = [(ui, v) for ui, v in seen if ui >= u]
+    low = max(below)[1] if below else guess
+    high = min(above)[1] if above else guess
+    return min(low, high, 0.0), max(low, high, 0.0)
 
 
 def _tests(log: LogData, mode: int) -> list[dict]:
@@ -194,9 +215,12 @@ class FrictionSteady(Scenario):
         its velocity from the host's track of leg 1 goes into `seen`."""
         period = run.period_s
         here = run.host.leg1_track[-1][1] if run.host.leg1_track else 0.150
-        room = abs(u) * GAIN_GUESS_MM_S_V * MM * STEP_S + 0.005
-        if (u > 0 and here + room > TOP_M + 0.020) or (u < 0 and here - room < BOTTOM_M - 0.020):
-            move_stroke(run, BOTTOM_M if u > 0 else TOP_M, settle_s=0.5)
+        slowest, fastest = _speed_range(u, seen)
+        if here + fastest * STEP_S + 0.005 > TOP_M + 0.020 or here + slowest * STEP_S - 0.005 < BOTTOM_M - 0.020:
+            # from the end the step moves away from; either way (a load sinks under a small
+            # positive input): from the middle
+            start = BOTTOM_M if slowest == 0.0 else TOP_M if fastest == 0.0 else 0.5 * (BOTTOM_M + TOP_M)
+            move_stroke(run, start, settle_s=0.5)
         run.host.test(TestMode.VALVE_STEP, valve_v=u, duration_s=STEP_S)
         start = run.host.syncs
         run.wait_motion_done(STEP_S + 1.0)

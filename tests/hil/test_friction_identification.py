@@ -19,7 +19,7 @@ from hil.design.friction_fit import (
     presliding_damping,
     presliding_stiffness,
 )
-from hil.scenarios.friction import FINE_SENSOR_MM
+from hil.scenarios.friction import FINE_SENSOR_MM, _input_for, _speed_range
 from physics import lugre
 from physics.constants import GRAVITY_M_S2, MM
 from tests.support.cli import hydrapod, reanalysed
@@ -218,6 +218,27 @@ def _presliding_in_process(start_cycles: int, force_filter_hz: float | None = No
         fits[name] = fit_presliding(dy, dy / period, at, seal[at], at, guide[at],
                                     steady_sides(cfg.raw["friction"]), cfg.testbench.guide_coulomb_n)
     return fits
+
+
+def test_the_search_bisects_where_steps_at_rest_would_repeat_an_input():
+    """6 kg, aiming at -7.2 mm/s (inputs in V, speeds in m/s): the load sinks fast at -0.2 V
+    and rests at 0.2 V. The interpolation's input rests too, its point lands beside the one
+    it was drawn from, and the interpolation would return the same input: the bracket's
+    midpoint instead."""
+    seen = [(-0.2, -0.0907), (0.5, 0.0443), (0.2, -0.00001)]
+    first = _input_for(-0.0072, seen)
+    assert first == pytest.approx(-0.2 + 0.4 * (0.0907 - 0.0072) / (0.0907 - 0.00001))
+    seen.append((first, 0.0))
+    assert _input_for(-0.0072, seen) == pytest.approx(0.5 * (-0.2 + first))
+
+
+def test_a_step_is_given_room_the_way_a_sinking_load_may_take_it():
+    """A small positive input between one that lets 6 kg sink at 53 mm/s and one that holds it
+    may move down only; beyond every input seen, the gain guess."""
+    seen = [(0.0, -0.053), (0.1, 0.0), (0.5, 0.044)]
+    assert _speed_range(0.05, seen) == (-0.053, 0.0)
+    slowest, fastest = _speed_range(0.8, seen)
+    assert slowest == 0.0 and fastest == pytest.approx(0.8 * 0.3)
 
 
 def test_a_toggling_reading_is_at_rest_on_its_boundary():
