@@ -83,16 +83,10 @@ def orifice_root(dp: float, laminar_pa: float) -> float:
 
 
 @numba.njit(cache=True, inline="always")
-def orifice_root_slope(dp: float, laminar_pa: float) -> float:
-    """d orifice_root / d dp (positive, finite at dp = 0)."""
-    return orifice_root_and_slope(dp, laminar_pa)[1]
-
-
-@numba.njit(cache=True, inline="always")
 def orifice_root_and_slope(dp: float, laminar_pa: float):
     """eq. 4.2's sqrt|dp| sign(dp), regularised as dp / q^(1/4) with q = dp^2 + laminar^2
-    (laminar below `laminar_pa`), and its slope, from one fourth root (two square roots,
-    several times faster than pow)."""
+    (laminar below `laminar_pa`), and its slope d/d dp (positive, finite at dp = 0), from one
+    fourth root (two square roots, several times faster than pow)."""
     q = dp * dp + laminar_pa * laminar_pa
     root4 = math.sqrt(math.sqrt(q))
     return dp / root4, (0.5 * dp * dp + laminar_pa * laminar_pa) / (q * root4)
