@@ -14,6 +14,7 @@ from can.interfaces.socketcan import SocketcanBus
 from firmware_py.config import ConfigError, load_config
 from firmware_py.controller import Controller
 from firmware_py.motion_control.joint_space import CONTROLLER_NAMES
+from firmware_py.runtime import loop as loop_module
 from firmware_py.runtime.loop import ControllerLoop
 from firmware_py.runtime.sync import bus_sends_sync, check_sync_source, sync_sequence
 from program.errors import UserInputError
@@ -63,9 +64,33 @@ def test_the_daemon_refuses_the_bus_sync_in_lockstep(tmp_path):
     assert proc.returncode == 2 and len(lines) == 1 and "sync_source" in lines[0], proc.stderr
 
 
+class WallClock:
+    """The loop's `time` module with its wall clock held at the scripted bus's last receive: a
+    frame's age (now minus its receive stamp) is then the age scripted, however long the
+    machine took between the receive and the loop's look at it (a 2-core machine busy with
+    the suite's other worker stalled longer than the sync window, and a fresh SYNC read as late)."""
+
+    def __init__(self):
+        self.now = time.time()
+
+    def time(self) -> float:
+        return self.now
+
+    def __getattr__(self, name):
+        return getattr(time, name)
+
+
+WALL = WallClock()
+
+
+@pytest.fixture(autouse=True)
+def _held_wall_clock(monkeypatch):
+    monkeypatch.setattr(loop_module, "time", WALL)
+
+
 class ScriptedBus(SocketcanBus):
     """A SocketCAN bus by type, scripted (no kernel CAN here): frames queued as (frame, age in s
-    when received); `send_periodic` only recorded."""
+    when received, on `WALL`); `send_periodic` only recorded."""
 
     def __init__(self):
         can.BusABC.__init__(self, channel="scripted")
@@ -83,7 +108,8 @@ class ScriptedBus(SocketcanBus):
             time.sleep(min(timeout or 0.0, 0.001))
             return None, False
         msg, age = self.queue.pop(0)
-        msg.timestamp = time.time() - age
+        WALL.now = time.time()
+        msg.timestamp = WALL.now - age
         return msg, False
 
     def send(self, msg, timeout=None) -> None:
